@@ -1,0 +1,106 @@
+"""Exception classes of the solver, one per stage.
+
+Every error carries where it happened (file, line or frame, element) and what was
+expected, so that the command line and the review app can show an actionable message.
+``to_dict()`` gives a JSON-serializable form for the UI.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+
+class AddbError(Exception):
+    """Base class of every error raised on purpose by :mod:`solver`.
+
+    Parameters
+    ----------
+    message
+        What was wrong and what was expected, in plain words.
+    path
+        The file (or folder) the problem is in, if any.
+    line
+        1-based line number in ``path`` (text formats), if known.
+    where
+        Any other location: an XML element, a column name, a frame index, a marker.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        line: int | None = None,
+        where: str | None = None,
+    ) -> None:
+        self.message = message
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.where = where
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        loc = []
+        if self.path is not None:
+            loc.append(self.path + (f":{self.line}" if self.line is not None else ""))
+        elif self.line is not None:
+            loc.append(f"line {self.line}")
+        if self.where:
+            loc.append(self.where)
+        prefix = " (" + ", ".join(loc) + ")" if loc else ""
+        return f"{type(self).__name__}{prefix}: {self.message}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serializable description: ``type``, ``message``, ``path``, ``line``, ``where``."""
+        return {
+            "type": type(self).__name__,
+            "message": self.message,
+            "path": self.path,
+            "line": self.line,
+            "where": self.where,
+        }
+
+
+class FileFormatError(AddbError):
+    """A data file could not be read: bad header, wrong column count, text in a number field."""
+
+
+class TrcFormatError(FileFormatError):
+    """A TRC marker file is malformed."""
+
+
+class MotFormatError(FileFormatError):
+    """A MOT/STO table is malformed."""
+
+
+class C3dFormatError(FileFormatError):
+    """A C3D file could not be read or holds inconsistent force-platform data."""
+
+
+class XmlFormatError(FileFormatError):
+    """An OpenSim XML file (ExternalLoads, setup, marker set) is malformed."""
+
+
+class SubjectFolderError(FileFormatError):
+    """An AddBiomechanics subject folder is incomplete or inconsistent."""
+
+
+class OsimModelError(AddbError):
+    """An .osim model is malformed or uses a feature the converter does not support."""
+
+
+class MarkerMismatchError(AddbError):
+    """Markers of a trial and of the model do not match (none in common, all missing)."""
+
+
+class KinematicsError(AddbError):
+    """Scaling or inverse kinematics failed."""
+
+
+class DynamicsError(AddbError):
+    """The dynamics stage (filtering, contact, centre-of-mass or residual fit) failed."""
+
+
+class DiagnosisError(AddbError):
+    """The diagnosis stage failed."""
