@@ -1,0 +1,312 @@
+"""Exact coupling between OpenSim coordinates and the expanded pinocchio joints.
+
+The pinocchio model has one 1-DoF joint per moving axis of every OpenSim joint, so the
+walker knee (one coordinate driving two spline rotations and two spline translations)
+becomes five pinocchio joints. Each expanded joint value is a function of one OpenSim
+coordinate: q_pin[k] = f_k(x[c_k]), where x are the OpenSim coordinates after the
+coordinate coupler constraints have been applied (x_dep = s * g(x_indep)).
+
+Velocities and accelerations follow by the chain rule:
+
+    v_pin[k] = f_k'(x) xdot,      a_pin[k] = f_k''(x) xdot^2 + f_k'(x) xddot,
+
+and generalized forces are projected back with the coupling Jacobian C = dq_pin/dq:
+tau = C^T tau_pin (principle of virtual work).
+
+Evaluation is vectorized over any leading shape and grouped (identity, linear, cubic
+splines sharing knots, others) so that one frame costs a few numpy calls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.model.functions import Constant, CubicSpline, Function, Linear, Multiplier
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+def _spline_of(f: Function) -> tuple[CubicSpline, float] | None:
+    """(spline, scale) when f is a CubicSpline or a MultiplierFunction of one."""
+    if isinstance(f, CubicSpline):
+        return f, 1.0
+    if isinstance(f, Multiplier):
+        inner = _spline_of(f.inner)
+        if inner is not None:
+            return inner[0], inner[1] * f.scale
+    return None
+
+
+def _linear_of(f: Function) -> tuple[float, float] | None:
+    """(slope, intercept) when f is linear or constant (possibly inside multipliers)."""
+    if isinstance(f, Linear):
+        return f.slope, f.intercept
+    if isinstance(f, Constant):
+        return 0.0, f.c
+    if isinstance(f, Multiplier):
+        inner = _linear_of(f.inner)
+        if inner is not None:
+            return inner[0] * f.scale, inner[1] * f.scale
+    return None
+
+
+@dataclass
+class _SplineGroup:
+    """Cubic splines sharing one knot vector, evaluated together."""
+
+    outputs: IntArray  # (k,) output slots
+    drivers: IntArray  # (k,) input slots (all splines of a group may have different drivers)
+    knots: FloatArray  # (n,)
+    y: FloatArray  # (n, k) knot values
+    b: FloatArray  # (n-1, k)
+    c: FloatArray
+    d: FloatArray
+    slope0: FloatArray  # (k,)
+    slope1: FloatArray
+
+
+class FunctionBank:
+    """Evaluate out[k] = f_k(x[driver_k]) and its derivatives for many functions at once.
+
+    Parameters
+    ----------
+    drivers
+        ``(K,)`` index into the input vector for each function.
+    functions
+        ``K`` scalar functions.
+    """
+
+    def __init__(self, drivers: list[int], functions: list[Function]) -> None:
+        self.n_out = len(functions)
+        lin_k, lin_c, lin_a, lin_b = [], [], [], []
+        groups: dict[tuple[float, ...], list[tuple[int, int, CubicSpline, float]]] = {}
+        self._others: list[tuple[int, int, Function]] = []
+        for k, (c, f) in enumerate(zip(drivers, functions)):
+            lin = _linear_of(f)
+            spl = _spline_of(f)
+            if lin is not None:
+                lin_k.append(k)
+                lin_c.append(c)
+                lin_a.append(lin[0])
+                lin_b.append(lin[1])
+            elif spl is not None:
+                groups.setdefault(tuple(spl[0].x), []).append((k, c, spl[0], spl[1]))
+            else:
+                self._others.append((k, c, f))
+        self._lin_k = np.array(lin_k, dtype=np.intp)
+        self._lin_c = np.array(lin_c, dtype=np.intp)
+        self._lin_a = np.array(lin_a)
+        self._lin_b = np.array(lin_b)
+        self._groups = [self._make_group(items) for items in groups.values()]
+
+    @staticmethod
+    def _make_group(items: list[tuple[int, int, CubicSpline, float]]) -> _SplineGroup:
+        s = np.array([it[3] for it in items])
+        return _SplineGroup(
+            outputs=np.array([it[0] for it in items], dtype=np.intp),
+            drivers=np.array([it[1] for it in items], dtype=np.intp),
+            knots=items[0][2].x,
+            y=np.stack([it[2].y for it in items], axis=1) * s,
+            b=np.stack([it[2]._b for it in items], axis=1) * s,
+            c=np.stack([it[2]._c for it in items], axis=1) * s,
+            d=np.stack([it[2]._d for it in items], axis=1) * s,
+            slope0=np.array([it[2]._slope_start for it in items]) * s,
+            slope1=np.array([it[2]._slope_end for it in items]) * s,
+        )
+
+    def evaluate(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Values, first and second derivatives.
+
+        Parameters
+        ----------
+        x
+            ``(..., N)`` input values.
+
+        Returns
+        -------
+        f, df, ddf
+            ``(..., K)`` each: f_k(x[driver_k]), f_k', f_k''.
+        """
+        lead = x.shape[:-1]
+        f = np.zeros(lead + (self.n_out,))
+        df = np.zeros_like(f)
+        ddf = np.zeros_like(f)
+        if self._lin_k.size:
+            f[..., self._lin_k] = self._lin_a * x[..., self._lin_c] + self._lin_b
+            df[..., self._lin_k] = self._lin_a
+        for g in self._groups:
+            xv = x[..., g.drivers]  # (..., k)
+            i = np.clip(np.searchsorted(g.knots, xv, side="right") - 1, 0, g.knots.size - 2)
+            t = xv - g.knots[i]
+            cols = np.arange(g.outputs.size)
+            b, c, d = g.b[i, cols], g.c[i, cols], g.d[i, cols]
+            val = g.y[i, cols] + t * (b + t * (c + t * d))
+            d1 = b + t * (2 * c + 3 * t * d)
+            d2 = 2 * c + 6 * t * d
+            lo, hi = xv < g.knots[0], xv > g.knots[-1]
+            if lo.any() or hi.any():
+                val = np.where(lo, g.y[0] + (xv - g.knots[0]) * g.slope0, val)
+                val = np.where(hi, g.y[-1] + (xv - g.knots[-1]) * g.slope1, val)
+                d1 = np.where(lo, g.slope0, np.where(hi, g.slope1, d1))
+                d2 = np.where(lo | hi, 0.0, d2)
+            f[..., g.outputs] = val
+            df[..., g.outputs] = d1
+            ddf[..., g.outputs] = d2
+        for k, c, fn in self._others:
+            xv = x[..., c]
+            f[..., k] = fn.value(xv)
+            df[..., k] = fn.derivative(xv, 1)
+            ddf[..., k] = fn.derivative(xv, 2)
+        return f, df, ddf
+
+
+class CoordinateMap:
+    """Map OpenSim coordinates q (n,) to expanded pinocchio joint values q_pin (nv,).
+
+    Parameters
+    ----------
+    n_coordinates
+        n, number of OpenSim coordinates (CoordinateSet order).
+    dof_coordinate
+        ``(nv,)`` OpenSim coordinate index driving each pinocchio DoF.
+    dof_function
+        ``nv`` functions f_k.
+    couplers
+        ``(dependent, independent, function, scale)`` index-based coupler constraints.
+    """
+
+    def __init__(
+        self,
+        n_coordinates: int,
+        dof_coordinate: list[int],
+        dof_function: list[Function],
+        couplers: list[tuple[int, int, Function, float]],
+    ) -> None:
+        self.n = n_coordinates
+        self.nv = len(dof_coordinate)
+        self.dof_coordinate = np.array(dof_coordinate, dtype=np.intp)
+        self._dofs = FunctionBank(dof_coordinate, dof_function)
+        self.dependent = np.array([c[0] for c in couplers], dtype=np.intp)
+        self.independent_of = np.array([c[1] for c in couplers], dtype=np.intp)
+        self._couplers = FunctionBank(
+            [c[1] for c in couplers], [Multiplier(c[2], c[3]) if c[3] != 1.0 else c[2] for c in couplers]
+        )
+        mask = np.ones(self.n, dtype=bool)
+        mask[self.dependent] = False
+        self.is_independent = mask
+        # root[c]: the independent coordinate that finally drives coordinate c
+        self.root = np.arange(self.n)
+        self.root[self.dependent] = self.independent_of
+        if np.any(~mask[self.independent_of]):
+            raise ValueError("chained coupler constraints (a dependent driving another) are not supported")
+
+    def complete(self, q: FloatArray) -> FloatArray:
+        """q with every dependent coordinate replaced by its coupler value; (..., n)."""
+        x = np.array(q, dtype=float, copy=True)
+        if self.dependent.size:
+            g, _, _ = self._couplers.evaluate(q)
+            x[..., self.dependent] = g
+        return x
+
+    def _coordinate_derivatives(
+        self, q: FloatArray, qd: FloatArray | None, qdd: FloatArray | None, constrained: bool
+    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, FloatArray]:
+        """x, xdot, xddot of all coordinates and dx/dq_root (..., n)."""
+        x = np.array(q, dtype=float, copy=True)
+        xd = None if qd is None else np.array(qd, dtype=float, copy=True)
+        xdd = None if qdd is None else np.array(qdd, dtype=float, copy=True)
+        dxdroot = np.ones(q.shape)
+        if constrained and self.dependent.size:
+            g, dg, ddg = self._couplers.evaluate(q)
+            x[..., self.dependent] = g
+            dxdroot[..., self.dependent] = dg
+            if xd is not None:
+                qi_d = qd[..., self.independent_of]
+                xd[..., self.dependent] = dg * qi_d
+                if xdd is not None:
+                    xdd[..., self.dependent] = ddg * qi_d**2 + dg * qdd[..., self.independent_of]
+        return x, xd, xdd, dxdroot
+
+    def expand(
+        self,
+        q: FloatArray,
+        qd: FloatArray | None = None,
+        qdd: FloatArray | None = None,
+        *,
+        constrained: bool = True,
+    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """Expanded joint positions, velocities and accelerations.
+
+        Parameters
+        ----------
+        q, qd, qdd
+            ``(..., n)`` OpenSim coordinates (rad or m) and their first/second time
+            derivatives; qd and qdd may be None.
+        constrained
+            True: dependent coordinates follow their coupler (their given values are
+            ignored). False: every coordinate is treated as independent (OpenSim's
+            "ignoring constraints" inverse dynamics).
+
+        Returns
+        -------
+        q_pin, v_pin, a_pin
+            ``(..., nv)`` each (None where the input was None).
+        """
+        x, xd, xdd, _ = self._coordinate_derivatives(q, qd, qdd, constrained)
+        f, df, ddf = self._dofs.evaluate(x)
+        c = self.dof_coordinate
+        v = None if xd is None else df * xd[..., c]
+        a = None if xdd is None else ddf * xd[..., c] ** 2 + df * xdd[..., c]
+        return f, v, a
+
+    def jacobian(self, q: FloatArray, *, constrained: bool = True) -> FloatArray:
+        """Coupling Jacobian C = d q_pin / d q, ``(nv, n)`` for one frame q (n,).
+
+        With ``constrained`` the columns of dependent coordinates are zero and their
+        effect is carried by the independent coordinate that drives them.
+        """
+        x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
+        _, df, _ = self._dofs.evaluate(x)
+        cmat = np.zeros((self.nv, self.n))
+        cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
+        cmat[np.arange(self.nv), cols] = df * dxdroot[self.dof_coordinate]
+        return cmat
+
+    def jacobian_batch(self, q: FloatArray, *, constrained: bool = True) -> tuple[FloatArray, IntArray]:
+        """Sparse form of :meth:`jacobian` for many frames.
+
+        Returns
+        -------
+        values
+            ``(..., nv)``: dq_pin[k]/dq[cols[k]].
+        cols
+            ``(nv,)`` the coordinate each DoF depends on.
+        """
+        x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
+        _, df, _ = self._dofs.evaluate(x)
+        cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
+        return df * dxdroot[..., self.dof_coordinate], cols
+
+    def project(self, q: FloatArray, tau_pin: FloatArray, *, constrained: bool = True) -> FloatArray:
+        """Generalized forces on the OpenSim coordinates, tau = C^T tau_pin.
+
+        Parameters
+        ----------
+        q
+            ``(..., n)`` coordinates.
+        tau_pin
+            ``(..., nv)`` generalized forces of the expanded joints (N·m or N).
+
+        Returns
+        -------
+        ``(..., n)`` N·m for rotational, N for translational coordinates; zero on
+        dependent coordinates when ``constrained``.
+        """
+        vals, cols = self.jacobian_batch(q, constrained=constrained)
+        onehot = np.zeros((self.nv, self.n))
+        onehot[np.arange(self.nv), cols] = 1.0
+        return (vals * tau_pin) @ onehot

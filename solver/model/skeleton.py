@@ -1,0 +1,462 @@
+"""The multibody model the solver computes with: an :class:`OsimModel` converted to pinocchio.
+
+Every moving axis of every OpenSim joint becomes one 1-DoF pinocchio joint
+(``JointModelRevoluteUnaligned`` or ``JointModelPrismaticUnaligned``); constant axes and
+offset frames become fixed placements. The expanded joint values are exact functions
+of the OpenSim coordinates (:mod:`solver.model.coupling`), so spline-driven knee
+translations, the patella coupler and locked coordinates are reproduced exactly.
+
+The public API speaks OpenSim coordinates in CoordinateSet order: ``q (n,)`` or
+``(T, n)`` in rad (rotational, coupled) or m (translational). Frames: the OpenSim
+ground frame (Y up). Rigid-body algorithms (RNEA, CRBA, Jacobians) are pinocchio's;
+the batched forward kinematics used for whole trials composes the same placements in
+numpy over all frames at once (checked against pinocchio in tests/model).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from solver.errors import OsimModelError
+from solver.model.coupling import CoordinateMap
+from solver.model.osim import ROTATIONAL, TRANSLATIONAL, OsimModel
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+def _skew(a: FloatArray) -> FloatArray:
+    return np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+
+
+def _rotation_about(axis: FloatArray, angle: float) -> FloatArray:
+    k = _skew(axis)
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
+@dataclass(frozen=True)
+class ExternalWrench:
+    """A wrench applied to a body, in the ground frame, for every frame of a trial.
+
+    Attributes
+    ----------
+    body
+        Name of the body the wrench acts on (e.g. ``calcn_r``).
+    force
+        ``(T, 3)`` force on the body, N, ground frame.
+    point
+        ``(T, 3)`` point of application (e.g. the centre of pressure), m, ground frame.
+    moment
+        ``(T, 3)`` free couple added to the force (e.g. the plate's free moment), N·m.
+    """
+
+    body: str
+    force: FloatArray
+    point: FloatArray
+    moment: FloatArray
+
+
+@dataclass(frozen=True)
+class DynamicsResult:
+    """Inverse dynamics of a trial.
+
+    Attributes
+    ----------
+    tau
+        ``(T, n)`` generalized forces on the OpenSim coordinates (N·m rotational, N
+        translational); zero on dependent (coupled) coordinates when constrained.
+    root_force
+        ``(T, 3)`` residual force the root joint must supply, N, ground frame.
+    root_moment
+        ``(T, 3)`` residual moment the root joint must supply, about the root body's
+        origin (the pelvis origin), N·m, ground frame.
+    """
+
+    tau: FloatArray
+    root_force: FloatArray
+    root_moment: FloatArray
+
+
+class Skeleton:
+    """Pinocchio model of an OpenSim model, with OpenSim coordinates as its interface.
+
+    Parameters
+    ----------
+    osim
+        The parsed (possibly scaled) model.
+
+    Raises
+    ------
+    OsimModelError
+        If the model has no root joint to ground.
+    """
+
+    def __init__(self, osim: OsimModel) -> None:
+        self.osim = osim
+        self.coordinate_names: tuple[str, ...] = osim.coordinate_names
+        self.n = len(self.coordinate_names)
+        cidx = {c: i for i, c in enumerate(self.coordinate_names)}
+        self._cidx = cidx
+        self.motion_types = tuple(c.motion_type for c in osim.coordinates)
+        self.is_rotational = np.array([m == ROTATIONAL for m in self.motion_types])
+        self.is_translational = np.array([m == TRANSLATIONAL for m in self.motion_types])
+        self.ranges = np.array([c.range for c in osim.coordinates], dtype=float).reshape(-1, 2)
+        self.defaults = np.array([c.default_value for c in osim.coordinates], dtype=float)
+        self.locked = np.array([c.locked for c in osim.coordinates], dtype=bool)
+        self.clamped = np.array([c.clamped for c in osim.coordinates], dtype=bool)
+        self.body_names: tuple[str, ...] = osim.body_names
+        self._build(osim, cidx)
+        self.cmap = CoordinateMap(
+            self.n,
+            self._dof_coord,
+            self._dof_func,
+            [(cidx[c.dependent], cidx[c.independent], c.function, c.scale_factor) for c in osim.couplers],
+        )
+        self.is_independent = self.cmap.is_independent
+        self.set_markers(osim)
+
+    # ------------------------------------------------------------------ building
+
+    def _build(self, osim: OsimModel, cidx: dict[str, int]) -> None:
+        model = pin.Model()
+        model.name = osim.name
+        model.gravity.linear = np.asarray(osim.gravity, dtype=float)
+        # placement of each body frame in the frame of the pinocchio joint carrying it
+        body_joint: dict[str, int] = {"ground": 0}
+        body_place: dict[str, pin.SE3] = {"ground": pin.SE3.Identity()}
+        self._dof_coord: list[int] = []
+        self._dof_func = []
+        self._jtype: list[int] = [0]  # 0 revolute, 1 prismatic (index 0 = universe)
+        self._jaxis: list[FloatArray] = [np.zeros(3)]
+        self.dof_names: list[str] = []
+        root_first_dof: int | None = None
+        for joint in osim.joints:
+            parent = joint.parent
+            pending = body_place[parent.body] * pin.SE3(parent.rotation(), np.array(parent.translation))
+            jid = body_joint[parent.body]
+            trans = [a for a in joint.axes if a.kind == "translation"]
+            rots = [a for a in joint.axes if a.kind == "rotation"]
+            const_t = sum(
+                (np.array(a.axis) * float(a.function.value(0.0)) for a in trans if a.coordinate is None),
+                np.zeros(3),
+            )
+            pending = pending * pin.SE3(np.eye(3), const_t)
+            first_dof = None
+            for a in trans + rots:
+                if a.coordinate is None:
+                    if a.kind == "rotation":
+                        pending = pending * pin.SE3(_rotation_about(np.array(a.axis), float(a.function.value(0.0))), np.zeros(3))
+                    continue
+                axis = np.array(a.axis, dtype=float)
+                jm = (
+                    pin.JointModelRevoluteUnaligned(axis)
+                    if a.kind == "rotation"
+                    else pin.JointModelPrismaticUnaligned(axis)
+                )
+                name = f"{joint.name}/{a.coordinate}/{a.kind}{len(self.dof_names)}"
+                jid = model.addJoint(jid, jm, pending, name)
+                pending = pin.SE3.Identity()
+                self._jtype.append(0 if a.kind == "rotation" else 1)
+                self._jaxis.append(axis)
+                self._dof_coord.append(cidx[a.coordinate])
+                self._dof_func.append(a.function)
+                self.dof_names.append(name)
+                if first_dof is None:
+                    first_dof = jid
+            child = joint.child
+            child_off = pin.SE3(child.rotation(), np.array(child.translation))
+            body_joint[child.body] = jid
+            body_place[child.body] = pending * child_off.inverse()
+            if parent.body == "ground" and first_dof is not None and root_first_dof is None:
+                root_first_dof = first_dof
+                self.root_body = child.body
+        for b in osim.bodies:
+            if b.name not in body_joint:
+                raise OsimModelError(f"body {b.name} has no joint", path=osim.source)
+            inertia = pin.Inertia(b.mass, np.array(b.com), np.array(b.inertia))
+            model.appendBodyToJoint(body_joint[b.name], inertia, body_place[b.name])
+            model.addBodyFrame(b.name, body_joint[b.name], body_place[b.name], 0)
+        if root_first_dof is None:
+            raise OsimModelError("no joint connects a body to ground with moving coordinates", path=osim.source)
+        self.model = model
+        self.data = model.createData()
+        self.root_joint = root_first_dof
+        self.nv = model.nv
+        self.body_joint = np.array([body_joint[b] for b in self.body_names], dtype=np.intp)
+        self.body_rot = np.array([body_place[b].rotation for b in self.body_names]).reshape(-1, 3, 3)
+        self.body_pos = np.array([body_place[b].translation for b in self.body_names]).reshape(-1, 3)
+        self.body_mass = np.array([b.mass for b in osim.bodies])
+        self.body_com = np.array([b.com for b in osim.bodies]).reshape(-1, 3)
+        self._body_index = {b: i for i, b in enumerate(self.body_names)}
+        self._body_joint_map = body_joint
+        self._body_place_map = body_place
+        nj = model.njoints
+        self._parents = np.array(model.parents, dtype=np.intp)
+        self._place_R = np.array([model.jointPlacements[j].rotation for j in range(nj)])
+        self._place_p = np.array([model.jointPlacements[j].translation for j in range(nj)])
+        self._idx_v = np.array([model.idx_vs[j] for j in range(nj)], dtype=np.intp)
+        self._K = np.array([_skew(a) for a in self._jaxis])
+        self._K2 = np.einsum("jab,jbc->jac", self._K, self._K)
+        support = np.zeros((nj, self.nv), dtype=bool)
+        for j in range(1, nj):
+            for s in model.supports[j]:
+                if s > 0:
+                    support[j, model.idx_vs[s]] = True
+        self._support = support
+
+    def set_markers(self, osim: OsimModel) -> None:
+        """(Re)load the marker set from ``osim`` (same bodies): names, bodies, locations."""
+        names, joints, local, bodies = [], [], [], []
+        for m in osim.markers:
+            if m.body == "ground":
+                jid, place = 0, pin.SE3.Identity()
+            else:
+                jid, place = self._body_joint_map[m.body], self._body_place_map[m.body]
+            names.append(m.name)
+            bodies.append(m.body)
+            joints.append(jid)
+            local.append(place.act(np.array(m.location, dtype=float)))
+        self.marker_names: tuple[str, ...] = tuple(names)
+        self.marker_bodies: tuple[str, ...] = tuple(bodies)
+        self.marker_joint = np.array(joints, dtype=np.intp)
+        self.marker_in_joint = np.array(local, dtype=float).reshape(-1, 3)
+        self._marker_index = {n: i for i, n in enumerate(names)}
+
+    # ------------------------------------------------------------------ lookups
+
+    def coordinate_index(self, name: str) -> int:
+        """Index of OpenSim coordinate ``name``; raises ``KeyError`` naming it."""
+        try:
+            return self._cidx[name]
+        except KeyError:
+            raise KeyError(f"model {self.osim.name} has no coordinate {name!r}") from None
+
+    def marker_index(self, names: list[str] | tuple[str, ...]) -> IntArray:
+        """Indices of the named model markers; raises ``KeyError`` naming a missing one."""
+        try:
+            return np.array([self._marker_index[n] for n in names], dtype=np.intp)
+        except KeyError as exc:
+            raise KeyError(f"model {self.osim.name} has no marker {exc.args[0]!r}") from None
+
+    def body_index(self, name: str) -> int:
+        """Index of body ``name`` in :attr:`body_names`."""
+        try:
+            return self._body_index[name]
+        except KeyError:
+            raise KeyError(f"model {self.osim.name} has no body {name!r}") from None
+
+    @property
+    def total_mass(self) -> float:
+        """Total mass, kg."""
+        return float(self.body_mass.sum())
+
+    def neutral(self) -> FloatArray:
+        """``(n,)`` default coordinate values with couplers applied."""
+        return self.cmap.complete(self.defaults)
+
+    # ------------------------------------------------------------------ kinematics (batched)
+
+    def joint_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """World placement of every pinocchio joint frame for many frames.
+
+        Parameters
+        ----------
+        q
+            ``(T, n)`` or ``(n,)`` coordinates.
+
+        Returns
+        -------
+        R, p
+            ``(T, njoints, 3, 3)`` rotations and ``(T, njoints, 3)`` origins, ground frame
+            (index 0 is the universe).
+        """
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        qp, _, _ = self.cmap.expand(q2)
+        t = q2.shape[0]
+        nj = self._parents.size
+        rot = np.empty((t, nj, 3, 3))
+        pos = np.empty((t, nj, 3))
+        rot[:, 0] = np.eye(3)
+        pos[:, 0] = 0.0
+        for j in range(1, nj):
+            par = self._parents[j]
+            r0 = rot[:, par] @ self._place_R[j]
+            p0 = pos[:, par] + rot[:, par] @ self._place_p[j]
+            x = qp[:, self._idx_v[j]]
+            if self._jtype[j] == 0:
+                s, c = np.sin(x)[:, None, None], (1.0 - np.cos(x))[:, None, None]
+                rot[:, j] = r0 + s * (r0 @ self._K[j]) + c * (r0 @ self._K2[j])
+                pos[:, j] = p0
+            else:
+                rot[:, j] = r0
+                pos[:, j] = p0 + (r0 @ self._jaxis[j]) * x[:, None]
+        return rot, pos
+
+    def body_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """World pose of every body frame.
+
+        Parameters
+        ----------
+        q
+            ``(T, n)`` or ``(n,)`` coordinates.
+
+        Returns
+        -------
+        R, p
+            ``(T, B, 3, 3)`` body rotations (columns: body axes in ground) and ``(T, B, 3)``
+            body origins, m, in :attr:`body_names` order.
+        """
+        rj, pj = self.joint_poses(q)
+        rj, pj = rj[:, self.body_joint], pj[:, self.body_joint]
+        return rj @ self.body_rot, pj + np.einsum("tbij,bj->tbi", rj, self.body_pos)
+
+    def marker_positions(self, q: FloatArray, markers: IntArray | None = None) -> FloatArray:
+        """Model marker positions in the ground frame.
+
+        Parameters
+        ----------
+        q
+            ``(T, n)`` or ``(n,)`` coordinates.
+        markers
+            Indices into :attr:`marker_names` (default: all).
+
+        Returns
+        -------
+        ``(T, M, 3)`` positions, m.
+        """
+        rj, pj = self.joint_poses(q)
+        idx = np.arange(len(self.marker_names)) if markers is None else np.asarray(markers)
+        j = self.marker_joint[idx]
+        return pj[:, j] + np.einsum("tmij,mj->tmi", rj[:, j], self.marker_in_joint[idx])
+
+    def center_of_mass(self, q: FloatArray) -> FloatArray:
+        """``(T, 3)`` whole-body centre of mass in the ground frame, m."""
+        rb, pb = self.body_poses(q)
+        com = pb + np.einsum("tbij,bj->tbi", rb, self.body_com)
+        return np.einsum("tbi,b->ti", com, self.body_mass) / self.body_mass.sum()
+
+    # ------------------------------------------------------------------ single-frame pinocchio
+
+    def expand(self, q: FloatArray) -> FloatArray:
+        """``(nv,)`` or ``(T, nv)`` pinocchio configuration for OpenSim coordinates q."""
+        return self.cmap.expand(np.asarray(q, dtype=float))[0]
+
+    def marker_jacobian(self, q: FloatArray, markers: IntArray) -> tuple[FloatArray, FloatArray]:
+        """Marker positions and their Jacobian with respect to the OpenSim coordinates.
+
+        Parameters
+        ----------
+        q
+            ``(n,)`` coordinates of one frame.
+        markers
+            ``(M,)`` indices into :attr:`marker_names`.
+
+        Returns
+        -------
+        positions
+            ``(M, 3)`` ground frame, m.
+        jacobian
+            ``(M, 3, n)`` d position / d q; columns of dependent (coupled) coordinates are
+            zero, their effect is included in the independent coordinate's column.
+        """
+        qp, _, _ = self.cmap.expand(q)
+        cmat = self.cmap.jacobian(q)
+        data = self.data
+        pin.computeJointJacobians(self.model, data, qp)
+        jw = data.J  # (6, nv): world-frame motion of each DoF axis at the ground origin
+        joints = self.marker_joint[markers]
+        uniq, inv = np.unique(joints, return_inverse=True)
+        rots = np.array([data.oMi[int(j)].rotation for j in uniq])
+        poss = np.array([data.oMi[int(j)].translation for j in uniq])
+        pm = np.einsum("mij,mj->mi", rots[inv], self.marker_in_joint[markers]) + poss[inv]
+        jlin, jang = jw[:3].T, jw[3:].T  # (nv, 3)
+        jm = jlin[None, :, :] + np.cross(jang[None, :, :], pm[:, None, :])  # v = v0 + w x p
+        jm *= self._support[joints][:, :, None]
+        return pm, np.einsum("mki,kc->mic", jm, cmat)
+
+    # ------------------------------------------------------------------ dynamics
+
+    def inverse_dynamics(
+        self,
+        q: FloatArray,
+        qd: FloatArray,
+        qdd: FloatArray,
+        wrenches: list[ExternalWrench] | tuple[ExternalWrench, ...] = (),
+        *,
+        constrained: bool = True,
+    ) -> DynamicsResult:
+        """Generalized forces that produce the motion under gravity and external wrenches.
+
+        Parameters
+        ----------
+        q, qd, qdd
+            ``(T, n)`` coordinates and their time derivatives (rad, rad/s, rad/s² or m...).
+        wrenches
+            External loads in the ground frame (e.g. ground reaction forces).
+        constrained
+            True (default): coupler constraints hold; dependent coordinates follow their
+            independent one and their force is projected onto it. False: every
+            coordinate is independent (OpenSim's ``calcResidualForceIgnoringConstraints``).
+
+        Returns
+        -------
+        DynamicsResult
+            Generalized forces and the root residual wrench per frame.
+        """
+        q2, qd2, qdd2 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, qd, qdd))
+        t = q2.shape[0]
+        qp, vp, ap = self.cmap.expand(q2, qd2, qdd2, constrained=constrained)
+        loads = self._world_wrenches(wrenches, t)
+        model, data = self.model, self.data
+        tau_pin = np.empty((t, self.nv))
+        root = np.empty((t, 6))
+        fext = [pin.Force.Zero() for _ in range(model.njoints)]
+        rj = self.root_joint
+        rb_joint = self._body_joint_map[self.root_body]
+        rb_origin = self._body_place_map[self.root_body].translation
+        for k in range(t):
+            if loads:
+                pin.forwardKinematics(model, data, qp[k])
+                for j, w in loads.items():
+                    fext[j] = data.oMi[j].actInv(pin.Force(w[k, :3], w[k, 3:]))
+                tau_pin[k] = pin.rnea(model, data, qp[k], vp[k], ap[k], fext)
+            else:
+                tau_pin[k] = pin.rnea(model, data, qp[k], vp[k], ap[k])
+            f_world = data.oMi[rj].act(data.f[rj])
+            root[k, :3] = f_world.linear
+            origin = data.oMi[rb_joint].act(rb_origin)
+            root[k, 3:] = f_world.angular - np.cross(origin, f_world.linear)
+        tau = self.cmap.project(q2, tau_pin, constrained=constrained)
+        return DynamicsResult(tau=tau, root_force=root[:, :3], root_moment=root[:, 3:])
+
+    def _world_wrenches(self, wrenches: list[ExternalWrench] | tuple[ExternalWrench, ...], t: int) -> dict[int, FloatArray]:
+        """Sum the wrenches per pinocchio joint as (T, 6) [force, moment about the ground origin]."""
+        out: dict[int, FloatArray] = {}
+        for w in wrenches:
+            if w.body not in self._body_joint_map:
+                raise KeyError(f"external wrench on unknown body {w.body!r}")
+            j = self._body_joint_map[w.body]
+            f = np.asarray(w.force, dtype=float).reshape(t, 3)
+            p = np.asarray(w.point, dtype=float).reshape(t, 3)
+            m = np.asarray(w.moment, dtype=float).reshape(t, 3)
+            wr = np.concatenate([f, np.cross(p, f) + m], axis=1)
+            out[j] = out.get(j, 0.0) + wr
+        return {j: np.nan_to_num(w) for j, w in out.items()}
+
+    def mass_matrix(self, q: FloatArray, *, constrained: bool = True) -> FloatArray:
+        """``(n, n)`` joint-space mass matrix C^T M_pin C in OpenSim coordinates (one frame)."""
+        qp, _, _ = self.cmap.expand(np.asarray(q, dtype=float), constrained=constrained)
+        mp = pin.crba(self.model, self.data, qp)
+        mp = np.triu(mp) + np.triu(mp, 1).T
+        cmat = self.cmap.jacobian(np.asarray(q, dtype=float), constrained=constrained)
+        return cmat.T @ mp @ cmat
+
+    def root_transform_axes(self) -> tuple[int, ...]:
+        """Indices of the root joint's coordinates (the six residual coordinates)."""
+        root_joint = self.osim.joints[0]
+        return tuple(self._cidx[c] for c in root_joint.coordinates)
+
