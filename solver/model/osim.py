@@ -605,6 +605,12 @@ def _parse_couplers(ctx: _Ctx, root: ET.Element) -> list[Coupler]:
 # ----------------------------------------------------------------------------- entry point
 
 
+def is_v3_layout(model_elem: ET.Element) -> bool:
+    """True for the OpenSim 3.x layout (joints inside bodies, no populated JointSet)."""
+    jointset = model_elem.find("JointSet")
+    return jointset is None or len(list(jointset.iter())) <= 1 or jointset.find(".//*[@name]") is None
+
+
 def read_osim(path: str | Path) -> OsimModel:
     """Parse an OpenSim model file.
 
@@ -647,7 +653,7 @@ def read_osim(path: str | Path) -> OsimModel:
     coords: list[Coordinate] = []
     jointset = root.find("JointSet")
     frames = None
-    if jointset is not None and len(list(jointset.iter())) > 1:  # 4.x
+    if not is_v3_layout(root):  # 4.x
         free = {}
         for container in ("ComponentSet", "FrameSet", "components"):
             c = root.find(container)

@@ -134,6 +134,8 @@ class Skeleton:
         self._jaxis: list[FloatArray] = [np.zeros(3)]
         self.dof_names: list[str] = []
         root_first_dof: int | None = None
+        # per joint: (joint, [(axis, pin dof index or None, constant angle)] for rotation1..3)
+        self.joint_rotations: list[tuple[object, list[tuple[FloatArray, int | None, float]]]] = []
         for joint in osim.joints:
             parent = joint.parent
             pending = body_place[parent.body] * pin.SE3(parent.rotation(), np.array(parent.translation))
@@ -146,7 +148,12 @@ class Skeleton:
             )
             pending = pending * pin.SE3(np.eye(3), const_t)
             first_dof = None
+            rot_info: list[tuple[FloatArray, int | None, float]] = []
             for a in trans + rots:
+                if a.kind == "rotation":
+                    rot_info.append(
+                        (np.array(a.axis), None if a.coordinate is None else len(self.dof_names), float(a.function.value(0.0)))
+                    )
                 if a.coordinate is None:
                     if a.kind == "rotation":
                         pending = pending * pin.SE3(_rotation_about(np.array(a.axis), float(a.function.value(0.0))), np.zeros(3))
@@ -167,6 +174,7 @@ class Skeleton:
                 self.dof_names.append(name)
                 if first_dof is None:
                     first_dof = jid
+            self.joint_rotations.append((joint, rot_info))
             child = joint.child
             child_off = pin.SE3(child.rotation(), np.array(child.translation))
             body_joint[child.body] = jid
@@ -388,6 +396,7 @@ class Skeleton:
         wrenches: list[ExternalWrench] | tuple[ExternalWrench, ...] = (),
         *,
         constrained: bool = True,
+        opensim_compatible: bool = False,
     ) -> DynamicsResult:
         """Generalized forces that produce the motion under gravity and external wrenches.
 
@@ -401,6 +410,11 @@ class Skeleton:
             True (default): coupler constraints hold; dependent coordinates follow their
             independent one and their force is projected onto it. False: every
             coordinate is independent (OpenSim's ``calcResidualForceIgnoringConstraints``).
+        opensim_compatible
+            Reproduce Simbody's velocity-dependent term of function-based (Custom)
+            joints, which is inexact when two rotations of one joint are driven by the
+            same coordinate (the walker knee); see :mod:`solver.model.opensim_compat`.
+            Off by default: the default result is the exact one.
 
         Returns
         -------
@@ -410,6 +424,10 @@ class Skeleton:
         q2, qd2, qdd2 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, qd, qdd))
         t = q2.shape[0]
         qp, vp, ap = self.cmap.expand(q2, qd2, qdd2, constrained=constrained)
+        if opensim_compatible:
+            from solver.model.opensim_compat import simbody_hdot_error
+
+            ap = ap + simbody_hdot_error(self, qp, vp)
         loads = self._world_wrenches(wrenches, t)
         model, data = self.model, self.data
         tau_pin = np.empty((t, self.nv))
