@@ -207,8 +207,9 @@ class Skeleton:
         self._place_R = np.array([model.jointPlacements[j].rotation for j in range(nj)])
         self._place_p = np.array([model.jointPlacements[j].translation for j in range(nj)])
         self._idx_v = np.array([model.idx_vs[j] for j in range(nj)], dtype=np.intp)
-        self._K = np.array([_skew(a) for a in self._jaxis])
-        self._K2 = np.einsum("jab,jbc->jac", self._K, self._K)
+        k = np.array([_skew(a) for a in self._jaxis])
+        self._PK = np.einsum("jab,jbc->jac", self._place_R, k)  # placement @ skew(axis)
+        self._PK2 = np.einsum("jab,jbc->jac", self._PK, k)
         support = np.zeros((nj, self.nv), dtype=bool)
         for j in range(1, nj):
             for s in model.supports[j]:
@@ -268,6 +269,38 @@ class Skeleton:
 
     # ------------------------------------------------------------------ kinematics (batched)
 
+    def _joint_poses_soa(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Joint placements with frames last: ``(nj, 3, 3, T)`` and ``(nj, 3, T)``.
+
+        Frames-last ("structure of arrays") keeps each 3x3 product a handful of long
+        vectorized operations, which is what makes batched kinematics cheap in numpy.
+        """
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        qp, _, _ = self.cmap.expand(q2)
+        t = q2.shape[0]
+        nj = self._parents.size
+        rot = np.empty((nj, 3, 3, t))
+        pos = np.empty((nj, 3, t))
+        rot[0] = np.eye(3)[:, :, None]
+        pos[0] = 0.0
+        for j in range(1, nj):
+            x = qp[:, self._idx_v[j]]
+            place_r, place_p = self._place_R[j], self._place_p[j]
+            if self._jtype[j] == 0:
+                r_loc = place_r[:, :, None] + self._PK[j][:, :, None] * np.sin(x) + self._PK2[j][:, :, None] * (1.0 - np.cos(x))
+                p_loc = np.broadcast_to(place_p[:, None], (3, t))
+            else:
+                r_loc = np.broadcast_to(place_r[:, :, None], (3, 3, t))
+                p_loc = place_p[:, None] + (place_r @ self._jaxis[j])[:, None] * x
+            par = self._parents[j]
+            if par == 0:
+                rot[j] = r_loc
+                pos[j] = p_loc
+            else:
+                rot[j] = np.einsum("ijt,jkt->ikt", rot[par], r_loc)
+                pos[j] = pos[par] + np.einsum("ijt,jt->it", rot[par], p_loc)
+        return rot, pos
+
     def joint_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """World placement of every pinocchio joint frame for many frames.
 
@@ -282,27 +315,8 @@ class Skeleton:
             ``(T, njoints, 3, 3)`` rotations and ``(T, njoints, 3)`` origins, ground frame
             (index 0 is the universe).
         """
-        q2 = np.atleast_2d(np.asarray(q, dtype=float))
-        qp, _, _ = self.cmap.expand(q2)
-        t = q2.shape[0]
-        nj = self._parents.size
-        rot = np.empty((t, nj, 3, 3))
-        pos = np.empty((t, nj, 3))
-        rot[:, 0] = np.eye(3)
-        pos[:, 0] = 0.0
-        for j in range(1, nj):
-            par = self._parents[j]
-            r0 = rot[:, par] @ self._place_R[j]
-            p0 = pos[:, par] + rot[:, par] @ self._place_p[j]
-            x = qp[:, self._idx_v[j]]
-            if self._jtype[j] == 0:
-                s, c = np.sin(x)[:, None, None], (1.0 - np.cos(x))[:, None, None]
-                rot[:, j] = r0 + s * (r0 @ self._K[j]) + c * (r0 @ self._K2[j])
-                pos[:, j] = p0
-            else:
-                rot[:, j] = r0
-                pos[:, j] = p0 + (r0 @ self._jaxis[j]) * x[:, None]
-        return rot, pos
+        rot, pos = self._joint_poses_soa(q)
+        return rot.transpose(3, 0, 1, 2), pos.transpose(2, 0, 1)
 
     def body_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """World pose of every body frame.
@@ -318,9 +332,11 @@ class Skeleton:
             ``(T, B, 3, 3)`` body rotations (columns: body axes in ground) and ``(T, B, 3)``
             body origins, m, in :attr:`body_names` order.
         """
-        rj, pj = self.joint_poses(q)
-        rj, pj = rj[:, self.body_joint], pj[:, self.body_joint]
-        return rj @ self.body_rot, pj + np.einsum("tbij,bj->tbi", rj, self.body_pos)
+        rot, pos = self._joint_poses_soa(q)
+        rj, pj = rot[self.body_joint], pos[self.body_joint]  # (B, 3, 3, T), (B, 3, T)
+        r_body = np.einsum("bijt,bjk->tbik", rj, self.body_rot)
+        p_body = pj.transpose(2, 0, 1) + np.einsum("bijt,bj->tbi", rj, self.body_pos)
+        return r_body, p_body
 
     def marker_positions(self, q: FloatArray, markers: IntArray | None = None) -> FloatArray:
         """Model marker positions in the ground frame.
@@ -336,10 +352,11 @@ class Skeleton:
         -------
         ``(T, M, 3)`` positions, m.
         """
-        rj, pj = self.joint_poses(q)
+        rot, pos = self._joint_poses_soa(q)
         idx = np.arange(len(self.marker_names)) if markers is None else np.asarray(markers)
         j = self.marker_joint[idx]
-        return pj[:, j] + np.einsum("tmij,mj->tmi", rj[:, j], self.marker_in_joint[idx])
+        out = pos[j] + np.einsum("mijt,mj->mit", rot[j], self.marker_in_joint[idx])
+        return out.transpose(2, 0, 1)
 
     def center_of_mass(self, q: FloatArray) -> FloatArray:
         """``(T, 3)`` whole-body centre of mass in the ground frame, m."""
@@ -428,28 +445,38 @@ class Skeleton:
             from solver.model.opensim_compat import simbody_hdot_error
 
             ap = ap + simbody_hdot_error(self, qp, vp)
-        loads = self._world_wrenches(wrenches, t)
+        rot, pos = self._joint_poses_soa(q2)  # (nj, 3, 3, T), (nj, 3, T)
+        local = {j: self._to_joint_frame(w, rot[j], pos[j]) for j, w in self._world_wrenches(wrenches, t).items()}
         model, data = self.model, self.data
         tau_pin = np.empty((t, self.nv))
         root = np.empty((t, 6))
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
         rj = self.root_joint
-        rb_joint = self._body_joint_map[self.root_body]
-        rb_origin = self._body_place_map[self.root_body].translation
         for k in range(t):
-            if loads:
-                pin.forwardKinematics(model, data, qp[k])
-                for j, w in loads.items():
-                    fext[j] = data.oMi[j].actInv(pin.Force(w[k, :3], w[k, 3:]))
+            if local:
+                for j, w in local.items():
+                    fext[j] = pin.Force(w[k])
                 tau_pin[k] = pin.rnea(model, data, qp[k], vp[k], ap[k], fext)
             else:
                 tau_pin[k] = pin.rnea(model, data, qp[k], vp[k], ap[k])
-            f_world = data.oMi[rj].act(data.f[rj])
-            root[k, :3] = f_world.linear
-            origin = data.oMi[rb_joint].act(rb_origin)
-            root[k, 3:] = f_world.angular - np.cross(origin, f_world.linear)
+            root[k] = data.f[rj].vector  # [linear, angular] in the root joint's frame
+        force = np.einsum("ijt,tj->ti", rot[rj], root[:, :3])
+        moment_at_joint = np.einsum("ijt,tj->ti", rot[rj], root[:, 3:])
+        bj = self._body_joint_map[self.root_body]
+        origin = pos[bj] + np.einsum("ijt,j->it", rot[bj], self._body_place_map[self.root_body].translation)
+        moment = moment_at_joint + np.cross(pos[rj].T - origin.T, force)
         tau = self.cmap.project(q2, tau_pin, constrained=constrained)
-        return DynamicsResult(tau=tau, root_force=root[:, :3], root_moment=root[:, 3:])
+        return DynamicsResult(tau=tau, root_force=force, root_moment=moment)
+
+    @staticmethod
+    def _to_joint_frame(wrench: FloatArray, rot: FloatArray, pos: FloatArray) -> FloatArray:
+        """(T, 6) [force, moment about the ground origin] -> the same wrench in a joint frame
+        with rotation ``rot`` (3, 3, T) and origin ``pos`` (3, T), moment about that origin."""
+        f, m = wrench[:, :3], wrench[:, 3:]
+        m_joint = m - np.cross(pos.T, f)
+        return np.concatenate(
+            [np.einsum("jit,tj->ti", rot, f), np.einsum("jit,tj->ti", rot, m_joint)], axis=1
+        )
 
     def _world_wrenches(self, wrenches: list[ExternalWrench] | tuple[ExternalWrench, ...], t: int) -> dict[int, FloatArray]:
         """Sum the wrenches per pinocchio joint as (T, 6) [force, moment about the ground origin]."""
