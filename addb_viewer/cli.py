@@ -19,7 +19,12 @@ Handler = Callable[[argparse.Namespace], int]
 def _cmd_info(args: argparse.Namespace) -> int:
     from solver.io.summary import format_summary, summarize
 
-    print(format_summary(summarize(args.path)))
+    path = args.path
+    if path is None:
+        from addb_viewer.demo import DEMO_SUBJECT
+
+        path = DEMO_SUBJECT
+    print(format_summary(summarize(path)))
     return 0
 
 
@@ -36,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "info", help="summarize a TRC/MOT/STO/C3D/.osim file or an AddBiomechanics subject folder"
     )
-    p.add_argument("path", help="file or subject folder")
+    p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
     p.set_defaults(handler=_cmd_info)
     return parser
 

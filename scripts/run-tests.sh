@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# Install addb with its test extra into .venv and run the whole test suite.
+# Usage: bash scripts/run-tests.sh [pytest arguments]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -e ".[test]"
+exec .venv/bin/python -m pytest -q "$@"
