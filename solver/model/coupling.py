@@ -56,17 +56,17 @@ def _linear_of(f: Function) -> tuple[float, float] | None:
 
 @dataclass
 class _SplineGroup:
-    """Cubic splines sharing one knot vector, evaluated together."""
+    """Cubic splines sharing one knot vector, evaluated together.
+
+    ``table[i, k] = (anchor, y, b, c, d)`` so that f = y + t (b + t (c + t d)) with
+    t = x - anchor, for slot i = 0 (below the first knot: the linear continuation),
+    1..n-1 (the spline intervals) and n (above the last knot).
+    """
 
     outputs: IntArray  # (k,) output slots
-    drivers: IntArray  # (k,) input slots (all splines of a group may have different drivers)
+    drivers: IntArray  # (k,) input slots
     knots: FloatArray  # (n,)
-    y: FloatArray  # (n, k) knot values
-    b: FloatArray  # (n-1, k)
-    c: FloatArray
-    d: FloatArray
-    slope0: FloatArray  # (k,)
-    slope1: FloatArray
+    table: FloatArray  # (n + 1, k, 5)
 
 
 class FunctionBank:
@@ -105,17 +105,22 @@ class FunctionBank:
 
     @staticmethod
     def _make_group(items: list[tuple[int, int, CubicSpline, float]]) -> _SplineGroup:
-        s = np.array([it[3] for it in items])
+        knots = items[0][2].x
+        n, k = knots.size, len(items)
+        table = np.zeros((n + 1, k, 5))
+        for col, (_, _, spl, scale) in enumerate(items):
+            table[1:n, col, 0] = knots[:-1]
+            table[1:n, col, 1] = spl.y[:-1] * scale
+            table[1:n, col, 2] = spl._b * scale
+            table[1:n, col, 3] = spl._c * scale
+            table[1:n, col, 4] = spl._d * scale
+            table[0, col, :3] = knots[0], spl.y[0] * scale, spl._slope_start * scale
+            table[n, col, :3] = knots[-1], spl.y[-1] * scale, spl._slope_end * scale
         return _SplineGroup(
             outputs=np.array([it[0] for it in items], dtype=np.intp),
             drivers=np.array([it[1] for it in items], dtype=np.intp),
-            knots=items[0][2].x,
-            y=np.stack([it[2].y for it in items], axis=1) * s,
-            b=np.stack([it[2]._b for it in items], axis=1) * s,
-            c=np.stack([it[2]._c for it in items], axis=1) * s,
-            d=np.stack([it[2]._d for it in items], axis=1) * s,
-            slope0=np.array([it[2]._slope_start for it in items]) * s,
-            slope1=np.array([it[2]._slope_end for it in items]) * s,
+            knots=knots,
+            table=table,
         )
 
     def evaluate(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -140,22 +145,14 @@ class FunctionBank:
             df[..., self._lin_k] = self._lin_a
         for g in self._groups:
             xv = x[..., g.drivers]  # (..., k)
-            i = np.clip(np.searchsorted(g.knots, xv, side="right") - 1, 0, g.knots.size - 2)
-            t = xv - g.knots[i]
-            cols = np.arange(g.outputs.size)
-            b, c, d = g.b[i, cols], g.c[i, cols], g.d[i, cols]
-            val = g.y[i, cols] + t * (b + t * (c + t * d))
-            d1 = b + t * (2 * c + 3 * t * d)
-            d2 = 2 * c + 6 * t * d
-            lo, hi = xv < g.knots[0], xv > g.knots[-1]
-            if lo.any() or hi.any():
-                val = np.where(lo, g.y[0] + (xv - g.knots[0]) * g.slope0, val)
-                val = np.where(hi, g.y[-1] + (xv - g.knots[-1]) * g.slope1, val)
-                d1 = np.where(lo, g.slope0, np.where(hi, g.slope1, d1))
-                d2 = np.where(lo | hi, 0.0, d2)
-            f[..., g.outputs] = val
-            df[..., g.outputs] = d1
-            ddf[..., g.outputs] = d2
+            n = g.knots.size
+            slot = np.minimum(np.searchsorted(g.knots, xv, side="right"), n - 1) + (xv > g.knots[-1])
+            coef = g.table[slot, np.arange(g.outputs.size)]  # (..., k, 5)
+            t = xv - coef[..., 0]
+            b, c, d = coef[..., 2], coef[..., 3], coef[..., 4]
+            f[..., g.outputs] = coef[..., 1] + t * (b + t * (c + t * d))
+            df[..., g.outputs] = b + t * (2 * c + 3 * t * d)
+            ddf[..., g.outputs] = 2 * c + 6 * t * d
         for k, c, fn in self._others:
             xv = x[..., c]
             f[..., k] = fn.value(xv)
@@ -275,6 +272,14 @@ class CoordinateMap:
         cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
         cmat[np.arange(self.nv), cols] = df * dxdroot[self.dof_coordinate]
         return cmat
+
+    def expand_with_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Constrained q_pin ``(nv,)`` and coupling Jacobian ``(nv, n)`` of one frame, in one pass."""
+        x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, True)
+        f, df, _ = self._dofs.evaluate(x)
+        cmat = np.zeros((self.nv, self.n))
+        cmat[np.arange(self.nv), self.root[self.dof_coordinate]] = df * dxdroot[self.dof_coordinate]
+        return f, cmat
 
     def jacobian_batch(self, q: FloatArray, *, constrained: bool = True) -> tuple[FloatArray, IntArray]:
         """Sparse form of :meth:`jacobian` for many frames.

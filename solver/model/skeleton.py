@@ -207,6 +207,9 @@ class Skeleton:
         self._place_R = np.array([model.jointPlacements[j].rotation for j in range(nj)])
         self._place_p = np.array([model.jointPlacements[j].translation for j in range(nj)])
         self._idx_v = np.array([model.idx_vs[j] for j in range(nj)], dtype=np.intp)
+        self._identity_r = [bool(np.allclose(r, np.eye(3), atol=0.0, rtol=0.0)) for r in self._place_R]
+        self._zero_p = [not np.any(p) for p in self._place_p]
+        self._axis_in_parent = [r @ a for r, a in zip(self._place_R, self._jaxis)]
         k = np.array([_skew(a) for a in self._jaxis])
         self._PK = np.einsum("jab,jbc->jac", self._place_R, k)  # placement @ skew(axis)
         self._PK2 = np.einsum("jab,jbc->jac", self._PK, k)
@@ -234,6 +237,9 @@ class Skeleton:
         self.marker_joint = np.array(joints, dtype=np.intp)
         self.marker_in_joint = np.array(local, dtype=float).reshape(-1, 3)
         self._marker_index = {n: i for i, n in enumerate(names)}
+        uniq, inv = np.unique(self.marker_joint, return_inverse=True)
+        self._marker_joints_uniq = [int(j) for j in uniq]
+        self._marker_slot = inv.astype(np.intp).reshape(-1)
 
     # ------------------------------------------------------------------ lookups
 
@@ -287,18 +293,16 @@ class Skeleton:
             x = qp[:, self._idx_v[j]]
             place_r, place_p = self._place_R[j], self._place_p[j]
             if self._jtype[j] == 0:
-                r_loc = place_r[:, :, None] + self._PK[j][:, :, None] * np.sin(x) + self._PK2[j][:, :, None] * (1.0 - np.cos(x))
-                p_loc = np.broadcast_to(place_p[:, None], (3, t))
+                r_loc = self._PK[j][:, :, None] * np.sin(x) + self._PK2[j][:, :, None] * (1.0 - np.cos(x))
+                r_loc += place_r[:, :, None]
+                p_loc = None if self._zero_p[j] else place_p[:, None]
             else:
-                r_loc = np.broadcast_to(place_r[:, :, None], (3, 3, t))
-                p_loc = place_p[:, None] + (place_r @ self._jaxis[j])[:, None] * x
+                r_loc = None if self._identity_r[j] else place_r[:, :, None]
+                p_loc = place_p[:, None] + self._axis_in_parent[j][:, None] * x
             par = self._parents[j]
-            if par == 0:
-                rot[j] = r_loc
-                pos[j] = p_loc
-            else:
-                rot[j] = np.einsum("ijt,jkt->ikt", rot[par], r_loc)
-                pos[j] = pos[par] + np.einsum("ijt,jt->it", rot[par], p_loc)
+            r_par, p_par = rot[par], pos[par]
+            rot[j] = r_par if r_loc is None else np.einsum("ijt,jkt->ikt", r_par, r_loc)
+            pos[j] = p_par if p_loc is None else p_par + np.einsum("ijt,jt->it", r_par, np.broadcast_to(p_loc, (3, t)))
         return rot, pos
 
     def joint_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -388,20 +392,28 @@ class Skeleton:
             ``(M, 3, n)`` d position / d q; columns of dependent (coupled) coordinates are
             zero, their effect is included in the independent coordinate's column.
         """
-        qp, _, _ = self.cmap.expand(q)
-        cmat = self.cmap.jacobian(q)
+        qp, cmat = self.cmap.expand_with_jacobian(np.asarray(q, dtype=float))
         data = self.data
         pin.computeJointJacobians(self.model, data, qp)
         jw = data.J  # (6, nv): world-frame motion of each DoF axis at the ground origin
-        joints = self.marker_joint[markers]
-        uniq, inv = np.unique(joints, return_inverse=True)
-        rots = np.array([data.oMi[int(j)].rotation for j in uniq])
-        poss = np.array([data.oMi[int(j)].translation for j in uniq])
-        pm = np.einsum("mij,mj->mi", rots[inv], self.marker_in_joint[markers]) + poss[inv]
-        jlin, jang = jw[:3].T, jw[3:].T  # (nv, 3)
-        jm = jlin[None, :, :] + np.cross(jang[None, :, :], pm[:, None, :])  # v = v0 + w x p
-        jm *= self._support[joints][:, :, None]
-        return pm, np.einsum("mki,kc->mic", jm, cmat)
+        slot = self._marker_slot[markers]
+        placements = data.oMi.tolist()
+        hom = np.array([placements[j].homogeneous for j in self._marker_joints_uniq])[slot]  # (M, 4, 4)
+        local = self.marker_in_joint[markers]
+        pm = (hom[:, :3, :3] * local[:, None, :]).sum(axis=2) + hom[:, :3, 3]
+        jl, ja = jw[:3], jw[3:]
+        px, py, pz = pm[:, 0:1], pm[:, 1:2], pm[:, 2:3]
+        jm = np.stack(  # point velocity v = v0 + w x p, per DoF column
+            [
+                jl[0] + ja[1] * pz - ja[2] * py,
+                jl[1] + ja[2] * px - ja[0] * pz,
+                jl[2] + ja[0] * py - ja[1] * px,
+            ],
+            axis=1,
+        )
+        jm *= self._support[self.marker_joint[markers]][:, None, :]
+        m = local.shape[0]
+        return pm, (jm.reshape(3 * m, self.nv) @ cmat).reshape(m, 3, self.n)
 
     # ------------------------------------------------------------------ dynamics
 
