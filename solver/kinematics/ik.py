@@ -1,0 +1,300 @@
+"""Inverse kinematics: coordinates that best place the model's markers on the observed ones.
+
+Per frame, a damped Gauss-Newton (Levenberg-Marquardt) least-squares solve of
+
+    min_q  sum_m w_m |p_m(q) - y_m|^2 + lambda_t |q - q_prev|^2
+
+over the free coordinates (independent of coupler constraints and not locked), with the
+analytic marker Jacobian from pinocchio; clamped coordinates are projected onto their
+range after every step. Frames are solved in time order, each starting from the previous
+solution (warm start), and ``lambda_t`` is a small pull toward the previous frame that
+only matters for directions no marker observes (e.g. during a marker gap).
+
+The root pose of the first frame comes from a rigid (Kabsch) registration of the model's
+markers to the observed ones, so no initial guess is needed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.model.skeleton import Skeleton
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class IkSettings:
+    """Settings of the per-frame solver.
+
+    Attributes
+    ----------
+    max_iterations
+        Gauss-Newton iterations per frame (warm-started frames need 2-4).
+    tolerance
+        Stop when the step's largest coordinate change is below this (rad or m).
+    temporal_weight
+        lambda_t, weight of the pull toward the previous frame (m² per rad²).
+    damping
+        Initial Levenberg-Marquardt damping, relative to the mean diagonal of J^T J.
+    """
+
+    max_iterations: int = 12
+    tolerance: float = 1e-4
+    temporal_weight: float = 1e-4
+    damping: float = 1e-6
+
+
+class FrameSolver:
+    """Solves one frame at a time for a fixed model and marker set.
+
+    Parameters
+    ----------
+    skeleton
+        The (scaled) model.
+    markers
+        ``(M,)`` indices of the model markers the observations refer to.
+    weights
+        ``(M,)`` marker weights (dimensionless).
+    settings
+        Solver settings.
+    """
+
+    def __init__(self, skeleton: Skeleton, markers: IntArray, weights: FloatArray, settings: IkSettings) -> None:
+        self.sk = skeleton
+        self.markers = np.asarray(markers, dtype=np.intp)
+        self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
+        self.settings = settings
+        self.free = np.flatnonzero(skeleton.is_independent & ~skeleton.locked)
+        lo, hi = skeleton.ranges[:, 0].copy(), skeleton.ranges[:, 1].copy()
+        lo[~skeleton.clamped], hi[~skeleton.clamped] = -np.inf, np.inf
+        self.lo, self.hi = lo, hi
+        self.calls = 0
+
+    def _clip(self, q: FloatArray) -> FloatArray:
+        q = np.clip(q, self.lo, self.hi)
+        q[self.sk.locked] = self.sk.defaults[self.sk.locked]
+        return self.sk.cmap.complete(q)
+
+    def residual(self, q: FloatArray, y: FloatArray, seen: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+        """Weighted residuals ``(k,)`` and their Jacobian ``(k, n_free)`` for observed markers."""
+        pos, jac = self.sk.marker_jacobian(q, self.markers[seen])
+        w = self.sqrt_w[seen][:, None]
+        r = (w * (pos - y[seen])).reshape(-1)
+        j = (w[:, :, None] * jac[:, :, self.free]).reshape(-1, self.free.size)
+        return r, j
+
+    def solve(self, q0: FloatArray, y: FloatArray, q_prev: FloatArray | None = None, max_iterations: int | None = None) -> tuple[FloatArray, float]:
+        """Solve one frame.
+
+        Parameters
+        ----------
+        q0
+            ``(n,)`` starting coordinates.
+        y
+            ``(M, 3)`` observed positions, NaN where missing.
+        q_prev
+            ``(n,)`` previous frame's solution for the temporal pull (None: pull toward q0).
+
+        Returns
+        -------
+        q, cost
+            Solution ``(n,)`` and its weighted sum of squared marker errors, m².
+        """
+        s = self.settings
+        seen = np.isfinite(y).all(axis=1)
+        q = self._clip(np.array(q0, dtype=float))
+        anchor = (q if q_prev is None else q_prev)[self.free]
+        lam = s.temporal_weight
+        r, j = self.residual(q, y, seen)
+        cost = r @ r + lam * np.sum((q[self.free] - anchor) ** 2)
+        mu = None
+        lo, hi = self.lo[self.free], self.hi[self.free]
+        for _ in range(max_iterations or s.max_iterations):
+            h = j.T @ j
+            h[np.diag_indices_from(h)] += lam
+            g = j.T @ r + lam * (q[self.free] - anchor)
+            if mu is None:
+                mu = s.damping * max(float(np.mean(np.diag(h))), 1e-12)
+            # coordinates held at a bound by the gradient stay there (projected Gauss-Newton)
+            x = q[self.free]
+            keep = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
+            h_k, g_k = h[np.ix_(keep, keep)], g[keep]
+            accepted = False
+            for _ in range(8):
+                hd = h_k.copy()
+                hd[np.diag_indices_from(hd)] += mu
+                q_new = q.copy()
+                q_new[self.free[keep]] -= np.linalg.solve(hd, g_k)
+                q_new = self._clip(q_new)
+                r_new, j_new = self.residual(q_new, y, seen)
+                cost_new = r_new @ r_new + lam * np.sum((q_new[self.free] - anchor) ** 2)
+                if cost_new <= cost:
+                    accepted = True
+                    break
+                mu *= 10.0
+            if not accepted:
+                break
+            change = np.max(np.abs(q_new - q))
+            decrease = (cost - cost_new) / max(cost, 1e-300)
+            q, r, j, cost = q_new, r_new, j_new, cost_new
+            mu = max(mu / 10.0, 1e-15)
+            self.calls += 1
+            if change < s.tolerance or decrease < 1e-6:
+                break
+        return q, float(r @ r)
+
+
+def solve_trajectory(
+    solver: FrameSolver, obs: FloatArray, q_start: FloatArray
+) -> FloatArray:
+    """Solve every frame in time order, each warm-started from the previous one.
+
+    Parameters
+    ----------
+    solver
+        The per-frame solver.
+    obs
+        ``(T, M, 3)`` observed marker positions, NaN where missing.
+    q_start
+        ``(n,)`` coordinates for the first frame's start.
+
+    Returns
+    -------
+    ``(T, n)`` coordinates (couplers applied, locked coordinates at their default).
+    """
+    t = obs.shape[0]
+    out = np.empty((t, solver.sk.n))
+    q = q_start
+    first = True
+    for k in range(t):
+        if not np.isfinite(obs[k]).all(axis=1).any():
+            out[k] = q  # no marker at all: hold the pose
+            continue
+        q, _ = solver.solve(q, obs[k], None if first else q, max_iterations=40 if first else None)
+        first = False
+        out[k] = q
+    return out
+
+
+def kabsch(model_pts: FloatArray, obs_pts: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rotation R and translation t minimizing |R model + t - obs|² over point pairs (N, 3)."""
+    cm, co = model_pts.mean(axis=0), obs_pts.mean(axis=0)
+    u, _, vt = np.linalg.svd((model_pts - cm).T @ (obs_pts - co))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return rot, co - rot @ cm
+
+
+def _joint_search_plan(sk: Skeleton) -> list[tuple[list[int], list[int], set[str]]]:
+    """For each non-root OpenSim joint (depth-first): its free coordinates, the free
+    coordinates of its child joints (searched along with it when the grid stays small),
+    and the bodies of its subtree."""
+    children: dict[str, list[str]] = {}
+    joint_of_child = {j.child.body: j for j in sk.osim.joints}
+    for j in sk.osim.joints:
+        children.setdefault(j.parent.body, []).append(j.child.body)
+
+    def subtree(body: str) -> set[str]:
+        out = {body}
+        for c in children.get(body, []):
+            out |= subtree(c)
+        return out
+
+    free = set(np.flatnonzero(sk.is_independent & ~sk.locked).tolist())
+
+    def coords_of(joint: object) -> list[int]:
+        return [sk.coordinate_index(c) for c in joint.coordinates if sk.coordinate_index(c) in free]  # type: ignore[attr-defined]
+
+    out = []
+    for j in sk.osim.joints[1:]:
+        own = coords_of(j)
+        if not own:
+            continue
+        ahead = [c for b in children.get(j.child.body, []) for c in coords_of(joint_of_child[b])]
+        out.append((own, ahead, subtree(j.child.body)))
+    return out
+
+
+def greedy_pose(solver: FrameSolver, y: FloatArray, q_root: FloatArray, grid: int = 5, max_candidates: int = 700) -> FloatArray:
+    """Pose the limbs joint by joint, from the root outward, by a grid search.
+
+    For each joint (depth-first), every combination of ``grid`` values across the range
+    of each of its free coordinates (ranges wider than a turn are cut to ±π), and of its
+    child joints' coordinates when the number of combinations stays under
+    ``max_candidates`` (one joint of look-ahead: a shoulder is scored together with the
+    elbow below it), is scored at once with batched forward kinematics on the markers of
+    the joint's subtree; the best value of the joint's own coordinates is kept. This
+    finds limb configurations far from the default pose (arms raised in a static trial)
+    that a local solver started at the default would miss.
+
+    Parameters
+    ----------
+    solver
+        Per-frame solver (model, markers).
+    y
+        ``(M, 3)`` observed positions.
+    q_root
+        ``(n,)`` coordinates with the root pose set (other joints at their defaults).
+    """
+    sk = solver.sk
+    seen = np.isfinite(y).all(axis=1)
+    q = q_root.copy()
+    marker_body = np.array([sk.marker_bodies[i] for i in solver.markers])
+    for own, ahead, bodies in _joint_search_plan(sk):
+        use = seen & np.isin(marker_body, list(bodies))
+        if not use.any():
+            continue
+        coords = own + ahead if grid ** (len(own) + len(ahead)) <= max_candidates else own
+        lo = np.maximum(sk.ranges[coords, 0], -np.pi)
+        hi = np.minimum(sk.ranges[coords, 1], np.pi)
+        axes = [np.linspace(a, b, grid) for a, b in zip(lo, hi)]
+        combos = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(coords))
+        cand = np.repeat(q[None], combos.shape[0], axis=0)
+        cand[:, coords] = combos
+        cand = sk.cmap.complete(cand)
+        pos = sk.marker_positions(cand, solver.markers[use])
+        cost = np.sum((pos - y[use][None]) ** 2, axis=(1, 2))
+        q[own] = cand[int(np.argmin(cost)), own]
+        q = sk.cmap.complete(q)
+    return q
+
+
+def initial_pose(solver: FrameSolver, y: FloatArray) -> FloatArray:
+    """Coordinates of a first guess for one frame: root pose by rigid registration.
+
+    The model's markers in its default pose are rigidly registered (Kabsch) to the
+    observed ones (root-body markers if three or more are seen, else all markers); the
+    root joint's coordinates are then solved alone to reproduce that rigid motion,
+    starting from headings 0, ±90° and 180° about the vertical and keeping the best.
+    """
+    sk = solver.sk
+    q0 = sk.neutral()
+    seen = np.isfinite(y).all(axis=1)
+    idx = solver.markers[seen]
+    on_root = np.array([sk.marker_bodies[i] == sk.root_body for i in idx])
+    use = on_root if on_root.sum() >= 3 else np.ones(idx.size, dtype=bool)
+    if use.sum() < 3:
+        return q0
+    model_pts = sk.marker_positions(q0, idx[use])[0]
+    rot, trans = kabsch(model_pts, y[seen][use])
+    target = model_pts @ rot.T + trans  # where the default-pose markers should go
+    root = np.array(sk.root_transform_axes())
+    sub = FrameSolver(sk, idx[use], np.ones(int(use.sum())), IkSettings(max_iterations=30, temporal_weight=0.0))
+    sub.free = root[np.isin(root, solver.free)]
+    best, best_cost = q0, np.inf
+    up = -np.asarray(sk.osim.gravity) / np.linalg.norm(sk.osim.gravity)
+    for heading in (0.0, np.pi / 2, -np.pi / 2, np.pi):
+        start = q0.copy()
+        for c in root:  # rotate the start about the vertical by setting the vertical-axis coordinate
+            ax = [a for a in sk.osim.joints[0].axes if a.coordinate == sk.coordinate_names[c]]
+            if ax and ax[0].kind == "rotation" and abs(np.dot(ax[0].axis, up)) > 0.9:
+                start[c] = heading
+        q, cost = sub.solve(start, target)
+        if cost < best_cost:
+            best, best_cost = q, cost
+    return greedy_pose(solver, y, best)

@@ -1,0 +1,138 @@
+"""Match a trial's markers to the model's markers and build the observation arrays.
+
+Lab marker names map to model markers by exact name, or through a user mapping
+(``{"lab name": "model name"}``, e.g. a ``markers.yaml`` / ``markers.json`` next to the
+subject). Markers the model does not carry are listed (and can later be attached to a
+body automatically, see :mod:`solver.kinematics.autoplace`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.errors import KinematicsError, MarkerMismatchError
+from solver.io.types import MarkerTrajectories
+
+FloatArray = NDArray[np.float64]
+
+MAPPING_FILES = ("markers.yaml", "markers.yml", "markers.json", "marker_map.yaml", "marker_map.json")
+
+
+def read_marker_mapping(path: str | Path) -> dict[str, str]:
+    """Read a lab-name -> model-name mapping from YAML or JSON.
+
+    The file holds a mapping ``{lab_name: model_name}``, optionally under a top-level
+    key ``markers``. Raises :class:`KinematicsError` naming the file on any other content.
+    """
+    path = Path(path)
+    text = path.read_text()
+    try:
+        if path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+    except Exception as exc:  # yaml/json errors carry their own position
+        raise KinematicsError(f"cannot parse marker mapping: {exc}", path=path) from None
+    if isinstance(data, dict) and isinstance(data.get("markers"), dict):
+        data = data["markers"]
+    if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+        raise KinematicsError("marker mapping must be a mapping of lab names to model marker names", path=path)
+    return dict(data)
+
+
+def find_marker_mapping(subject_dir: str | Path) -> dict[str, str]:
+    """The mapping file next to a subject (first of :data:`MAPPING_FILES`), or {}."""
+    for name in MAPPING_FILES:
+        p = Path(subject_dir) / name
+        if p.is_file():
+            return read_marker_mapping(p)
+    return {}
+
+
+@dataclass(frozen=True)
+class MarkerMatch:
+    """How one trial's markers relate to the model's.
+
+    Attributes
+    ----------
+    model_markers
+        Model marker names used by this trial, in the order of ``trial_columns``.
+    trial_columns
+        Column index in the trial's marker array for each used model marker.
+    unmatched
+        Trial marker names the model does not carry (ignored unless attached).
+    """
+
+    model_markers: tuple[str, ...]
+    trial_columns: tuple[int, ...]
+    unmatched: tuple[str, ...]
+
+
+def match_markers(
+    trial: MarkerTrajectories,
+    model_marker_names: Sequence[str],
+    mapping: Mapping[str, str] | None = None,
+    *,
+    trial_name: str = "",
+) -> MarkerMatch:
+    """Pair trial marker columns with model markers.
+
+    Raises
+    ------
+    MarkerMismatchError
+        When no trial marker matches a model marker, naming the trial and listing a few
+        names of each side.
+    """
+    mapping = dict(mapping or {})
+    model_set = set(model_marker_names)
+    used, cols, unmatched = [], [], []
+    for i, name in enumerate(trial.names):
+        target = mapping.get(name, name)
+        if target in model_set and target not in used:
+            used.append(target)
+            cols.append(i)
+        else:
+            unmatched.append(name)
+    if not used:
+        raise MarkerMismatchError(
+            f"no marker of the trial matches a model marker (trial: {', '.join(trial.names[:6])}...; "
+            f"model: {', '.join(list(model_marker_names)[:6])}...); give a marker mapping file",
+            path=trial.source or None,
+            where=trial_name or None,
+        )
+    return MarkerMatch(tuple(used), tuple(cols), tuple(unmatched))
+
+
+def observations(trial: MarkerTrajectories, match: MarkerMatch, *, trial_name: str = "") -> FloatArray:
+    """``(T, M, 3)`` observed positions (m) of the matched markers, NaN where missing.
+
+    Raises
+    ------
+    KinematicsError
+        The trial has zero frames.
+    MarkerMismatchError
+        Every matched marker is missing in every frame.
+    """
+    if trial.n_frames == 0:
+        raise KinematicsError("the trial has zero frames", path=trial.source or None, where=trial_name or None)
+    obs = trial.positions[:, list(match.trial_columns), :]
+    seen = np.isfinite(obs).all(axis=2)
+    if not seen.any():
+        raise MarkerMismatchError(
+            "all matched markers are missing (NaN) in every frame", path=trial.source or None, where=trial_name or None
+        )
+    return np.array(obs, dtype=float)
+
+
+def all_nan_markers(obs: FloatArray, names: Sequence[str]) -> list[str]:
+    """Names of markers missing in every frame of ``obs`` (T, M, 3)."""
+    seen = np.isfinite(obs).all(axis=2).any(axis=0)
+    return [n for n, s in zip(names, seen) if not s]

@@ -1,0 +1,231 @@
+"""The kinematics stage: scale the model and solve inverse kinematics for every trial.
+
+Steps (each timed in :attr:`KinematicsResult.seconds`):
+
+1. match each trial's markers to the model (name mapping); unmatched markers are listed;
+2. pick fit frames from every trial (evenly spaced among the best-observed frames);
+3. start from the generic model scaled uniformly to the subject's height, register the
+   root rigidly and solve IK on the fit frames;
+4. fit body scales, marker offsets and fit-frame coordinates jointly (:mod:`.fit`);
+5. optionally attach unmatched markers to bodies (:mod:`.autoplace`) and refit;
+6. solve every frame of every trial with the fitted model, warm-started along time (:mod:`.ik`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.errors import KinematicsError
+from solver.io.types import MarkerTrajectories
+from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model
+from solver.kinematics.ik import FrameSolver, IkSettings, initial_pose, solve_trajectory
+from solver.kinematics.observations import MarkerMatch, match_markers, observations
+from solver.kinematics.result import KinematicsResult, TrialKinematics
+from solver.kinematics.scale_groups import make_groups, model_height
+from solver.model.osim import OsimModel
+from solver.model.scaling import scale_model
+from solver.model.skeleton import Skeleton
+
+FloatArray = NDArray[np.float64]
+Progress = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class KinematicsOptions:
+    """Options of the kinematics stage.
+
+    Attributes
+    ----------
+    frames_per_trial
+        Frames taken from each trial into the scale fit.
+    max_fit_frames
+        Cap on the total number of fit frames.
+    marker_weights
+        Model marker name -> weight (default 1).
+    attach_unmatched
+        Attach trial markers the model lacks to the best-fitting body (see autoplace).
+    symmetric_scales
+        Left and right bodies share scale factors.
+    fit
+        Weights of the joint fit.
+    ik
+        Settings of the per-frame solver.
+    """
+
+    frames_per_trial: int = 12
+    max_fit_frames: int = 48
+    marker_weights: Mapping[str, float] = field(default_factory=dict)
+    attach_unmatched: bool = False
+    symmetric_scales: bool = True
+    fit: FitSettings = field(default_factory=FitSettings)
+    ik: IkSettings = field(default_factory=IkSettings)
+
+
+def _pick_frames(obs: FloatArray, k: int) -> NDArray[np.intp]:
+    """Up to ``k`` evenly spaced frames among those seeing at least 90% of the best count."""
+    count = np.isfinite(obs).all(axis=2).sum(axis=1)
+    good = np.flatnonzero(count >= 0.9 * count.max())
+    if good.size <= k:
+        return good
+    return good[np.linspace(0, good.size - 1, k).round().astype(int)]
+
+
+def _initial_fit_poses(solver: FrameSolver, fit_y: FloatArray, trial_of: list[int]) -> FloatArray:
+    """Poses of the fit frames with the height-scaled model.
+
+    The first fit frame of each trial is posed from scratch (:func:`initial_pose`); the
+    next ones of the same trial start from the previous solution, falling back to a
+    fresh start when that ends with more than twice the first frame's error.
+    """
+    q_init = np.empty((fit_y.shape[0], solver.sk.n))
+    ref_cost = np.inf
+    for f in range(fit_y.shape[0]):
+        n_seen = max(int(np.isfinite(fit_y[f]).all(axis=1).sum()), 1)
+        if f == 0 or trial_of[f] != trial_of[f - 1]:
+            q, cost = solver.solve(initial_pose(solver, fit_y[f]), fit_y[f], max_iterations=60)
+            ref_cost = cost / n_seen
+        else:
+            q, cost = solver.solve(q_init[f - 1], fit_y[f], max_iterations=60)
+            if cost / n_seen > 2.0 * ref_cost:
+                q2, cost2 = solver.solve(initial_pose(solver, fit_y[f]), fit_y[f], max_iterations=60)
+                if cost2 < cost:
+                    q, cost = q2, cost2
+        q_init[f] = q
+    return q_init
+
+
+def run_kinematics(
+    generic: OsimModel,
+    trials: Sequence[tuple[str, MarkerTrajectories]],
+    *,
+    height_m: float | None = None,
+    mapping: Mapping[str, str] | None = None,
+    options: KinematicsOptions | None = None,
+    progress: Progress | None = None,
+) -> KinematicsResult:
+    """Scale ``generic`` to the subject and solve IK for every trial.
+
+    Parameters
+    ----------
+    generic
+        The unscaled model.
+    trials
+        ``(name, markers)`` of every trial of the subject (static trials included).
+    height_m
+        Subject height, m; None uses the model's own height (scale prior at 1).
+    mapping
+        Lab marker name -> model marker name.
+    options
+        Stage options.
+    progress
+        Called with (message, fraction done) as the stage advances.
+
+    Returns
+    -------
+    KinematicsResult
+
+    Raises
+    ------
+    KinematicsError, MarkerMismatchError
+        No trials, a trial with zero frames, no marker in common with the model, or every
+        matched marker missing; the message names the trial.
+    """
+    opts = options or KinematicsOptions()
+    say = progress or (lambda msg, frac: None)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if not trials:
+        raise KinematicsError("no trials to solve", path=generic.source)
+    model_marker_names = [m.name for m in generic.markers]
+    matches: list[MarkerMatch] = []
+    obs_by_trial: list[FloatArray] = []
+    for name, markers in trials:
+        match = match_markers(markers, model_marker_names, mapping, trial_name=name)
+        matches.append(match)
+        obs_by_trial.append(observations(markers, match, trial_name=name))
+    union = sorted({n for m in matches for n in m.model_markers}, key=model_marker_names.index)
+    col = {n: i for i, n in enumerate(union)}
+    weights = np.array([float(opts.marker_weights.get(n, 1.0)) for n in union])
+
+    # fit frames, mapped onto the union marker set; trial_of[f] says which trial frame f is from
+    per_trial = max(1, min(opts.frames_per_trial, opts.max_fit_frames // len(trials)))
+    fit_obs, trial_of = [], []
+    for k, (match, obs) in enumerate(zip(matches, obs_by_trial)):
+        frames = _pick_frames(obs, per_trial)
+        y = np.full((frames.size, len(union), 3), np.nan)
+        y[:, [col[n] for n in match.model_markers]] = obs[frames]
+        fit_obs.append(y)
+        trial_of += [k] * frames.size
+    fit_y = np.concatenate(fit_obs)
+    observed_cols = np.isfinite(fit_y).all(axis=2).any(axis=0)
+    if not observed_cols.all():
+        keep = np.flatnonzero(observed_cols)
+        union = [union[i] for i in keep]
+        col = {n: i for i, n in enumerate(union)}
+        weights, fit_y = weights[keep], fit_y[:, keep]
+    bodies = {m.body for m in generic.markers if m.name in col}
+    groups = make_groups(generic, bodies, symmetric=opts.symmetric_scales)
+    generic_sk = Skeleton(generic)
+    h_scale = 1.0 if height_m is None else float(height_m) / model_height(generic_sk)
+    timings["setup"] = time.perf_counter() - t0
+
+    # initial poses with the height-scaled model
+    say("initial poses", 0.05)
+    t1 = time.perf_counter()
+    scales0 = np.full(groups.n_params, h_scale)
+    init_sk = Skeleton(scale_model(generic, groups.body_scales(scales0)))
+    init_solver = FrameSolver(init_sk, init_sk.marker_index(union), weights, opts.ik)
+    q_init = _initial_fit_poses(init_solver, fit_y, trial_of)
+    timings["initial_poses"] = time.perf_counter() - t1
+
+    say("scale fit", 0.2)
+    t2 = time.perf_counter()
+    problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
+    fit = fit_model(problem, q_init, scales0)
+    timings["scale_fit"] = time.perf_counter() - t2
+
+    # final IK of every trial with the fitted model
+    t3 = time.perf_counter()
+    sk = Skeleton(fit.model)
+    results = []
+    for k, ((name, markers), match, obs) in enumerate(zip(trials, matches, obs_by_trial)):
+        say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))
+        ts = time.perf_counter()
+        names = [n for n in match.model_markers if n in col]
+        cols = [match.model_markers.index(n) for n in names]
+        y = obs[:, cols]
+        solver = FrameSolver(sk, sk.marker_index(names), np.array([weights[col[n]] for n in names]), opts.ik)
+        first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
+        q_start = initial_pose(solver, y[first])
+        q = solve_trajectory(solver, y, q_start)
+        results.append(
+            TrialKinematics(
+                name=name,
+                time=markers.time,
+                coordinate_names=sk.coordinate_names,
+                q=q,
+                marker_names=tuple(names),
+                observed=y,
+                modeled=sk.marker_positions(q, sk.marker_index(names)),
+                unmatched=match.unmatched,
+                seconds=time.perf_counter() - ts,
+            )
+        )
+    timings["ik"] = time.perf_counter() - t3
+    timings["total"] = time.perf_counter() - t0
+    say("kinematics done", 1.0)
+    body_scales = {b: tuple(float(v) for v in s) for b, s in groups.body_scales(fit.scales).items()}
+    offsets = {n: tuple(float(v) for v in d) for n, d in zip(union, fit.offsets)}
+    return KinematicsResult(
+        model=fit.model,
+        body_scales=body_scales,
+        marker_offsets=offsets,
+        trials=tuple(results),
+        fit_marker_rms=fit.marker_rms,
+        seconds=timings,
+    )
