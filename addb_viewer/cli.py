@@ -28,6 +28,22 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_kinematics(args: argparse.Namespace) -> int:
+    from addb_viewer.progress import ProgressBar, table
+    from solver.pipeline import ProcessOptions, process_kinematics
+
+    opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
+    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar())
+    rows = [
+        [t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", f"{t.marker_max * 100:.2f}", t.worst_marker]
+        for t in result.kinematics.trials
+        if not opts.trials or t.name in opts.trials
+    ]
+    print(table(rows, ["trial", "frames", "marker RMS (cm)", "max (cm)", "worst marker"]))
+    print(f"wrote {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
     parser = argparse.ArgumentParser(
@@ -43,6 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
     p.set_defaults(handler=_cmd_info)
+    p = sub.add_parser("kinematics", help="scale the model and solve inverse kinematics for a subject")
+    p.add_argument("subject", help="AddBiomechanics subject folder")
+    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    p.add_argument("--trial", action="append", help="write only this trial (repeatable); all trials are used for scaling")
+    p.set_defaults(handler=_cmd_kinematics)
     return parser
 
 

@@ -20,13 +20,13 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from decimal import Context, Decimal, InvalidOperation
+from decimal import MAX_EMAX, MIN_EMIN, Context, Decimal, InvalidOperation
 
 import numpy as np
 
 from solver.io._text import FloatArray, TokenError, parse_floats
 
-_CTX = Context(prec=60)
+_CTX = Context(prec=60, Emax=MAX_EMAX, Emin=MIN_EMIN)  # no overflow: 1e9999999 -> inf
 _PI = Decimal("3.14159265358979323846264338327950288419716939937510582097494459230781640628620899")
 _RAD_PER_DEG = _CTX.divide(_PI, Decimal(180))
 _DEG_PER_RAD = _CTX.divide(Decimal(180), _PI)

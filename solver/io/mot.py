@@ -330,7 +330,8 @@ def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         raise MotFormatError("the time is not a finite number", path=path, line=numbers[bad[0]])
-    steps = np.flatnonzero(np.diff(time) <= 0)
+    with np.errstate(over="ignore"):  # 1e308 - -1e308 is inf, still an increase
+        steps = np.flatnonzero(np.diff(time) <= 0)
     if steps.size:
         k = int(steps[0]) + 1
         raise MotFormatError(
@@ -443,7 +444,7 @@ def estimate_rate(time: np.ndarray) -> float:
     """
     if time.shape[0] < 2:
         return math.nan
-    rate = (time.shape[0] - 1) / float(time[-1] - time[0])
+    rate = (time.shape[0] - 1) / (float(time[-1]) - float(time[0]))
     nearest = round(rate)
     return float(nearest) if nearest > 0 and abs(rate - nearest) <= 1e-6 * nearest else rate
 

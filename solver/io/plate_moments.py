@@ -55,10 +55,13 @@ class MomentReference:
     lever_m: float
 
 
-def _loaded(force: FloatArray, up: int) -> NDArray[np.bool_]:
-    vertical = force[:, up]
+def _loaded(force: FloatArray, cop: FloatArray, moment: FloatArray, up: int) -> NDArray[np.bool_]:
+    """Frames with finite data and a vertical force above the load threshold."""
+    finite = np.isfinite(force).all(axis=1) & np.isfinite(cop).all(axis=1)
+    finite &= np.isfinite(moment).all(axis=1)
+    vertical = np.where(finite, force[:, up], -np.inf)
     peak = float(np.max(vertical)) if vertical.size else 0.0
-    return vertical > max(MIN_LOAD_N, LOAD_FRACTION * peak)
+    return finite & (vertical > max(MIN_LOAD_N, LOAD_FRACTION * peak))
 
 
 def _lever(residual: FloatArray, force: FloatArray, up: int) -> float:
@@ -85,7 +88,7 @@ def _fit_point(force: FloatArray, cop: FloatArray, moment: FloatArray, up: int) 
     a_mat = skew[:, rows, :].reshape(-1, 3)
     b_vec = rhs[:, rows].reshape(-1)
     point, *_ = np.linalg.lstsq(a_mat, b_vec, rcond=None)
-    return point
+    return point  # finite input (see _loaded) keeps the SVD well defined
 
 
 def detect_reference(
@@ -108,19 +111,23 @@ def detect_reference(
         none does (or no frame is loaded, in which case the columns are left as is by
         the caller).
     """
-    loaded = _loaded(force, up)
+    loaded = _loaded(force, cop, moment, up)
     if loaded.sum() < 3:
         return MomentReference("cop", np.zeros(3), 0.0)
     f, c, m = force[loaded], cop[loaded], moment[loaded]
-    lever = _lever(m, f, up)
-    if lever <= LEVER_TOLERANCE_M:
-        return MomentReference("cop", np.zeros(3), lever)
-    lever = _lever(m - np.cross(c, f), f, up)
-    if lever <= LEVER_TOLERANCE_M:
-        return MomentReference("origin", np.zeros(3), lever)
-    point = _fit_point(f, c, m, up)
-    lever = _lever(m - np.cross(c - point, f), f, up)
-    if lever <= LEVER_TOLERANCE_M:
+    with np.errstate(all="ignore"):  # absurd but finite values (1e308) give inf, not warnings
+        lever = _lever(m, f, up)
+        if lever <= LEVER_TOLERANCE_M:
+            return MomentReference("cop", np.zeros(3), lever)
+        lever = _lever(m - np.cross(c, f), f, up)
+        if lever <= LEVER_TOLERANCE_M:
+            return MomentReference("origin", np.zeros(3), lever)
+        try:
+            point = _fit_point(f, c, m, up)
+        except np.linalg.LinAlgError:
+            return None
+        lever = _lever(m - np.cross(c - point, f), f, up)
+    if np.all(np.isfinite(point)) and lever <= LEVER_TOLERANCE_M:
         return MomentReference("point", point, lever)
     return None
 
@@ -131,7 +138,8 @@ def free_moment(
     """``(T, 3)`` free moment at the CoP, N·m, from moments about ``reference``."""
     if reference.kind == "cop":
         return moment
-    return moment - np.cross(cop - reference.point, force)
+    with np.errstate(all="ignore"):  # non-finite samples stay non-finite, silently
+        return moment - np.cross(cop - reference.point, force)
 
 
 def warn_conversion(plate: str, reference: MomentReference, source: str) -> None:

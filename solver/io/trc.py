@@ -220,7 +220,8 @@ def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         raise TrcFormatError("the time is not a finite number", path=path, line=numbers[bad[0]])
-    steps = np.flatnonzero(np.diff(time) <= 0)
+    with np.errstate(over="ignore"):  # 1e308 - -1e308 is inf, still an increase
+        steps = np.flatnonzero(np.diff(time) <= 0)
     if steps.size:
         k = steps[0] + 1
         raise TrcFormatError(

@@ -58,7 +58,7 @@ class FitSettings:
     """
 
     scale_prior_weight: float = 2e-4
-    anisotropy_weight: float = 1e-4
+    anisotropy_weight: float = 1e-3
     offset_weight: float = 0.02
     pose_prior_weight: float = 1e-5
     max_iterations: int = 40
@@ -168,17 +168,25 @@ class ScaleFitProblem:
         j[rs.size :, self.n_s :] = np.diag(sw)
         return r, j
 
-    def z_jacobian(self, sk: Skeleton, q: FloatArray) -> FloatArray:
-        """``(F, M, 3, n_z)`` derivative of marker positions w.r.t. [scales, offsets]."""
+    def z_jacobian(self, sk: Skeleton, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Derivatives of marker positions w.r.t. scales and offsets, in block form.
+
+        Returns
+        -------
+        js
+            ``(F, M, 3, 3G)`` d position / d group scales.
+        rb
+            ``(F, M, 3, 3)`` d position of marker m / d its own offset (its body's rotation);
+            the offset Jacobian is block diagonal, so only these blocks are kept.
+        """
         body_rot, _ = sk.body_poses(q)
         js = self.sj.markers(body_rot, q, self.marker_body, self.marker_local)
-        f, m = js.shape[:2]
-        jz = np.zeros((f, m, 3, self.n_z))
-        jz[..., : self.n_s] = js
-        rb = body_rot[:, self.marker_body]  # (F, M, 3, 3)
-        for k in range(m):
-            jz[:, k, :, self.n_s + 3 * k : self.n_s + 3 * k + 3] = rb[:, k]
-        return jz
+        return js, body_rot[:, self.marker_body]
+
+    def shift(self, js: FloatArray, rb: FloatArray, dz: FloatArray) -> FloatArray:
+        """``(F, M, 3)`` position change for a step ``dz`` = [d scales, d offsets]."""
+        d_off = dz[self.n_s :].reshape(-1, 3)
+        return js @ dz[: self.n_s] + np.einsum("fmij,mj->fmi", rb, d_off)
 
     def cost(self, positions: FloatArray, q: FloatArray, q_anchor: FloatArray, free: IntArray, scales: FloatArray, offsets: FloatArray) -> float:
         """Total cost for model marker positions ``(F, M, 3)``."""
@@ -215,26 +223,37 @@ def fit_model(problem: ScaleFitProblem, q_init: FloatArray, scales0: FloatArray)
     mu = None
     accepted_steps = 0
     n_f, nf, nz = q.shape[0], free.size, problem.n_z
+    n_m = len(problem.names)
+    w_seen = problem.sqrt_w[None, :] * problem.seen  # (F, M) weights, 0 where unseen
+    y = np.nan_to_num(problem.obs)
     for _ in range(st.max_iterations):
-        # ---- linearize
-        jz_all = problem.z_jacobian(sk, q)
-        a_blocks = np.empty((n_f, nf, nf))
-        b_blocks = np.empty((n_f, nf, nz))
-        g_f = np.empty((n_f, nf))
-        c_mat = np.zeros((nz, nz))
-        g_z = np.zeros(nz)
+        # ---- linearize: residuals and Jacobians of all frames, weighted, 0 where unseen
+        pos = np.empty((n_f, n_m, 3))
+        jq = np.empty((n_f, n_m, 3, nf))
         for f in range(n_f):
-            seen = problem.seen[f]
-            pos, jq = sk.marker_jacobian(q[f], midx[seen])
-            w = problem.sqrt_w[seen][:, None]
-            r = (w * (pos - problem.obs[f, seen])).reshape(-1)
-            jq = (w[:, :, None] * jq[:, :, free]).reshape(-1, nf)
-            jz = (w[:, :, None] * jz_all[f, seen]).reshape(-1, nz)
-            a_blocks[f] = jq.T @ jq + e * np.eye(nf)
-            b_blocks[f] = jq.T @ jz
-            g_f[f] = jq.T @ r + e * (q[f, free] - q_anchor[f, free])
-            c_mat += jz.T @ jz
-            g_z += jz.T @ r
+            pos[f], jfull = sk.marker_jacobian(q[f], midx)
+            jq[f] = jfull[:, :, free]
+        ww = w_seen[:, :, None]
+        r = ww * (pos - y)  # (F, M, 3)
+        jq *= ww[..., None]
+        js, rb = problem.z_jacobian(sk, q)
+        js = js * ww[..., None]
+        rbw = rb * ww[..., None]
+        jq_flat = jq.reshape(n_f, 3 * n_m, nf)
+        a_blocks = np.transpose(jq_flat, (0, 2, 1)) @ jq_flat + e * np.eye(nf)
+        b_s = np.transpose(jq_flat, (0, 2, 1)) @ js.reshape(n_f, 3 * n_m, problem.n_s)
+        b_d = np.einsum("fmia,fmib->famb", jq, rbw).reshape(n_f, nf, 3 * n_m)
+        b_blocks = np.concatenate([b_s, b_d], axis=2)
+        g_f = np.einsum("fmia,fmi->fa", jq, r) + e * (q[:, free] - q_anchor[:, free])
+        js_flat = js.reshape(-1, problem.n_s)
+        c_mat = np.zeros((nz, nz))
+        c_mat[: problem.n_s, : problem.n_s] = js_flat.T @ js_flat
+        c_sd = np.einsum("fmia,fmib->amb", js, rbw).reshape(problem.n_s, 3 * n_m)
+        c_mat[: problem.n_s, problem.n_s :] = c_sd
+        c_mat[problem.n_s :, : problem.n_s] = c_sd.T
+        diag = np.repeat((w_seen**2).sum(axis=0), 3)  # R^T R = I for each offset block
+        c_mat[problem.n_s :, problem.n_s :] += np.diag(diag)
+        g_z = np.concatenate([js_flat.T @ r.reshape(-1), np.einsum("fmia,fmi->ma", rbw, r).reshape(-1)])
         # coordinates held at a bound by their gradient do not move (projected Gauss-Newton)
         x = q[:, free]
         held = ((x <= lo[free]) & (g_f > 0)) | ((x >= hi[free]) & (g_f < 0))  # (F, nf)
@@ -266,8 +285,7 @@ def fit_model(problem: ScaleFitProblem, q_init: FloatArray, scales0: FloatArray)
             q_new = sk.cmap.complete(q_new)
             s_new, o_new = scales + dz[: problem.n_s], offsets + dz[problem.n_s :].reshape(-1, 3)
             # positions at the new point: affine in (s, d) at fixed q, so exact without a rebuild
-            jz_new = problem.z_jacobian(sk, q_new)
-            pos_new = sk.marker_positions(q_new, midx) + jz_new @ dz
+            pos_new = sk.marker_positions(q_new, midx) + problem.shift(*problem.z_jacobian(sk, q_new), dz)
             cost_new = problem.cost(pos_new, q_new, q_anchor, free, s_new, o_new)
             if cost_new < cost:
                 improved = True

@@ -44,7 +44,7 @@ class IkSettings:
     """
 
     max_iterations: int = 12
-    tolerance: float = 1e-4
+    tolerance: float = 3e-4
     temporal_weight: float = 1e-4
     damping: float = 1e-6
 
@@ -144,7 +144,7 @@ class FrameSolver:
             q, r, j, cost = q_new, r_new, j_new, cost_new
             mu = max(mu / 10.0, 1e-15)
             self.calls += 1
-            if change < s.tolerance or decrease < 1e-6:
+            if change < s.tolerance or decrease < 1e-5:
                 break
         return q, float(r @ r)
 

@@ -119,7 +119,8 @@ def observations(trial: MarkerTrajectories, match: MarkerMatch, *, trial_name: s
     KinematicsError
         The trial has zero frames.
     MarkerMismatchError
-        Every matched marker is missing in every frame.
+        Every matched marker is missing in every frame, or one matched marker is missing
+        in every frame (named in the message).
     """
     if trial.n_frames == 0:
         raise KinematicsError("the trial has zero frames", path=trial.source or None, where=trial_name or None)
@@ -129,10 +130,14 @@ def observations(trial: MarkerTrajectories, match: MarkerMatch, *, trial_name: s
         raise MarkerMismatchError(
             "all matched markers are missing (NaN) in every frame", path=trial.source or None, where=trial_name or None
         )
+    empty = [trial.names[c] for c, s in zip(match.trial_columns, seen.any(axis=0)) if not s]
+    if empty:
+        raise MarkerMismatchError(
+            f"marker {empty[0]!r}{' (and ' + str(len(empty) - 1) + ' more)' if len(empty) > 1 else ''} is missing "
+            "(NaN) in every frame; remove the column from the file or the name from the marker mapping",
+            path=trial.source or None,
+            where=f"trial {trial_name}" if trial_name else None,
+        )
     return np.array(obs, dtype=float)
 
 
-def all_nan_markers(obs: FloatArray, names: Sequence[str]) -> list[str]:
-    """Names of markers missing in every frame of ``obs`` (T, M, 3)."""
-    seen = np.isfinite(obs).all(axis=2).any(axis=0)
-    return [n for n, s in zip(names, seen) if not s]

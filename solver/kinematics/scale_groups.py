@@ -117,13 +117,22 @@ def model_height(skeleton: Skeleton) -> float:
     return float((pelvis - lowest) / PELVIS_HEIGHT_RATIO)
 
 
+#: Beyond this relative deviation from the height ratio a scale factor is implausible
+#: (adult segment proportions vary by roughly ±15% around the population mean, and marker
+#: protocols add some apparent deviation); a steep penalty takes over past it.
+PLAUSIBLE_DEVIATION = 0.35
+BOUND_WEIGHT = 1e3
+
+
 def prior_residuals(
     params: FloatArray, target: float, weight: float, anisotropy_weight: float
 ) -> tuple[FloatArray, FloatArray]:
     """Residuals and Jacobian of the scale prior.
 
-    r = sqrt(weight) (s - target) for every factor, and sqrt(anisotropy_weight)
-    (s_x - s_y, s_y - s_z, s_z - s_x) within each group.
+    r = sqrt(weight) (s - target) for every factor, sqrt(anisotropy_weight)
+    (s_x - s_y, s_y - s_z, s_z - s_x) within each group, and a steep one-sided penalty
+    sqrt(weight * BOUND_WEIGHT) * excess on the part of |s - target| beyond
+    ``PLAUSIBLE_DEVIATION * target``.
 
     Returns
     -------
@@ -136,4 +145,10 @@ def prior_residuals(
     j1 = np.sqrt(weight) * np.eye(n)
     d = np.array([[1, -1, 0], [0, 1, -1], [-1, 0, 1]], dtype=float)
     j2 = np.sqrt(anisotropy_weight) * np.kron(np.eye(g), d)
-    return np.concatenate([r1, j2 @ params]), np.vstack([j1, j2])
+    dev = params - target
+    limit = PLAUSIBLE_DEVIATION * target
+    excess = np.sign(dev) * np.maximum(np.abs(dev) - limit, 0.0)
+    k = np.sqrt(weight * BOUND_WEIGHT)
+    r3 = k * excess
+    j3 = k * np.diag((np.abs(dev) > limit).astype(float))
+    return np.concatenate([r1, j2 @ params, r3]), np.vstack([j1, j2, j3])

@@ -42,9 +42,10 @@ class KinematicsOptions:
     Attributes
     ----------
     frames_per_trial
-        Frames taken from each trial into the scale fit.
+        Least number of frames taken from each trial into the scale fit.
     max_fit_frames
-        Cap on the total number of fit frames.
+        Frames of the scale fit, shared equally between the trials (at least
+        ``frames_per_trial`` each).
     marker_weights
         Model marker name -> weight (default 1).
     attach_unmatched
@@ -57,7 +58,7 @@ class KinematicsOptions:
         Settings of the per-frame solver.
     """
 
-    frames_per_trial: int = 12
+    frames_per_trial: int = 2
     max_fit_frames: int = 48
     marker_weights: Mapping[str, float] = field(default_factory=dict)
     attach_unmatched: bool = False
@@ -153,7 +154,7 @@ def run_kinematics(
     weights = np.array([float(opts.marker_weights.get(n, 1.0)) for n in union])
 
     # fit frames, mapped onto the union marker set; trial_of[f] says which trial frame f is from
-    per_trial = max(1, min(opts.frames_per_trial, opts.max_fit_frames // len(trials)))
+    per_trial = max(opts.frames_per_trial, opts.max_fit_frames // len(trials))
     fit_obs, trial_of = [], []
     for k, (match, obs) in enumerate(zip(matches, obs_by_trial)):
         frames = _pick_frames(obs, per_trial)

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solve_banded
 
 FloatArray = NDArray[np.float64]
 
@@ -126,11 +125,10 @@ def _fmm_second_derivatives(x: FloatArray, y: FloatArray) -> FloatArray:
     n = x.size
     h = np.diff(x)
     s = np.diff(y) / h
-    ab = np.zeros((3, n))  # banded matrix: row 0 super-diagonal, 1 diagonal, 2 sub-diagonal
+    a = np.zeros((n, n))  # tridiagonal except for the two end rows; n is a few dozen knots
     rhs = np.zeros(n)
-    ab[1, 1:-1] = 2.0 * (h[:-1] + h[1:])
-    ab[0, 2:] = h[1:]
-    ab[2, :-2] = h[:-1]
+    i = np.arange(1, n - 1)
+    a[i, i - 1], a[i, i], a[i, i + 1] = h[:-1], 2.0 * (h[:-1] + h[1:]), h[1:]
     rhs[1:-1] = 6.0 * (s[1:] - s[:-1])
     if n >= 4:
         dd2 = np.diff(s) / (x[2:] - x[:-2])  # second divided differences
@@ -139,13 +137,11 @@ def _fmm_second_derivatives(x: FloatArray, y: FloatArray) -> FloatArray:
     else:
         d3_start = d3_end = 0.0
     # (M1 - M0) / h0 = 6 d3_start  ->  -M0 + M1 = 6 h0 d3_start, scaled by h0 for balance.
-    ab[1, 0] = -h[0]
-    ab[0, 1] = h[0]
+    a[0, 0], a[0, 1] = -h[0], h[0]
     rhs[0] = 6.0 * h[0] ** 2 * d3_start
-    ab[1, -1] = h[-1]
-    ab[2, -2] = -h[-1]
+    a[-1, -2], a[-1, -1] = -h[-1], h[-1]
     rhs[-1] = 6.0 * h[-1] ** 2 * d3_end
-    return solve_banded((1, 1), ab, rhs)
+    return np.linalg.solve(a, rhs)
 
 
 def _natural_second_derivatives(x: FloatArray, y: FloatArray) -> FloatArray:
@@ -153,14 +149,12 @@ def _natural_second_derivatives(x: FloatArray, y: FloatArray) -> FloatArray:
     n = x.size
     h = np.diff(x)
     s = np.diff(y) / h
-    ab = np.zeros((3, n))
+    a = np.eye(n)
     rhs = np.zeros(n)
-    ab[1, :] = 1.0
-    ab[1, 1:-1] = 2.0 * (h[:-1] + h[1:])
-    ab[0, 2:] = h[1:]
-    ab[2, :-2] = h[:-1]
+    i = np.arange(1, n - 1)
+    a[i, i - 1], a[i, i], a[i, i + 1] = h[:-1], 2.0 * (h[:-1] + h[1:]), h[1:]
     rhs[1:-1] = 6.0 * (s[1:] - s[:-1])
-    return solve_banded((1, 1), ab, rhs)
+    return np.linalg.solve(a, rhs)
 
 
 class CubicSpline(Function):

@@ -1,0 +1,253 @@
+"""AddBiomechanics subject folders.
+
+Layout::
+
+    <subject>/
+        _subject.json            massKg, heightM (strings or numbers), sex,
+                                 footBodyNames, disableDynamics, ... (all kept in ``raw``)
+        unscaled_generic.osim    the generic model with the lab's marker set
+        trials/<trial>/
+            markers.trc | markers.c3d
+            grf.mot              optional: without it the trial is kinematics-only
+
+A C3D trial without ``grf.mot`` takes its forces from the C3D force platforms.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from solver.errors import SubjectFolderError
+from solver.io.c3d import read_c3d
+from solver.io.mot import read_forces
+from solver.io.trc import read_trc
+from solver.io.types import ForceRecording, MarkerTrajectories
+
+SUBJECT_JSON = "_subject.json"
+MODEL_FILE = "unscaled_generic.osim"
+DEFAULT_FOOT_BODIES = ("calcn_r", "calcn_l")
+
+
+@dataclass(frozen=True)
+class TrialFiles:
+    """The files of one trial folder.
+
+    Attributes
+    ----------
+    name
+        Trial folder name (``walk``).
+    markers_path
+        ``markers.trc`` or ``markers.c3d``.
+    forces_path
+        ``grf.mot``, or None (kinematics-only, or forces from the C3D).
+    """
+
+    name: str
+    markers_path: Path
+    forces_path: Path | None
+
+
+@dataclass(frozen=True)
+class Subject:
+    """An AddBiomechanics subject folder, validated but not yet loaded.
+
+    Attributes
+    ----------
+    name
+        The folder name.
+    path
+        The folder.
+    mass_kg
+        Body mass, kg (``massKg``).
+    height_m
+        Height, m (``heightM``), or None when the file does not give it.
+    foot_body_names
+        Bodies that can touch the ground (``footBodyNames``; default calcn_r, calcn_l).
+    disable_dynamics
+        ``disableDynamics``: fit kinematics only.
+    model_path
+        ``unscaled_generic.osim``.
+    trials
+        One entry per ``trials/<name>`` folder, sorted by name.
+    raw
+        The parsed ``_subject.json`` (read it, do not modify it).
+    """
+
+    name: str
+    path: Path
+    mass_kg: float
+    height_m: float | None
+    foot_body_names: tuple[str, ...]
+    disable_dynamics: bool
+    model_path: Path
+    trials: tuple[TrialFiles, ...]
+    raw: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+
+    @property
+    def sex(self) -> str:
+        """``sex`` from the JSON (``"unknown"`` when absent)."""
+        return str(self.raw.get("sex", "unknown"))
+
+    def trial(self, name: str) -> TrialFiles:
+        """The trial named ``name``; raises ``KeyError`` naming the known trials."""
+        for t in self.trials:
+            if t.name == name:
+                return t
+        raise KeyError(f"no trial {name!r} in {self.path}; trials: {[t.name for t in self.trials]}")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """A loaded trial: markers and, unless kinematics-only, force plates."""
+
+    name: str
+    markers: MarkerTrajectories
+    forces: ForceRecording | None
+
+
+def load_subject(path: str | Path) -> Subject:
+    """Read and check an AddBiomechanics subject folder (JSON, model, trial files).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not exist.
+    SubjectFolderError
+        ``path`` is not a folder; ``_subject.json`` missing, not valid JSON (with its
+        line), not an object, or without a positive ``massKg`` (naming the file and
+        the key); a malformed ``heightM``, ``footBodyNames`` or ``disableDynamics``;
+        no ``unscaled_generic.osim``; no ``trials`` folder or no trial in it; a trial
+        folder without ``markers.trc``/``markers.c3d`` or with both.
+    """
+    folder = Path(path)
+    if not folder.exists():
+        raise FileNotFoundError(2, "No such file or folder", str(folder))
+    if not folder.is_dir():
+        raise SubjectFolderError("expected a subject folder, found a file", path=folder)
+    raw = _read_json(folder / SUBJECT_JSON)
+    json_path = folder / SUBJECT_JSON
+    mass = _number(raw, "massKg", json_path, required=True)
+    height = _number(raw, "heightM", json_path, required=False)
+    model = folder / MODEL_FILE
+    if not model.is_file():
+        raise SubjectFolderError(
+            f"the model {MODEL_FILE} is missing; expected it beside {SUBJECT_JSON}", path=model
+        )
+    return Subject(
+        name=folder.name,
+        path=folder,
+        mass_kg=mass,  # type: ignore[arg-type]
+        height_m=height,
+        foot_body_names=_foot_bodies(raw, json_path),
+        disable_dynamics=_flag(raw, "disableDynamics", json_path),
+        model_path=model,
+        trials=_trials(folder),
+        raw=raw,
+    )
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise SubjectFolderError(
+            f"{SUBJECT_JSON} is missing; expected a JSON object with massKg and heightM",
+            path=path,
+        )
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise SubjectFolderError("not UTF-8 text", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise SubjectFolderError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    if not isinstance(raw, dict):
+        raise SubjectFolderError(f"expected a JSON object, found {type(raw).__name__}", path=path)
+    return raw
+
+
+def _number(raw: dict[str, Any], key: str, path: Path, *, required: bool) -> float | None:
+    if key not in raw or raw[key] in ("", None):
+        if required:
+            raise SubjectFolderError(
+                f"key {key!r} is missing; expected a positive number (string or number)",
+                path=path,
+                where=key,
+            )
+        return None
+    value = raw[key]
+    try:
+        number = float(value) if not isinstance(value, bool) else math.nan
+    except (TypeError, ValueError):
+        number = math.nan
+    if not (math.isfinite(number) and number > 0):
+        raise SubjectFolderError(f"{key}={value!r} is not a positive number", path=path, where=key)
+    return number
+
+
+def _foot_bodies(raw: dict[str, Any], path: Path) -> tuple[str, ...]:
+    value = raw.get("footBodyNames")
+    if value is None:
+        return DEFAULT_FOOT_BODIES
+    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+        raise SubjectFolderError(
+            f"footBodyNames={value!r}; expected a list of body names",
+            path=path,
+            where="footBodyNames",
+        )
+    return tuple(value)
+
+
+def _flag(raw: dict[str, Any], key: str, path: Path) -> bool:
+    value = raw.get(key, False)
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() in ("true", "false"):
+        return value.strip().lower() == "true"
+    raise SubjectFolderError(f"{key}={value!r}; expected true or false", path=path, where=key)
+
+
+def _trials(folder: Path) -> tuple[TrialFiles, ...]:
+    trials_dir = folder / "trials"
+    if not trials_dir.is_dir():
+        raise SubjectFolderError(
+            "the trials folder is missing; expected trials/<name>/markers.trc", path=trials_dir
+        )
+    out = []
+    for trial in sorted(p for p in trials_dir.iterdir() if p.is_dir()):
+        trc, c3d = trial / "markers.trc", trial / "markers.c3d"
+        if trc.is_file() and c3d.is_file():
+            raise SubjectFolderError("both markers.trc and markers.c3d; expected one", path=trial)
+        markers = trc if trc.is_file() else c3d if c3d.is_file() else None
+        if markers is None:
+            raise SubjectFolderError(
+                "no markers.trc or markers.c3d in the trial folder", path=trial
+            )
+        grf = trial / "grf.mot"
+        out.append(TrialFiles(trial.name, markers, grf if grf.is_file() else None))
+    if not out:
+        raise SubjectFolderError("no trial folders; expected trials/<name>/", path=trials_dir)
+    return tuple(out)
+
+
+def load_trial(files: TrialFiles) -> Trial:
+    """Read a trial's markers and forces.
+
+    Returns
+    -------
+    Trial
+        Markers from the TRC/C3D; forces from ``grf.mot`` when present, else from the
+        C3D platforms, else None (kinematics-only).
+
+    Raises
+    ------
+    TrcFormatError, C3dFormatError, MotFormatError
+        From the readers, naming the file and line.
+    """
+    if files.markers_path.suffix.lower() == ".c3d":
+        markers, c3d_forces = read_c3d(files.markers_path)
+    else:
+        markers, c3d_forces = read_trc(files.markers_path), None
+    forces = read_forces(files.forces_path) if files.forces_path is not None else c3d_forces
+    return Trial(files.name, markers, forces)

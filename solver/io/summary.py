@@ -1,0 +1,372 @@
+"""One-screen summaries of lab files and subject folders (``addb info PATH``).
+
+:func:`summarize` returns a JSON-serializable dict; :func:`format_summary` turns it
+into readable text. Units in the keys: ``_s``, ``_hz``, ``_n`` (newtons), ``_bw`` (body
+weights, only when the subject's mass is known, i.e. for subject folders).
+Warnings raised by the readers (e.g. a moment-reference conversion) are collected
+under ``"notes"`` instead of being printed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from solver.errors import FileFormatError, XmlFormatError
+from solver.io.c3d import read_c3d
+from solver.io.external_loads import read_external_loads
+from solver.io.mot import estimate_rate, is_force_table, read_forces, read_table
+from solver.io.review import KEY as REVIEW_KEY
+from solver.io.review import read_review
+from solver.io.subject import load_subject, load_trial
+from solver.io.trc import read_trc
+from solver.io.types import ForceRecording, MarkerTrajectories
+
+GRAVITY = 9.80665
+
+
+def summarize(path: str | Path) -> dict[str, Any]:
+    """Summary of a TRC, MOT/STO, C3D, .osim, OpenSim XML or review JSON file, or a subject folder.
+
+    Returns
+    -------
+    dict
+        Always ``kind`` and ``path``; then per kind: ``frames``, ``rate_hz``,
+        ``duration_s``, ``markers``, ``gaps`` (markers with missing frames, longest
+        gap in frames and its marker), ``plates`` with peak vertical force (N, and
+        body weights when the mass is known), model counts, external forces, trials.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not exist.
+    FileFormatError
+        (or a subclass) The file is malformed or of an unknown type; the message
+        names the file and the line or element.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(2, "No such file or folder", str(p))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        try:
+            with np.errstate(all="ignore"):  # absurd values give inf/nan in the summary
+                summary = _dispatch(p)
+        except FileNotFoundError:
+            raise
+        except OSError as exc:
+            raise FileFormatError(f"cannot read: {exc.strerror or exc}", path=p) from None
+    notes = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    if notes:
+        summary["notes"] = notes
+    return summary
+
+
+def _dispatch(p: Path) -> dict[str, Any]:
+    if p.is_dir():
+        return _subject(p)
+    readers: dict[str, Callable[[Path], dict[str, Any]]] = {
+        ".trc": _trc,
+        ".mot": _table,
+        ".sto": _table,
+        ".c3d": _c3d,
+        ".osim": _osim,
+        ".xml": _xml,
+        ".json": _json,
+    }
+    reader = readers.get(p.suffix.lower())
+    if reader is None:
+        raise FileFormatError(
+            f"unknown file type {p.suffix!r}; expected .trc, .mot, .sto, .c3d, .osim, .xml, "
+            ".json or a subject folder",
+            path=p,
+        )
+    return reader(p)
+
+
+# --------------------------------------------------------------------------- per kind
+
+
+def _markers_summary(m: MarkerTrajectories) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "frames": m.n_frames,
+        "rate_hz": m.rate_hz,
+        "start_s": float(m.time[0]) if m.n_frames else None,
+        "duration_s": float(m.time[-1] - m.time[0]) if m.n_frames else 0.0,
+        "markers": len(m.names),
+    }
+    out["gaps"] = marker_gaps(m)
+    return out
+
+
+def marker_gaps(m: MarkerTrajectories) -> dict[str, Any]:
+    """Markers with missing (NaN) frames: count, longest gap in frames and its marker."""
+    missing = np.isnan(m.positions).any(axis=2)  # (T, M)
+    longest, worst = 0, None
+    n_with = 0
+    for j, name in enumerate(m.names):
+        run = _longest_run(missing[:, j])
+        if run:
+            n_with += 1
+            if run > longest:
+                longest, worst = run, name
+    return {
+        "markers_with_gaps": n_with,
+        "longest_gap_frames": longest,
+        "longest_gap_marker": worst,
+        "missing_fraction": float(missing.mean()) if missing.size else 0.0,
+    }
+
+
+def _longest_run(flags: np.ndarray) -> int:
+    if not flags.any():
+        return 0
+    padded = np.concatenate([[0], flags.astype(np.int8), [0]])
+    edges = np.flatnonzero(np.diff(padded))
+    return int((edges[1::2] - edges[::2]).max())
+
+
+def _forces_summary(f: ForceRecording, mass_kg: float | None) -> dict[str, Any]:
+    total = np.zeros(f.n_frames)
+    plates = []
+    for plate in f.plates:
+        vertical = plate.force[:, 1]
+        total += vertical
+        entry: dict[str, Any] = {
+            "name": plate.name,
+            "peak_vertical_force_n": float(vertical.max()) if vertical.size else 0.0,
+        }
+        plates.append(entry)
+    out: dict[str, Any] = {
+        "force_frames": f.n_frames,
+        "force_rate_hz": f.rate_hz,
+        "plates": plates,
+        "peak_vertical_force_n": float(total.max()) if total.size else 0.0,
+    }
+    if mass_kg:
+        weight = mass_kg * GRAVITY
+        out["peak_vertical_force_bw"] = out["peak_vertical_force_n"] / weight
+        for entry in plates:
+            entry["peak_vertical_force_bw"] = entry["peak_vertical_force_n"] / weight
+    return out
+
+
+def _trc(p: Path) -> dict[str, Any]:
+    return {"kind": "trc", "path": str(p), **_markers_summary(read_trc(p))}
+
+
+def _table(p: Path) -> dict[str, Any]:
+    table = read_table(p)
+    if is_force_table(table):
+        forces = read_forces(p)
+        return {
+            "kind": "forces",
+            "path": str(p),
+            "frames": forces.n_frames,
+            "rate_hz": forces.rate_hz,
+            "duration_s": float(np.ptp(forces.time)) if forces.n_frames else 0.0,
+            **_forces_summary(forces, None),
+        }
+    t = table.time
+    return {
+        "kind": "table",
+        "path": str(p),
+        "frames": int(t.shape[0]),
+        "rate_hz": _rate(t),
+        "duration_s": float(np.ptp(t)) if t.size else 0.0,
+        "columns": len(table.column_names),
+        "in_degrees": table.header.get("inDegrees"),
+    }
+
+
+def _rate(t: np.ndarray) -> float | None:
+    r = estimate_rate(t)
+    return None if math.isnan(r) else r
+
+
+def _c3d(p: Path) -> dict[str, Any]:
+    markers, forces = read_c3d(p)
+    out = {"kind": "c3d", "path": str(p), **_markers_summary(markers)}
+    if forces is not None:
+        out.update(_forces_summary(forces, None))
+    return out
+
+
+def _xml_root(p: Path) -> ET.Element:
+    try:
+        return ET.parse(p).getroot()
+    except ET.ParseError as exc:
+        line = exc.position[0] if exc.position else None
+        raise XmlFormatError(f"not well-formed XML: {exc}", path=p, line=line) from None
+
+
+def model_counts(p: Path) -> dict[str, Any]:
+    """Bodies (ground excluded), coordinates and markers of an .osim file, by XML."""
+    root = _xml_root(p)
+    model = root if root.tag == "Model" else root.find("Model")
+    if model is None:
+        raise XmlFormatError(
+            f"expected an OpenSim <Model>, found <{root.tag}>", path=p, where=root.tag
+        )
+    bodies = [b for b in model.iter("Body") if b.get("name") and b.get("name") != "ground"]
+    return {
+        "model": model.get("name", ""),
+        "version": root.get("Version"),
+        "bodies": len(bodies),
+        "coordinates": sum(1 for c in model.iter("Coordinate") if c.get("name")),
+        "markers": sum(1 for m in model.iter("Marker") if m.get("name")),
+    }
+
+
+def _osim(p: Path) -> dict[str, Any]:
+    return {"kind": "osim", "path": str(p), **model_counts(p)}
+
+
+def _xml(p: Path) -> dict[str, Any]:
+    root = _xml_root(p)
+    document = root if root.tag != "OpenSimDocument" else next(iter(root), root)
+    if document.tag == "ExternalLoads":
+        loads = read_external_loads(p)
+        return {
+            "kind": "external_loads",
+            "path": str(p),
+            "datafile": loads.datafile,
+            "forces": [
+                {"name": f.name, "body": f.applied_to_body, "force": f.force_identifier}
+                for f in loads.forces
+            ],
+        }
+    if document.tag == "Model":
+        return _osim(p)
+    return {
+        "kind": "opensim_xml",
+        "path": str(p),
+        "element": document.tag,
+        "name": document.get("name", ""),
+    }
+
+
+def _json(p: Path) -> dict[str, Any]:
+    try:
+        raw = json.loads(p.read_bytes().decode("utf-8", errors="replace"))
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=p, line=exc.lineno) from None
+    if isinstance(raw, dict) and REVIEW_KEY in raw:
+        mask = read_review(p)
+        return {
+            "kind": "review",
+            "path": str(p),
+            "review_frames": int(mask.shape[0]),
+            "missing_grf_frames": int(mask.sum()),
+        }
+    if isinstance(raw, dict) and "massKg" in raw:
+        return {
+            "kind": "subject_json",
+            "path": str(p),
+            "mass_kg": raw.get("massKg"),
+            "height_m": raw.get("heightM"),
+        }
+    raise FileFormatError(
+        f"unknown JSON file; expected a review file with {REVIEW_KEY!r} or a subject JSON",
+        path=p,
+    )
+
+
+def _subject(p: Path) -> dict[str, Any]:
+    subject = load_subject(p)
+    trials = []
+    for files in subject.trials:
+        trial = load_trial(files)
+        entry: dict[str, Any] = {"name": trial.name, **_markers_summary(trial.markers)}
+        if trial.forces is None:
+            entry["kinematics_only"] = True
+        else:
+            entry.update(_forces_summary(trial.forces, subject.mass_kg))
+        trials.append(entry)
+    return {
+        "kind": "subject",
+        "path": str(p),
+        "name": subject.name,
+        "mass_kg": subject.mass_kg,
+        "height_m": subject.height_m,
+        "foot_bodies": list(subject.foot_body_names),
+        "disable_dynamics": subject.disable_dynamics,
+        "model": model_counts(subject.model_path),
+        "trials": trials,
+    }
+
+
+# --------------------------------------------------------------------------- text
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def _data_lines(d: dict[str, Any], indent: str = "  ") -> list[str]:
+    lines = []
+    if "frames" in d:
+        rate = d.get("rate_hz")
+        rate_text = f" at {_fmt(rate)} Hz" if rate else ""
+        duration = _fmt(d.get("duration_s", 0.0))
+        lines.append(f"{indent}frames: {d['frames']}{rate_text}, {duration} s")
+    if "markers" in d and isinstance(d["markers"], int) and d.get("kind") != "osim":
+        gaps = d.get("gaps", {})
+        gap_text = "no gaps"
+        if gaps.get("markers_with_gaps"):
+            gap_text = (
+                f"{gaps['markers_with_gaps']} with gaps, longest {gaps['longest_gap_frames']} "
+                f"frames ({gaps['longest_gap_marker']})"
+            )
+        lines.append(f"{indent}markers: {d['markers']} ({gap_text})")
+    if "plates" in d:
+        names = ", ".join(p["name"] for p in d["plates"])
+        peak = f"{_fmt(d['peak_vertical_force_n'])} N"
+        if "peak_vertical_force_bw" in d:
+            peak += f" = {d['peak_vertical_force_bw']:.2f} BW"
+        lines.append(f"{indent}plates: {len(d['plates'])} ({names}); peak vertical force {peak}")
+    if d.get("kinematics_only"):
+        lines.append(f"{indent}forces: none (kinematics only)")
+    return lines
+
+
+def format_summary(d: dict[str, Any]) -> str:
+    """Readable multi-line text of a :func:`summarize` result."""
+    kind = d.get("kind", "?")
+    lines = [f"{d.get('path', '')}: {kind.replace('_', ' ')}"]
+    lines += _data_lines(d)
+    if kind == "table":
+        lines.append(f"  columns: {d['columns']} (inDegrees={d.get('in_degrees')})")
+    if kind == "osim":
+        lines.append(
+            f"  model {d['model']!r} (version {d['version']}): {d['bodies']} bodies, "
+            f"{d['coordinates']} coordinates, {d['markers']} markers"
+        )
+    if kind == "external_loads":
+        lines.append(f"  datafile: {d['datafile']}")
+        lines += [f"  {f['name']}: {f['force']} -> {f['body']}" for f in d["forces"]]
+    if kind == "opensim_xml":
+        lines.append(f"  <{d['element']}> {d['name']}")
+    if kind == "review":
+        lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
+    if kind == "subject":
+        height = f"{_fmt(d['height_m'])} m" if d["height_m"] else "unknown height"
+        m = d["model"]
+        lines.append(f"  subject {d['name']}: {_fmt(d['mass_kg'])} kg, {height}")
+        lines.append(
+            f"  model: {m['bodies']} bodies, {m['coordinates']} coordinates, {m['markers']} markers"
+        )
+        for t in d["trials"]:
+            lines.append(f"  trial {t['name']}:")
+            lines += _data_lines(t, indent="    ")
+    lines += [f"  note: {n}" for n in d.get("notes", [])]
+    return "\n".join(lines)
