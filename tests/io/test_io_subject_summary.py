@@ -1,0 +1,270 @@
+"""Subject folders, ``summarize``/``format_summary`` on every kind of shared file, and the
+``addb info`` command on good, missing and broken input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from solver.errors import FileFormatError, SubjectFolderError, TrcFormatError
+from solver.io.subject import load_subject, load_trial
+from solver.io.summary import format_summary, summarize
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+SUBJECTS = sorted(p for p in (DATA / "subjects").iterdir() if p.is_dir())
+#: name -> (mass kg, height m, {trial: has forces}) from the data README and JSON files
+EXPECTED = {
+    "opencap_uhlrich2023": (75.7, 1.85, {"DJ1": True, "walking1": True}),
+    "rajagopal2016_run": (72.84, 1.80, {"run": True, "static": False}),
+    "rajagopal2016_walk": (85.0668, 1.829, {"static": False, "walk": True}),
+}
+G = 9.80665
+
+
+def test_three_subjects_are_shared() -> None:
+    assert [p.name for p in SUBJECTS] == sorted(EXPECTED)
+
+
+@pytest.mark.parametrize("folder", SUBJECTS, ids=lambda p: p.name)
+def test_subject_folders_load(folder: Path) -> None:
+    subject = load_subject(folder)
+    mass, height, trials = EXPECTED[folder.name]
+    assert subject.name == folder.name and subject.path == folder
+    assert subject.mass_kg == mass and subject.height_m == height
+    assert subject.foot_body_names == ("calcn_r", "calcn_l")
+    assert subject.disable_dynamics is False
+    assert subject.model_path == folder / "unscaled_generic.osim"
+    assert {t.name: t.forces_path is not None for t in subject.trials} == trials
+    assert subject.raw["massKg"] == str(mass) or float(subject.raw["massKg"]) == mass
+    for files in subject.trials:
+        trial = load_trial(files)
+        assert trial.name == files.name
+        assert trial.markers.n_frames > 100
+        if trial.forces is None:
+            assert not trials[files.name]
+            continue
+        # force and marker recordings cover the same trial
+        assert trial.forces.time[0] <= trial.markers.time[0] + 0.01
+        assert trial.forces.time[-1] >= trial.markers.time[-1] - 0.01
+        peak_bw = sum(p.force[:, 1] for p in trial.forces.plates).max() / (mass * G)
+        assert 1.0 < peak_bw < (5.0 if files.name == "DJ1" else 3.0)
+
+
+def _copy_subject(tmp_path: Path, name: str = "rajagopal2016_walk") -> Path:
+    dest = tmp_path / name
+    shutil.copytree(DATA / "subjects" / name, dest)
+    return dest
+
+
+def test_missing_mass_names_the_file_and_key(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    json_path = folder / "_subject.json"
+    raw = json.loads(json_path.read_text())
+    del raw["massKg"]
+    json_path.write_text(json.dumps(raw))
+    with pytest.raises(SubjectFolderError) as info:
+        load_subject(folder)
+    assert info.value.path == str(json_path) and info.value.where == "massKg"
+    assert "massKg" in str(info.value) and "_subject.json" in str(info.value)
+
+
+@pytest.mark.parametrize("value", ["heavy", -3, 0, True])
+def test_bad_mass(tmp_path: Path, value: object) -> None:
+    folder = _copy_subject(tmp_path)
+    raw = json.loads((folder / "_subject.json").read_text())
+    raw["massKg"] = value
+    (folder / "_subject.json").write_text(json.dumps(raw))
+    with pytest.raises(SubjectFolderError, match="not a positive number"):
+        load_subject(folder)
+
+
+def test_numeric_mass_and_height_are_accepted(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    raw = json.loads((folder / "_subject.json").read_text())
+    raw.update(massKg=70, heightM=1.7, disableDynamics="true", footBodyNames=["toes_r"])
+    (folder / "_subject.json").write_text(json.dumps(raw))
+    subject = load_subject(folder)
+    assert (subject.mass_kg, subject.height_m) == (70.0, 1.7)
+    assert subject.disable_dynamics is True and subject.foot_body_names == ("toes_r",)
+
+
+def test_invalid_json_reports_the_line(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    (folder / "_subject.json").write_text('{\n  "massKg": "70",\n  "heightM" 1.8\n}')
+    with pytest.raises(SubjectFolderError, match="not valid JSON") as info:
+        load_subject(folder)
+    assert info.value.line == 3
+
+
+def test_missing_model_and_markers(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    (folder / "unscaled_generic.osim").unlink()
+    with pytest.raises(SubjectFolderError, match=r"unscaled_generic\.osim is missing"):
+        load_subject(folder)
+    folder = _copy_subject(tmp_path / "b")
+    (folder / "trials/walk/markers.trc").unlink()
+    with pytest.raises(SubjectFolderError, match=r"no markers\.trc or markers\.c3d") as info:
+        load_subject(folder)
+    assert info.value.path == str(folder / "trials/walk")
+
+
+def test_missing_json_and_trials(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    shutil.rmtree(folder / "trials")
+    with pytest.raises(SubjectFolderError, match="trials folder is missing"):
+        load_subject(folder)
+    (folder / "_subject.json").unlink()
+    with pytest.raises(SubjectFolderError, match=r"_subject\.json is missing"):
+        load_subject(folder)
+
+
+def test_c3d_trial_takes_forces_from_the_c3d(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    trial_dir = folder / "trials" / "treadmill"
+    trial_dir.mkdir()
+    shutil.copy(DATA / "trials/opensim_c3d/walking2.c3d", trial_dir / "markers.c3d")
+    subject = load_subject(folder)
+    files = subject.trial("treadmill")
+    assert files.markers_path.suffix == ".c3d" and files.forces_path is None
+    trial = load_trial(files)
+    assert trial.forces is not None and len(trial.forces.plates) == 2
+    assert trial.forces.n_frames == trial.markers.n_frames == 1249
+
+
+def test_broken_trial_file_names_the_file_and_line(tmp_path: Path) -> None:
+    folder = _copy_subject(tmp_path)
+    trc = folder / "trials/walk/markers.trc"
+    lines = trc.read_text().splitlines()
+    trc.write_text("\n".join(lines[:-20]) + "\n")
+    files = load_subject(folder).trial("walk")
+    with pytest.raises(TrcFormatError, match="truncated") as info:
+        load_trial(files)
+    assert info.value.path == str(trc)
+
+
+# ----------------------------------------------------------------------------- summaries
+
+SUMMARY_FILES = sorted(
+    p
+    for pattern in ("*.trc", "*.mot", "*.sto", "*.c3d", "*.osim", "*.xml", "*review*.json")
+    for p in DATA.rglob(pattern)
+)
+
+
+@pytest.mark.parametrize("path", SUMMARY_FILES, ids=lambda p: str(p.relative_to(DATA)))
+def test_every_shared_file_is_summarized(path: Path) -> None:
+    d = summarize(path)
+    json.dumps(d)  # JSON-serializable for the UI
+    text = format_summary(d)
+    assert text.startswith(str(path)) and len(text.splitlines()) >= 2
+    if path.suffix in (".trc", ".c3d"):
+        assert d["frames"] > 0 and d["rate_hz"] > 0 and d["markers"] > 0
+        assert d["duration_s"] == pytest.approx((d["frames"] - 1) / d["rate_hz"], rel=1e-6)
+    if path.suffix == ".osim":
+        assert 14 <= d["bodies"] <= 22 and 25 <= d["coordinates"] <= 39 and d["markers"] > 30
+    if path.name.startswith("grf") and path.suffix == ".mot":
+        assert d["kind"] == "forces" and len(d["plates"]) >= 2
+
+
+def test_osim_counts_match_opensim_conventions(shared_data: Path) -> None:
+    # 3.x layout: ground is a Body there but not counted
+    d30 = summarize(shared_data / "subjects/rajagopal2016_walk/unscaled_generic.osim")
+    d40 = summarize(shared_data / "models/Rajagopal2016.osim")
+    assert (d30["version"], d40["version"]) == ("30000", "40000")
+    assert d30["bodies"] == d40["bodies"] == 22
+    assert d30["coordinates"] == d40["coordinates"] == 39
+
+
+@pytest.mark.opensim
+def test_osim_counts_agree_with_opensim(shared_data: Path) -> None:
+    opensim = pytest.importorskip("opensim")
+    path = shared_data / "models/Rajagopal2015_passiveCal_hipAbdMoved_noArms.osim"
+    model = opensim.Model(str(path))
+    d = summarize(path)
+    assert d["bodies"] == model.getBodySet().getSize()
+    assert d["coordinates"] == model.getCoordinateSet().getSize()
+    assert d["markers"] == model.getMarkerSet().getSize()
+
+
+def test_subject_summary_in_body_weights(shared_data: Path) -> None:
+    d = summarize(shared_data / "subjects/rajagopal2016_walk")
+    trials = {t["name"]: t for t in d["trials"]}
+    assert trials["static"]["kinematics_only"] is True
+    walk = trials["walk"]
+    assert walk["peak_vertical_force_bw"] == pytest.approx(
+        walk["peak_vertical_force_n"] / (85.0668 * G)
+    )
+    assert 1.0 < walk["peak_vertical_force_bw"] < 1.5  # walking
+    text = format_summary(d)
+    assert "BW" in text and "kinematics only" in text and "85.07 kg" in text
+
+
+def test_gaps_are_counted(shared_data: Path) -> None:
+    d = summarize(shared_data / "trials/camargo2021_levelground/markers.trc")
+    gaps = d["gaps"]
+    assert gaps["markers_with_gaps"] > 0 and gaps["longest_gap_frames"] > 1
+    assert gaps["longest_gap_marker"] is not None
+    none = summarize(shared_data / "trials/rajagopal2016/motion_capture_walk.trc")["gaps"]
+    assert none["markers_with_gaps"] == 0 and none["longest_gap_frames"] == 0
+
+
+def test_moment_conversion_notes(shared_data: Path) -> None:
+    d = summarize(shared_data / "trials/camargo2021_levelground/grf.mot")
+    assert len(d["notes"]) == 6 and "note:" in format_summary(d)
+
+
+def test_summary_errors(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError):
+        summarize(tmp_path / "missing.trc")
+    other = tmp_path / "notes.txt"
+    other.write_text("x")
+    with pytest.raises(FileFormatError, match="unknown file type"):
+        summarize(other)
+    folder = tmp_path / "not_a_subject"
+    folder.mkdir()
+    with pytest.raises(SubjectFolderError, match=r"_subject\.json is missing"):
+        summarize(folder)
+
+
+def _addb_info(path: Path) -> subprocess.CompletedProcess[str]:
+    code = "import sys; from addb_viewer.cli import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.run(
+        [sys.executable, "-c", code, "info", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def test_cli_info_ok(shared_data: Path) -> None:
+    result = _addb_info(shared_data / "subjects/opencap_uhlrich2023")
+    assert result.returncode == 0, result.stderr
+    assert "trial DJ1" in result.stdout and "BW" in result.stdout
+
+
+@pytest.mark.parametrize("damage", ["missing", "truncated", "binary"])
+def test_cli_info_bad_input_is_one_line(shared_data: Path, tmp_path: Path, damage: str) -> None:
+    path = tmp_path / "markers.trc"
+    if damage == "truncated":
+        text = (shared_data / "trials/rajagopal2016/motion_capture_walk.trc").read_text()
+        path.write_text(text[: len(text) // 2])
+    elif damage == "binary":
+        path.write_bytes(bytes(range(256)) * 4)
+    result = _addb_info(path)
+    assert result.returncode == 1
+    assert result.stdout == ""
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("addb info:") and str(path) in lines[0]
+
+
+def test_markers_have_no_nan_where_the_file_has_numbers(shared_data: Path) -> None:
+    trial = load_trial(load_subject(shared_data / "subjects/opencap_uhlrich2023").trial("DJ1"))
+    assert not np.isnan(trial.markers.positions).any()
