@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,8 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
         ``positions`` ``(T, M, 3)`` in metres in the file's lab frame (OpenSim files
         are Y up; no rotation is applied), NaN where a marker is missing (empty cell
         or ``nan``); ``time`` ``(T,)`` s from the Time column; ``rate_hz`` from
-        ``DataRate``; marker names from line 4.
+        ``DataRate`` (a :class:`UserWarning` says so when the Time column steps at a
+        rate more than 1 % away); marker names from line 4.
 
     Raises
     ------
@@ -80,6 +82,7 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     _parse_column(rows, line_numbers, 0, path)  # frame numbers: checked, not used
     time = _parse_column(rows, line_numbers, 1, path)
     _check_time(time, line_numbers, path)
+    _check_rate(time, rate, path)
     coords = _parse_coordinates(rows, line_numbers, shift, path)
     positions = coords.reshape(len(rows), len(names), 3)
     return MarkerTrajectories(names, positions, time, rate, source=str(path))
@@ -228,6 +231,20 @@ def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
             f"time {time[k]!r} s does not increase (previous row: {time[k - 1]!r} s)",
             path=path,
             line=numbers[k],
+        )
+
+
+def _check_rate(time: np.ndarray, rate: float, path: str | Path) -> None:
+    """Warn when the Time column's median step disagrees with DataRate by more than 1 %."""
+    if time.shape[0] < 2:
+        return
+    step = float(np.median(np.diff(time)))
+    if abs(step * rate - 1.0) > 0.01:
+        warnings.warn(
+            f"{path}: DataRate says {rate:g} Hz but the Time column steps {step:g} s "
+            f"({1.0 / step:g} Hz); rate_hz keeps the header's value",
+            UserWarning,
+            stacklevel=3,
         )
 
 

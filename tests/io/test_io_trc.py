@@ -289,7 +289,8 @@ def _random_markers(
     pos[rng.random(pos.shape[:2]) < 0.1] = np.nan  # missing markers, whole xyz
     pos[0, 0] = [0.0, -0.0, 5e-324]
     rate = float(rng.uniform(30, 500))
-    time = np.cumsum(rng.uniform(0.5, 1.5, n_frames)) / rate
+    # arbitrary float64 times, close enough to the rate not to trigger the rate warning
+    time = (np.arange(n_frames) + rng.uniform(-1e-3, 1e-3, n_frames)) / rate + rng.uniform(0, 9)
     names = tuple(f"M{k} name.{k}" for k in range(n_markers))  # spaces and dots
     return MarkerTrajectories(names, pos, time, rate)
 
@@ -346,3 +347,24 @@ def test_opensim_reads_written_trc(shared_data: Path, tmp_path: Path) -> None:
         got = np.array([vec.get(i) for i in range(3)])
         np.testing.assert_allclose(got, markers.positions[frame, marker] * 1000, rtol=1e-12)
     assert np.isnan(markers.positions[missing_frame, missing_marker]).all()
+
+
+def test_rate_disagreeing_with_time_column_warns(tmp_path: Path, small_trc: list[str]) -> None:
+    lines = list(small_trc)
+    lines[2] = lines[2].replace("  100.0", "  200.0", 1)  # DataRate 200, time steps 0.01 s
+    with pytest.warns(UserWarning, match="DataRate says 200 Hz but the Time column steps 0.01 s"):
+        markers = read_trc(_damaged(tmp_path, lines))
+    assert markers.rate_hz == 200.0
+
+
+def test_large_trc_reads_fast(shared_data: Path) -> None:
+    import time
+
+    path = shared_data / "trials/camargo2021_levelground/markers.trc"
+    best = float("inf")
+    for _ in range(3):
+        start = time.perf_counter()
+        markers = read_trc(path)
+        best = min(best, time.perf_counter() - start)
+    assert markers.n_frames == 3067
+    assert best < 0.2
