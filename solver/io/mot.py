@@ -47,8 +47,18 @@ from solver.io.types import ForcePlate, ForceRecording, Table
 
 #: Header keys written as "key value" (older Motion Analysis / SIMM style) instead of key=value.
 _SPACE_KEYS = {"name", "datacolumns", "datarows", "range"}
-#: Header keys recomputed by the writers rather than copied from ``Table.header``.
-_COMPUTED_KEYS = {"name", "version", "nrows", "ncolumns", "datacolumns", "datarows", "range"}
+#: Header keys recomputed (or, for inDegrees_file, dropped) by the writers rather than
+#: copied from ``Table.header``.
+_COMPUTED_KEYS = {
+    "name",
+    "version",
+    "nrows",
+    "ncolumns",
+    "datacolumns",
+    "datarows",
+    "range",
+    "indegrees_file",
+}
 _TRANSLATIONAL = re.compile(r"(_t[xyz]|_beta)$|translation", re.IGNORECASE)
 
 
@@ -593,6 +603,13 @@ def _check_names(names: Sequence[str], path: str | Path) -> None:
         seen.add(name)
 
 
+def _safe_name(name: str) -> str:
+    """A first header line that reads back as the name (no '=', not a header keyword)."""
+    name = " ".join(name.replace("=", "-").split()) or "table"
+    first = name.split()[0].lower()
+    return f"table {name}" if first in _SPACE_KEYS | {"endheader"} else name
+
+
 def _write(
     path: str | Path,
     header: dict[str, str],
@@ -611,7 +628,7 @@ def _write(
     extra = {k: v for k, v in header.items() if k.lower() not in _COMPUTED_KEYS and k != "comment"}
     extra.setdefault("inDegrees", "no")
     if kind == "mot":
-        name = header.get("name", Path(path).stem).replace("\n", " ")
+        name = _safe_name(header.get("name", "") or Path(path).stem)
         out = [name, "version=1", f"nRows={n_rows}", f"nColumns={len(names)}"]
     else:
         out = ["version=3", "DataType=double", f"nRows={n_rows}", f"nColumns={len(names)}"]

@@ -514,3 +514,15 @@ def test_opensim_reads_written_forces_coordinates_and_sto(
     np.testing.assert_array_equal(
         table.getDependentColumn("pelvis_tx").to_numpy(), q.column("pelvis_tx")
     )
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [("Coordinates", "Coordinates"), ("a=b", "a-b"), ("range of motion", "table range of motion")],
+)
+def test_table_name_line_reads_back(tmp_path: Path, name: str, expected: str) -> None:
+    path = tmp_path / "named.mot"
+    write_table(path, Table(("a",), np.zeros((2, 1)), np.arange(2.0), {"name": name}))
+    back = read_table(path)
+    assert back.header["name"] == expected
+    assert back.column_names == ("a",)  # the name line never swallows the header
