@@ -141,7 +141,7 @@ class ScaleFitProblem:
         n_frames = obs.shape[0]
         n_obs = self.seen.sum(axis=0).astype(float)
         fixed = np.array([m.fixed for m in self.generic_markers])
-        self.offset_w = settings.offset_weight * np.maximum(n_obs, 1.0) * np.where(fixed, 1e6, 1.0)
+        self.offset_w = settings.offset_weight * np.maximum(n_obs, 1.0) * np.where(fixed, 20.0, 1.0)
         self.prior_w = settings.scale_prior_weight * n_frames
         self.aniso_w = settings.anisotropy_weight * n_frames
         self.n_s = groups.n_params

@@ -220,17 +220,29 @@ def _joint_search_plan(sk: Skeleton) -> list[tuple[list[int], list[int], set[str
     return out
 
 
-def greedy_pose(solver: FrameSolver, y: FloatArray, q_root: FloatArray, grid: int = 5, max_candidates: int = 700) -> FloatArray:
+def _grid_values(lo: float, hi: float, default: float, grid: int) -> FloatArray:
+    """Candidate values of one coordinate: ``grid`` values spanning its range, plus its
+    default. A range of a full turn or more is sampled around the circle once (±180° are
+    the same angle), so that no candidate sits on an artificial bound."""
+    if hi - lo >= 2 * np.pi - 1e-6:
+        values = default + np.linspace(-np.pi, np.pi, grid + 1)[:-1]
+        values = values[(values >= lo) & (values <= hi)]
+    else:
+        values = np.linspace(lo, hi, grid)
+    return np.unique(np.append(values, np.clip(default, lo, hi)))
+
+
+def greedy_pose(solver: FrameSolver, y: FloatArray, q_root: FloatArray, grid: int = 6, max_candidates: int = 4000) -> FloatArray:
     """Pose the limbs joint by joint, from the root outward, by a grid search.
 
-    For each joint (depth-first), every combination of ``grid`` values across the range
-    of each of its free coordinates (ranges wider than a turn are cut to ±π), and of its
-    child joints' coordinates when the number of combinations stays under
-    ``max_candidates`` (one joint of look-ahead: a shoulder is scored together with the
-    elbow below it), is scored at once with batched forward kinematics on the markers of
-    the joint's subtree; the best value of the joint's own coordinates is kept. This
-    finds limb configurations far from the default pose (arms raised in a static trial)
-    that a local solver started at the default would miss.
+    For each joint (depth-first), every combination of candidate values of its free
+    coordinates (:func:`_grid_values`), and of its child joints' coordinates when the
+    number of combinations stays under ``max_candidates`` (one joint of look-ahead: a
+    shoulder is scored together with the elbow below it), is scored at once with batched
+    forward kinematics on the markers of the joint's subtree; the best value of the
+    joint's own coordinates is kept. Ties (equivalent Euler angles) go to the candidate
+    nearest the default pose. This finds limb configurations far from the default (arms
+    raised in a static trial) that a local solver started at the default would miss.
 
     Parameters
     ----------
@@ -249,16 +261,16 @@ def greedy_pose(solver: FrameSolver, y: FloatArray, q_root: FloatArray, grid: in
         use = seen & np.isin(marker_body, list(bodies))
         if not use.any():
             continue
-        coords = own + ahead if grid ** (len(own) + len(ahead)) <= max_candidates else own
-        lo = np.maximum(sk.ranges[coords, 0], -np.pi)
-        hi = np.minimum(sk.ranges[coords, 1], np.pi)
-        axes = [np.linspace(a, b, grid) for a, b in zip(lo, hi)]
-        combos = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(coords))
+        values = {c: _grid_values(sk.ranges[c, 0], sk.ranges[c, 1], sk.defaults[c], grid) for c in own + ahead}
+        size = int(np.prod([values[c].size for c in own + ahead]))
+        coords = own + ahead if size <= max_candidates else own
+        combos = np.stack(np.meshgrid(*[values[c] for c in coords], indexing="ij"), axis=-1).reshape(-1, len(coords))
         cand = np.repeat(q[None], combos.shape[0], axis=0)
         cand[:, coords] = combos
         cand = sk.cmap.complete(cand)
         pos = sk.marker_positions(cand, solver.markers[use])
         cost = np.sum((pos - y[use][None]) ** 2, axis=(1, 2))
+        cost += 1e-6 * np.sum((combos - sk.defaults[coords]) ** 2, axis=1)  # tie-break only
         q[own] = cand[int(np.argmin(cost)), own]
         q = sk.cmap.complete(q)
     return q
