@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ import numpy as np
 from solver.errors import KinematicsError
 from solver.io.mot import write_coordinates
 from solver.io.subject import Subject, Trial, load_subject, load_trial
-from solver.kinematics.observations import find_marker_mapping
+from solver.kinematics.observations import find_marker_settings
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.stage import KinematicsOptions, run_kinematics
 from solver.model.osim import read_osim
@@ -67,14 +67,17 @@ def subject_kinematics(
     t0 = time.perf_counter()
     trials = load_trials(subject)
     generic = read_osim(subject.model_path)
-    mapping = find_marker_mapping(subject.path)
+    markers = find_marker_settings(subject.path)
+    opts = options or KinematicsOptions()
+    if markers.attach_unmatched:
+        opts = replace(opts, attach_unmatched=True)
     load_seconds = time.perf_counter() - t0
     kin = run_kinematics(
         generic,
         [(t.name, t.markers) for t in trials],
         height_m=subject.height_m,
-        mapping=mapping,
-        options=options,
+        mapping=markers.mapping,
+        options=opts,
         progress=progress,
     )
     return SubjectKinematics(subject, trials, kin, load_seconds)

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.kinematics.ik import solver_bounds
 from solver.kinematics.scale_groups import ScaleGroups, prior_residuals
 from solver.kinematics.scale_jacobian import ScaleJacobian
 from solver.model.osim import Marker, OsimModel
@@ -215,8 +216,7 @@ def fit_model(problem: ScaleFitProblem, q_init: FloatArray, scales0: FloatArray)
     q_anchor = q.copy()
     sk = problem.build(scales, offsets)
     free = np.flatnonzero(sk.is_independent & ~sk.locked)
-    lo, hi = sk.ranges[:, 0].copy(), sk.ranges[:, 1].copy()
-    lo[~sk.clamped], hi[~sk.clamped] = -np.inf, np.inf
+    lo, hi = solver_bounds(sk)
     midx = sk.marker_index(problem.names)
     e = st.pose_prior_weight
     cost = problem.cost(sk.marker_positions(q, midx), q, q_anchor, free, scales, offsets)

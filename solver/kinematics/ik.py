@@ -49,6 +49,21 @@ class IkSettings:
     damping: float = 1e-6
 
 
+def solver_bounds(skeleton: Skeleton) -> tuple[FloatArray, FloatArray]:
+    """Lower and upper bounds the solvers enforce: the range of clamped coordinates.
+
+    The root joint's coordinates (the body's position and heading in the lab) are never
+    bounded: their ranges in OpenSim models (e.g. pelvis_tz within ±3 m, pelvis_rotation
+    within ±90°) are display defaults, not anatomy, and a subject walking a circuit
+    leaves them.
+    """
+    lo, hi = skeleton.ranges[:, 0].copy(), skeleton.ranges[:, 1].copy()
+    free = ~skeleton.clamped
+    free[list(skeleton.root_transform_axes())] = True
+    lo[free], hi[free] = -np.inf, np.inf
+    return lo, hi
+
+
 class FrameSolver:
     """Solves one frame at a time for a fixed model and marker set.
 
@@ -70,9 +85,7 @@ class FrameSolver:
         self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
         self.settings = settings
         self.free = np.flatnonzero(skeleton.is_independent & ~skeleton.locked)
-        lo, hi = skeleton.ranges[:, 0].copy(), skeleton.ranges[:, 1].copy()
-        lo[~skeleton.clamped], hi[~skeleton.clamped] = -np.inf, np.inf
-        self.lo, self.hi = lo, hi
+        self.lo, self.hi = solver_bounds(skeleton)
         self.calls = 0
 
     def _clip(self, q: FloatArray) -> FloatArray:

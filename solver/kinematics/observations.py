@@ -24,11 +24,35 @@ FloatArray = NDArray[np.float64]
 MAPPING_FILES = ("markers.yaml", "markers.yml", "markers.json", "marker_map.yaml", "marker_map.json")
 
 
-def read_marker_mapping(path: str | Path) -> dict[str, str]:
-    """Read a lab-name -> model-name mapping from YAML or JSON.
+@dataclass(frozen=True)
+class MarkerSettings:
+    """What a subject's marker file says.
 
-    The file holds a mapping ``{lab_name: model_name}``, optionally under a top-level
-    key ``markers``. Raises :class:`KinematicsError` naming the file on any other content.
+    Attributes
+    ----------
+    mapping
+        Lab marker name -> model marker name.
+    attach_unmatched
+        Attach lab markers the model lacks to the body they move with.
+    source
+        The file read ("" when there is none).
+    """
+
+    mapping: dict[str, str]
+    attach_unmatched: bool = False
+    source: str = ""
+
+
+def read_marker_settings(path: str | Path) -> MarkerSettings:
+    """Read a marker mapping file (YAML or JSON).
+
+    Either a plain mapping ``{lab_name: model_name}``, or an object with ``markers`` (that
+    mapping) and optionally ``attach_unmatched: true``.
+
+    Raises
+    ------
+    KinematicsError
+        Unparsable file or other content, naming the file.
     """
     path = Path(path)
     text = path.read_text()
@@ -41,20 +65,24 @@ def read_marker_mapping(path: str | Path) -> dict[str, str]:
             data = json.loads(text)
     except Exception as exc:  # yaml/json errors carry their own position
         raise KinematicsError(f"cannot parse marker mapping: {exc}", path=path) from None
-    if isinstance(data, dict) and isinstance(data.get("markers"), dict):
-        data = data["markers"]
+    attach = False
+    if isinstance(data, dict) and "markers" in data:
+        attach = data.get("attach_unmatched", False)
+        if not isinstance(attach, bool):
+            raise KinematicsError("attach_unmatched must be true or false", path=path)
+        data = data["markers"] or {}
     if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
         raise KinematicsError("marker mapping must be a mapping of lab names to model marker names", path=path)
-    return dict(data)
+    return MarkerSettings(dict(data), attach, str(path))
 
 
-def find_marker_mapping(subject_dir: str | Path) -> dict[str, str]:
-    """The mapping file next to a subject (first of :data:`MAPPING_FILES`), or {}."""
+def find_marker_settings(subject_dir: str | Path) -> MarkerSettings:
+    """The marker file next to a subject (first of :data:`MAPPING_FILES`), or empty settings."""
     for name in MAPPING_FILES:
         p = Path(subject_dir) / name
         if p.is_file():
-            return read_marker_mapping(p)
-    return {}
+            return read_marker_settings(p)
+    return MarkerSettings({})
 
 
 @dataclass(frozen=True)

@@ -24,10 +24,11 @@ from solver.errors import KinematicsError
 from solver.io.types import MarkerTrajectories
 from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model
 from solver.kinematics.ik import FrameSolver, IkSettings, initial_pose, solve_trajectory
+from solver.kinematics.autoplace import place_markers
 from solver.kinematics.observations import MarkerMatch, match_markers, observations
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.scale_groups import make_groups, model_height
-from solver.model.osim import OsimModel
+from solver.model.osim import Marker, OsimModel
 from solver.model.scaling import scale_model
 from solver.model.skeleton import Skeleton
 
@@ -144,32 +145,41 @@ def run_kinematics(
         raise KinematicsError("no trials to solve", path=generic.source)
     model_marker_names = [m.name for m in generic.markers]
     matches: list[MarkerMatch] = []
-    obs_by_trial: list[FloatArray] = []
     for name, markers in trials:
         match = match_markers(markers, model_marker_names, mapping, trial_name=name)
+        observations(markers, match, trial_name=name)  # validates: frames, all-NaN markers
         matches.append(match)
-        obs_by_trial.append(observations(markers, match, trial_name=name))
+    # column of each (model or lab) marker name in each trial
+    columns = [
+        {**{lab: i for i, lab in enumerate(m.names)}, **dict(zip(match.model_markers, match.trial_columns))}
+        for (_, m), match in zip(trials, matches)
+    ]
     union = sorted({n for m in matches for n in m.model_markers}, key=model_marker_names.index)
-    col = {n: i for i, n in enumerate(union)}
-    weights = np.array([float(opts.marker_weights.get(n, 1.0)) for n in union])
+    unmatched = sorted({n for m in matches for n in m.unmatched}) if opts.attach_unmatched else []
 
-    # fit frames, mapped onto the union marker set; trial_of[f] says which trial frame f is from
+    # fit frames; trial_of[f] says which trial fit frame f is from
     per_trial = max(opts.frames_per_trial, opts.max_fit_frames // len(trials))
-    fit_obs, trial_of = [], []
-    for k, (match, obs) in enumerate(zip(matches, obs_by_trial)):
-        frames = _pick_frames(obs, per_trial)
-        y = np.full((frames.size, len(union), 3), np.nan)
-        y[:, [col[n] for n in match.model_markers]] = obs[frames]
-        fit_obs.append(y)
-        trial_of += [k] * frames.size
-    fit_y = np.concatenate(fit_obs)
-    observed_cols = np.isfinite(fit_y).all(axis=2).any(axis=0)
-    if not observed_cols.all():
-        keep = np.flatnonzero(observed_cols)
-        union = [union[i] for i in keep]
-        col = {n: i for i, n in enumerate(union)}
-        weights, fit_y = weights[keep], fit_y[:, keep]
-    bodies = {m.body for m in generic.markers if m.name in col}
+    picked = []
+    for k, ((_, markers), match) in enumerate(zip(trials, matches)):
+        frames = _pick_frames(markers.positions[:, list(match.trial_columns)], per_trial)
+        picked += [(k, int(f)) for f in frames]
+    trial_of = [k for k, _ in picked]
+
+    def gather(names: list[str]) -> FloatArray:
+        out = np.full((len(picked), len(names), 3), np.nan)
+        for i, (k, f) in enumerate(picked):
+            for j, n in enumerate(names):
+                c = columns[k].get(n)
+                if c is not None:
+                    out[i, j] = trials[k][1].positions[f, c]
+        return out
+
+    fit_y = gather(union)
+    keep = np.isfinite(fit_y).all(axis=2).any(axis=0)
+    union = [n for n, ok in zip(union, keep) if ok]
+    fit_y = fit_y[:, keep]
+    weights = np.array([float(opts.marker_weights.get(n, 1.0)) for n in union])
+    bodies = {m.body for m in generic.markers if m.name in set(union)}
     groups = make_groups(generic, bodies, symmetric=opts.symmetric_scales)
     generic_sk = Skeleton(generic)
     h_scale = 1.0 if height_m is None else float(height_m) / model_height(generic_sk)
@@ -188,19 +198,33 @@ def run_kinematics(
     t2 = time.perf_counter()
     problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
     fit = fit_model(problem, q_init, scales0)
+    attached: dict[str, str] = {}
+    if unmatched:
+        say("attaching unmatched markers", 0.3)
+        placed, _ = place_markers(Skeleton(fit.model), fit.q, gather(unmatched), unmatched)
+        if placed:
+            body_scales = groups.body_scales(fit.scales)
+            new = tuple(Marker(p.name, p.body, tuple(np.array(p.location) / body_scales[p.body]), False) for p in placed)
+            generic = generic.with_markers(generic.markers + new)
+            attached = {p.name: p.body for p in placed}
+            union = union + [p.name for p in placed]
+            fit_y = np.concatenate([fit_y, gather([p.name for p in placed])], axis=1)
+            weights = np.append(weights, np.ones(len(placed)))
+            problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
+            fit = fit_model(problem, fit.q, fit.scales)
     timings["scale_fit"] = time.perf_counter() - t2
 
     # final IK of every trial with the fitted model
     t3 = time.perf_counter()
     sk = Skeleton(fit.model)
+    in_fit = set(union)
     results = []
-    for k, ((name, markers), match, obs) in enumerate(zip(trials, matches, obs_by_trial)):
+    for k, ((name, markers), match) in enumerate(zip(trials, matches)):
         say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))
         ts = time.perf_counter()
-        names = [n for n in match.model_markers if n in col]
-        cols = [match.model_markers.index(n) for n in names]
-        y = obs[:, cols]
-        solver = FrameSolver(sk, sk.marker_index(names), np.array([weights[col[n]] for n in names]), opts.ik)
+        names = [n for n in (*match.model_markers, *match.unmatched) if n in in_fit]
+        y = np.array(markers.positions[:, [columns[k][n] for n in names]])
+        solver = FrameSolver(sk, sk.marker_index(names), np.array([weights[union.index(n)] for n in names]), opts.ik)
         first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
         q_start = initial_pose(solver, y[first])
         q = solve_trajectory(solver, y, q_start)
@@ -213,7 +237,7 @@ def run_kinematics(
                 marker_names=tuple(names),
                 observed=y,
                 modeled=sk.marker_positions(q, sk.marker_index(names)),
-                unmatched=match.unmatched,
+                unmatched=tuple(n for n in match.unmatched if n not in attached),
                 seconds=time.perf_counter() - ts,
             )
         )
@@ -227,6 +251,7 @@ def run_kinematics(
         body_scales=body_scales,
         marker_offsets=offsets,
         trials=tuple(results),
+        attached=attached,
         fit_marker_rms=fit.marker_rms,
         seconds=timings,
     )
