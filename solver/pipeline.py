@@ -19,12 +19,15 @@ import numpy as np
 from solver.errors import KinematicsError
 from solver.io.mot import write_coordinates
 from solver.io.subject import Subject, Trial, load_subject, load_trial
+from solver.io.types import ForceRecording
 from solver.kinematics.observations import find_marker_settings
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.stage import KinematicsOptions, run_kinematics
 from solver.model.osim import read_osim
 from solver.model.osim_writer import write_osim
+from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
+from solver.results import PlateData, ProcessedTrial, save_processed
 
 Progress = Callable[[str, float], None]
 
@@ -162,8 +165,127 @@ def process_kinematics(
                 "kinematics_total": total,
             }
             write_json(tmp / trial.name / "results.json", metrics)
+            model_file = str(Path(out_dir).resolve() / f"{subject.name}_scaled.osim")
+            save_processed(tmp / trial.name / "trial.npz", build_processed(sk, trial, model_path=model_file, metrics=metrics))
         write_subject_summary(tmp, sk)
     return sk
+
+
+def process_subject(
+    subject_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    options: ProcessOptions | None = None,
+    unmeasured: dict[str, np.ndarray] | None = None,
+    progress: Progress | None = None,
+) -> SubjectKinematics:
+    """Run every stage on a subject and write ``out_dir`` (see :mod:`solver.outputs`).
+
+    Parameters
+    ----------
+    subject_dir
+        AddBiomechanics subject folder.
+    out_dir
+        Output folder, replaced atomically.
+    options
+        Stage options and the trials to write.
+    unmeasured
+        Trial name -> ``(T,)`` bool mask, at the trial's marker frame rate, of frames with
+        unmeasured external force (the reviewer's flags); they override the automatic
+        proposals of the dynamics stage.
+    progress
+        Called with (message, fraction done).
+
+    Notes
+    -----
+    Until the dynamics stage lands this runs the kinematics stage only.
+    """
+    return process_kinematics(subject_dir, out_dir, options=options, progress=progress)
+
+
+def plates_on_frames(forces: ForceRecording | None, time: np.ndarray) -> tuple[PlateData, ...]:
+    """Plate wrenches linearly interpolated onto the trial's frame times (no assignment)."""
+    if forces is None:
+        return ()
+    out = []
+    for p in forces.plates:
+        def interp(a: np.ndarray) -> np.ndarray:
+            return np.stack([np.interp(time, forces.time, a[:, k], left=np.nan, right=np.nan) for k in range(3)], axis=1)
+
+        force = interp(np.asarray(p.force))
+        cop = interp(np.nan_to_num(np.asarray(p.cop)))
+        cop[np.linalg.norm(force, axis=1) < 1e-6] = np.nan
+        out.append(PlateData(p.name, force, cop, interp(np.asarray(p.free_moment)), p.corners, np.full(time.size, -1)))
+    return tuple(out)
+
+
+def build_processed(
+    sk: SubjectKinematics,
+    trial: TrialKinematics,
+    *,
+    model_path: str = "",
+    plates: tuple[PlateData, ...] | None = None,
+    dynamics: dict[str, Any] | None = None,
+    metrics: dict[str, Any] | None = None,
+) -> ProcessedTrial:
+    """Assemble the :class:`ProcessedTrial` of one trial from the stage results.
+
+    ``dynamics`` holds the dynamics stage's arrays (``q``, ``qd``, ``qdd``, ``com``,
+    ``com_acc``, ``residual_force``, ``residual_moment``, ``tau``, ``unobserved``,
+    ``proposed``, ``proposal_reasons``, ``mass_kg``, ``model``); without it the dynamic
+    fields are NaN and the kinematics coordinates are used.
+    """
+    from scipy.spatial.transform import Rotation
+
+    dyn = dynamics or {}
+    model = dyn.get("model", sk.kinematics.model)
+    skel = Skeleton(model)
+    q = dyn.get("q", trial.q)
+    t = q.shape[0]
+    rot, pos = skel.body_poses(q)
+    wxyz = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat(scalar_first=True).reshape(t, -1, 4)
+    nan3 = np.full((t, 3), np.nan)
+    raw = next(x for x in sk.trials if x.name == trial.name)
+    return ProcessedTrial(
+        subject=sk.subject.name,
+        trial=trial.name,
+        time=dyn.get("time", trial.time),
+        coordinate_names=skel.coordinate_names,
+        q=q,
+        qd=dyn.get("qd", np.full_like(q, np.nan)),
+        qdd=dyn.get("qdd", np.full_like(q, np.nan)),
+        marker_names=trial.marker_names,
+        observed=dyn.get("observed", trial.observed),
+        modeled=skel.marker_positions(q, skel.marker_index(list(trial.marker_names))),
+        body_names=skel.body_names,
+        body_position=pos,
+        body_wxyz=wxyz,
+        body_meshes={b.name: [(m.file, m.scale) for m in b.meshes] for b in model.bodies},
+        plates=plates if plates is not None else plates_on_frames(raw.forces, trial.time),
+        mass_kg=float(dyn.get("mass_kg", sk.subject.mass_kg)),
+        height_m=sk.subject.height_m,
+        com=dyn.get("com", skel.center_of_mass(q)),
+        com_acc=dyn.get("com_acc", nan3),
+        residual_force=dyn.get("residual_force", nan3),
+        residual_moment=dyn.get("residual_moment", nan3),
+        tau=dyn.get("tau", np.full_like(q, np.nan)),
+        unobserved=dyn.get("unobserved", np.zeros(t, dtype=bool)),
+        proposed=dyn.get("proposed", np.zeros(t, dtype=bool)),
+        proposal_reasons=tuple(dyn.get("proposal_reasons", [""] * t)),
+        metrics=metrics or {},
+        model_path=model_path,
+        geometry_dir=str(geometry_dir(sk.subject.model_path)),
+        settings=dyn.get("settings", {}),
+    )
+
+
+def geometry_dir(model_path: Path) -> Path:
+    """Where the model's mesh files are: a ``Geometry`` folder beside the model (the model
+    file may be a link into a models folder), else the model's folder."""
+    for base in (Path(model_path).absolute().parent, Path(model_path).resolve().parent):
+        if (base / "Geometry").is_dir():
+            return base / "Geometry"
+    return Path(model_path).resolve().parent
 
 
 def _selected(requested: Sequence[str] | None, available: Sequence[str]) -> set[str]:
