@@ -132,7 +132,8 @@ class Operation:
     clear_ids
         Conflict ids removed (``clear_conflicts`` only).
     undo_of, redo_of
-        Id of the operation this one undoes or redoes, if any.
+        For an undo, the id of the operation undone; for a redo, the id of the undo it
+        reverts. ``None`` for ordinary edits.
     """
 
     seq: int

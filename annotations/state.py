@@ -123,15 +123,18 @@ class SubjectState:
         """Names of trials with anything recorded, sorted."""
         return sorted(n for n, t in self.trials.items() if not t.is_empty())
 
-    def review(self, name: str) -> TrialReview:
-        """Immutable snapshot of one trial (empty if unknown)."""
+    def review(self, name: str, *, flags: bool = True) -> TrialReview:
+        """Immutable snapshot of one trial (empty if unknown); without flag runs if not
+        ``flags`` (cheaper when only activities and notes are needed)."""
         t = self.trials.get(name) or TrialState()
         return TrialReview(
             trial=name,
             reviewed=t.reviewed[0],
             reviewed_provenance=t.reviewed[1],
-            unmeasured_force=tuple(flag_runs(t.flags[UNMEASURED_FORCE], UNMEASURED_FORCE)),
-            excluded=tuple(flag_runs(t.flags[EXCLUDED], EXCLUDED)),
+            unmeasured_force=tuple(flag_runs(t.flags[UNMEASURED_FORCE], UNMEASURED_FORCE))
+            if flags
+            else (),
+            excluded=tuple(flag_runs(t.flags[EXCLUDED], EXCLUDED)) if flags else (),
             activities=tuple(sorted(t.activities.values(), key=lambda a: (a.start, a.stop, a.id))),
             notes=tuple(sorted(t.notes.values(), key=_note_order)),
             n_frames=t.info[0],

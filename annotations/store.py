@@ -246,8 +246,9 @@ class AnnotationStore:
 
     def _load_locked(self) -> None:
         p = self.paths
-        for stale in p.main.parent.glob(f"{p.main.name}.tmp-*"):
-            stale.unlink(missing_ok=True)
+        for name in (p.main.name, p.journal.name):  # left by a writer killed mid-rewrite
+            for stale in p.main.parent.glob(f"{name}.tmp-*"):
+                stale.unlink(missing_ok=True)
         main = None
         if p.main.exists():
             main = decode_subject_file(p.main.read_bytes(), p.main)
@@ -485,11 +486,13 @@ class AnnotationStore:
 
     def activities(self, trial: str) -> list[ActivityRange]:
         """Activity ranges of a trial, sorted by ``(start, stop, id)``."""
-        return list(self.review(trial).activities)
+        with self._tlock:
+            return list(self._state.review(trial, flags=False).activities)
 
     def notes(self, trial: str) -> list[Note]:
         """Notes of a trial (whole-trial notes first, then by start frame)."""
-        return list(self.review(trial).notes)
+        with self._tlock:
+            return list(self._state.review(trial, flags=False).notes)
 
     def is_reviewed(self, trial: str) -> bool:
         """Whether the trial is marked as reviewed."""

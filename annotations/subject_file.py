@@ -57,6 +57,7 @@ class SubjectFile:
     journal_lines: int
 
 
+_FOOT_JSON = {None: "null", **{f: f'"{f}"' for f in FEET}}
 _TRIAL_FIELDS = (
     "reviewed",
     "n_frames",
@@ -95,14 +96,14 @@ def encode_subject_file(
     for name in state.trial_names():
         t = state.trials[name]
         runs_uf = [
-            dumps([r.start, r.stop, r.foot, ref(r.provenance)])
+            f"[{r.start}, {r.stop}, {_FOOT_JSON[r.foot]}, {ref(r.provenance)}]"
             for r in flag_runs(t.flags[UNMEASURED_FORCE], UNMEASURED_FORCE)
         ]
         runs_ex = [
-            dumps([r.start, r.stop, ref(r.provenance)])
+            f"[{r.start}, {r.stop}, {ref(r.provenance)}]"
             for r in flag_runs(t.flags[EXCLUDED], EXCLUDED)
         ]
-        review = state.review(name)
+        review = state.review(name, flags=False)
         acts = [
             dumps(
                 {
