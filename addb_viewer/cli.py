@@ -1,13 +1,14 @@
 """The ``addb`` command line.
 
-Each subcommand lives in its own small function; heavy modules (viser, rerun, the
-solver) are imported inside it so that ``addb --help`` and ``addb info`` start fast.
-Exit codes: 0 success, 1 bad input (a clear message on stderr), 2 usage error.
+Each subcommand lives in its own module of :mod:`addb_viewer.commands` (listed in
+:data:`COMMANDS`); heavy modules are imported inside the handlers so that ``addb --help``
+starts fast. Exit codes: 0 success, 1 bad input (a clear message on stderr), 2 usage.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Callable, Sequence
 
@@ -15,33 +16,11 @@ from solver.errors import AddbError
 
 Handler = Callable[[argparse.Namespace], int]
 
-
-def _cmd_info(args: argparse.Namespace) -> int:
-    from solver.io.summary import format_summary, summarize
-
-    path = args.path
-    if path is None:
-        from addb_viewer.demo import DEMO_SUBJECT
-
-        path = DEMO_SUBJECT
-    print(format_summary(summarize(path)))
-    return 0
-
-
-def _cmd_kinematics(args: argparse.Namespace) -> int:
-    from addb_viewer.progress import ProgressBar, table
-    from solver.pipeline import ProcessOptions, process_kinematics
-
-    opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
-    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar())
-    rows = [
-        [t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", f"{t.marker_max * 100:.2f}", t.worst_marker]
-        for t in result.kinematics.trials
-        if not opts.trials or t.name in opts.trials
-    ]
-    print(table(rows, ["trial", "frames", "marker RMS (cm)", "max (cm)", "worst marker"]))
-    print(f"wrote {args.out}")
-    return 0
+#: Subcommand modules, in the order ``addb --help`` lists them.
+COMMANDS = (
+    "addb_viewer.commands.info",
+    "addb_viewer.commands.kinematics",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,16 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    p = sub.add_parser(
-        "info", help="summarize a TRC/MOT/STO/C3D/.osim file or an AddBiomechanics subject folder"
-    )
-    p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
-    p.set_defaults(handler=_cmd_info)
-    p = sub.add_parser("kinematics", help="scale the model and solve inverse kinematics for a subject")
-    p.add_argument("subject", help="AddBiomechanics subject folder")
-    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
-    p.add_argument("--trial", action="append", help="write only this trial (repeatable); all trials are used for scaling")
-    p.set_defaults(handler=_cmd_kinematics)
+    for name in COMMANDS:
+        importlib.import_module(name).register(sub)
     return parser
 
 

@@ -1,0 +1,23 @@
+"""``addb info [PATH]``: summarize a lab file, a model or a subject folder."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def run(args: argparse.Namespace) -> int:
+    from solver.io.summary import format_summary, summarize
+
+    path = args.path
+    if path is None:
+        from addb_viewer.demo import DEMO_SUBJECT
+
+        path = DEMO_SUBJECT
+    print(format_summary(summarize(path)))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim file or an AddBiomechanics subject folder")
+    p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
+    p.set_defaults(handler=run)

@@ -1,0 +1,29 @@
+"""``addb kinematics SUBJECT_DIR --out OUT``: scaling and inverse kinematics only."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def run(args: argparse.Namespace) -> int:
+    from addb_viewer.progress import ProgressBar, table
+    from solver.pipeline import ProcessOptions, process_kinematics
+
+    opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
+    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar())
+    rows = [
+        [t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", f"{t.marker_max * 100:.2f}", t.worst_marker]
+        for t in result.kinematics.trials
+        if not opts.trials or t.name in opts.trials
+    ]
+    print(table(rows, ["trial", "frames", "marker RMS (cm)", "max (cm)", "worst marker"]))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("kinematics", help="scale the model and solve inverse kinematics for a subject")
+    p.add_argument("subject", help="AddBiomechanics subject folder")
+    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    p.add_argument("--trial", action="append", help="write only this trial (repeatable); all trials are used for scaling")
+    p.set_defaults(handler=run)
