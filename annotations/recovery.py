@@ -167,7 +167,10 @@ def _consistent(paths: StorePaths, main: SubjectFile, journal: _Journal) -> bool
     """Whether a store would open these files (same checks as ``AnnotationStore.open``)."""
     if main.journal_id != journal.journal_id or main.last_seq < journal.base_seq:
         return False
-    if not journal.header_size <= main.journal_offset <= journal.size:
+    off = main.journal_offset
+    if not journal.header_size <= off <= journal.size:
+        return False
+    if off > journal.header_size and journal.data[off - journal.header_size - 1] != ord("\n"):
         return False
     try:
         scan(

@@ -23,37 +23,34 @@ seen the earlier one (it had not synchronised since), the loser is listed by
 
 from __future__ import annotations
 
-import fcntl
 import os
-import threading
 import uuid
-import warnings
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
-from datetime import datetime
-from pathlib import Path
-from typing import Any, Self
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from annotations.arguments import (
+    MAX_FRAME,
+    FramesLike,
+    check_foot,
+    check_kind,
+    check_source,
+    check_trial,
+    count,
+    frames_list,
+    span,
+)
+from annotations.engine import OPEN_TOKEN, Clock, JournaledStore
 from annotations.errors import AnnotationError, AnnotationFileError
 from annotations.journal import (
     StorePaths,
-    append_durably,
-    atomic_write,
-    create_journal,
-    read_header,
-    scan,
 )
 from annotations.masks import mask_to_ranges
 from annotations.model import (
     ACTIVITY_LABELS,
     EXCLUDED,
-    FEET,
-    FLAG_KINDS,
-    SOURCES,
     UNMEASURED_FORCE,
     ActivityRange,
     Conflict,
@@ -63,50 +60,17 @@ from annotations.model import (
     Note,
     Provenance,
     TrialReview,
-    format_timestamp,
     utc_now,
 )
 from annotations.recovery import RecoveryReport
-from annotations.schema import Key, Operation, encode_line, operation_to_json
+from annotations.schema import Key
 from annotations.state import (
-    SubjectState,
-    detect_overrides,
     flag_mask,
     flag_runs,
-    skipped_conflicts,
-    undo_puts,
 )
-from annotations.subject_file import SubjectFile, decode_subject_file, encode_subject_file
-
-MAX_FRAME = 50_000_000
-"""Largest accepted frame index + 1 (about 5.8 days at 100 Hz): catches unit mistakes."""
-
-Clock = Callable[[], datetime]
-FramesLike = int | range | Iterable[int] | NDArray[np.integer]
 
 
-@dataclass(slots=True)
-class _History:
-    """One undo (or redo) step: the values an operation wrote and the ones it replaced."""
-
-    op: str
-    trial: str | None
-    kind: str | None
-    applied: dict[Key, Any]
-    replaced: dict[Key, Any]
-    item_id: str | None
-    edit_id: str
-
-
-def _stat_key(path: Path) -> tuple[int, int, int] | None:
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        return None
-    return (st.st_ino, st.st_size, st.st_mtime_ns)
-
-
-class AnnotationStore:
+class AnnotationStore(JournaledStore):
     """Review record of one subject: flags, activity ranges, notes, reviewed marks.
 
     Open with :meth:`open`; every edit method returns an :class:`~annotations.model.Edit`
@@ -118,39 +82,6 @@ class AnnotationStore:
     ``[start, stop)``; a ``frames`` argument is an ``int``, a ``range`` or an iterable of
     ints (use :meth:`set_mask` for boolean masks).
     """
-
-    def __init__(
-        self,
-        paths: StorePaths,
-        *,
-        reviewer: str,
-        clock: Clock,
-        compact_every: int,
-        max_undo: int,
-        _token: object = None,
-    ) -> None:
-        if _token is not _OPEN_TOKEN:
-            raise AnnotationError("use AnnotationStore.open(path, reviewer=...) to open a store")
-        self.paths = paths
-        self._reviewer = reviewer
-        self._clock = clock
-        self._compact_every = compact_every
-        self._max_undo = max_undo
-        self._session = uuid.uuid4().hex
-        self._tlock = threading.RLock()
-        self._state = SubjectState()
-        self._seq = 0
-        self._offset = 0
-        self._lines = 0
-        self._journal_id = ""
-        self._jfd = -1
-        self._lock_fd = -1
-        self._main_stat: tuple[int, int, int] | None = None
-        self._since_compact = 0
-        self._undo: list[_History] = []
-        self._redo: list[_History] = []
-        self._closed = False
-        self._problems: list[str] = []
 
     # =================================================================== open / close
     @classmethod
@@ -208,7 +139,7 @@ class AnnotationStore:
             clock=clock or utc_now,
             compact_every=compact_every,
             max_undo=max_undo,
-            _token=_OPEN_TOKEN,
+            _token=OPEN_TOKEN,
         )
         store._open_files()
         return store
@@ -228,156 +159,6 @@ class AnnotationStore:
 
         return recover(path, skip_damaged_lines=skip_damaged_lines, clock=clock)
 
-    def _open_files(self) -> None:
-        p = self.paths
-        try:
-            self._lock_fd = os.open(p.lock, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise AnnotationFileError(
-                f"cannot create the lock file ({exc.strerror}); is the folder writable?",
-                path=p.lock,
-            ) from exc
-        try:
-            with self._locked(fcntl.LOCK_EX):
-                self._load_locked()
-        except BaseException:
-            self._release_fds()
-            raise
-
-    def _load_locked(self) -> None:
-        p = self.paths
-        for name in (p.main.name, p.journal.name):  # left by a writer killed mid-rewrite
-            for stale in p.main.parent.glob(f"{name}.tmp-*"):
-                stale.unlink(missing_ok=True)
-        main = None
-        if p.main.exists():
-            main = decode_subject_file(p.main.read_bytes(), p.main)
-            self._main_stat = _stat_key(p.main)
-        new_journal = not p.journal.exists()
-        if new_journal:
-            base = 0 if main is None else main.last_seq
-            if main is not None:
-                warnings.warn(
-                    f"{p.journal} is missing; starting a new journal after operation {base}",
-                    stacklevel=4,
-                )
-            create_journal(
-                p.journal,
-                journal_id=uuid.uuid4().hex,
-                base_seq=base,
-                created=self._now(),
-                tmp_tag=self._session,
-            )
-        self._jfd = os.open(p.journal, os.O_RDWR | os.O_APPEND)
-        journal_id, base_seq, header_size = read_header(self._jfd, p.journal)
-        self._journal_id = journal_id
-        if main is None:
-            self._start_from_header(base_seq, header_size)
-        elif new_journal:
-            self._state = main.state
-            self._seq, self._offset, self._lines = main.last_seq, header_size, 1
-        else:
-            self._start_from_main(main, base_seq)
-        self._refresh_locked(repair=True)
-        if main is None or new_journal or self._since_compact >= self._compact_every:
-            self._compact_locked()
-
-    def _start_from_header(self, base_seq: int, header_size: int) -> None:
-        if base_seq != 0:
-            raise AnnotationFileError(
-                f"the subject file {self.paths.main.name} is missing but the journal only holds "
-                f"operations after {base_seq}; restore the subject file from a backup",
-                path=self.paths.journal,
-            )
-        self._seq, self._offset, self._lines = 0, header_size, 1
-
-    def _start_from_main(self, main: SubjectFile, base_seq: int) -> None:
-        p = self.paths
-        if main.journal_id != self._journal_id:
-            raise AnnotationFileError(
-                f"belongs to journal {main.journal_id} but {p.journal.name} is journal "
-                f"{self._journal_id} (a file was replaced or copied); run "
-                "AnnotationStore.recover() to rebuild from the journal",
-                path=p.main,
-            )
-        size = os.fstat(self._jfd).st_size
-        if main.journal_offset > size or main.last_seq < base_seq:
-            raise AnnotationFileError(
-                f"the journal is shorter than {p.main.name} records (offset {main.journal_offset}, "
-                f"size {size}); it was truncated or replaced; run AnnotationStore.recover()",
-                path=p.journal,
-            )
-        self._state = main.state
-        self._seq, self._offset, self._lines = (
-            main.last_seq,
-            main.journal_offset,
-            main.journal_lines,
-        )
-
-    def close(self) -> None:
-        """Compact (if anything changed) and release the files. Idempotent.
-
-        Raises
-        ------
-        AnnotationFileError
-            If the subject file on disk was damaged meanwhile (it is not overwritten; the
-            edits are safe in the journal).
-        """
-        with self._tlock:
-            if self._closed:
-                return
-            try:
-                with self._locked(fcntl.LOCK_EX):
-                    self._refresh_locked(repair=True)
-                    if self._since_compact or _stat_key(self.paths.main) != self._main_stat:
-                        self._compact_locked()
-            finally:
-                self._closed = True
-                self._release_fds()
-
-    def _release_fds(self) -> None:
-        for fd in (self._jfd, self._lock_fd):
-            if fd >= 0:
-                os.close(fd)
-        self._jfd = self._lock_fd = -1
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    # =================================================================== properties
-    @property
-    def reviewer(self) -> str:
-        """Reviewer name recorded with every edit of this store."""
-        return self._reviewer
-
-    @property
-    def session(self) -> str:
-        """Id of this store session (written with each operation)."""
-        return self._session
-
-    @property
-    def seq(self) -> int:
-        """Sequence number of the last operation this store has seen."""
-        return self._seq
-
-    @property
-    def can_undo(self) -> bool:
-        """Whether :meth:`undo` has a step to undo."""
-        return bool(self._undo)
-
-    @property
-    def can_redo(self) -> bool:
-        """Whether :meth:`redo` has a step to redo."""
-        return bool(self._redo)
-
-    def problems(self) -> list[str]:
-        """Problems met by automatic compaction (the edits themselves were saved)."""
-        with self._tlock:
-            return list(self._problems)
-
     # =================================================================== reading
     def trials(self) -> list[str]:
         """Names of the trials with anything recorded, sorted."""
@@ -396,7 +177,7 @@ class AnnotationStore:
 
     def flag(self, trial: str, frame: int, kind: str = UNMEASURED_FORCE) -> FrameFlag | None:
         """The flag of one frame, or ``None`` if the frame is not flagged."""
-        kind = _check_kind(kind)
+        kind = check_kind(kind)
         with self._tlock:
             t = self._state.trials.get(trial)
             entry = None if t is None else t.flags[kind].get(int(frame))
@@ -404,7 +185,7 @@ class AnnotationStore:
 
     def flag_runs(self, trial: str, kind: str = UNMEASURED_FORCE) -> list[FlagRun]:
         """Flagged frames as runs with equal foot and provenance, sorted."""
-        kind = _check_kind(kind)
+        kind = check_kind(kind)
         with self._tlock:
             t = self._state.trials.get(trial)
             return [] if t is None else flag_runs(t.flags[kind], kind)
@@ -423,8 +204,8 @@ class AnnotationStore:
         foot
             Only frames flagged for this foot (``"both"`` counts for each); ``None``: all.
         """
-        kind = _check_kind(kind)
-        foot = _check_foot(foot)
+        kind = check_kind(kind)
+        foot = check_foot(foot)
         with self._tlock:
             t = self._state.trials.get(trial)
             if t is None or not t.flags[kind]:
@@ -465,8 +246,8 @@ class AnnotationStore:
             If ``n_frames`` is unknown, or a frame at or past ``n_frames`` is flagged
             (the annotations do not belong to a trial of this length).
         """
-        kind = _check_kind(kind)
-        foot = _check_foot(foot)
+        kind = check_kind(kind)
+        foot = check_foot(foot)
         with self._tlock:
             t = self._state.trials.get(trial)
             if n_frames is None:
@@ -475,7 +256,7 @@ class AnnotationStore:
                     raise AnnotationError(
                         "n_frames not given and not recorded for this trial", where=trial
                     )
-            n = _count(n_frames, "n_frames")
+            n = count(n_frames, "n_frames")
             flags = {} if t is None else t.flags[kind]
             if flags and max(flags) >= n:
                 raise AnnotationError(
@@ -504,22 +285,6 @@ class AnnotationStore:
         """Conflicts recorded so far (by every writer), oldest first."""
         with self._tlock:
             return list(self._state.conflicts.values())
-
-    def refresh(self) -> bool:
-        """Read the edits other writers saved since this store last looked.
-
-        Returns
-        -------
-        bool
-            True if anything new was read. Call it periodically (e.g. every second from the
-            app) so that what the user sees includes other tabs' edits.
-        """
-        with self._tlock:
-            self._check_open()
-            if os.fstat(self._jfd).st_size == self._offset:
-                return False
-            with self._locked(fcntl.LOCK_SH):
-                return bool(self._refresh_locked(repair=False))
 
     # =================================================================== editing: flags
     def set_unmeasured(
@@ -552,7 +317,7 @@ class AnnotationStore:
         Edit
             Receipt; the edit is durable.
         """
-        foot = _check_foot(foot)
+        foot = check_foot(foot)
         if foot is not None and not value:
             raise AnnotationError("foot is only given when flagging (value=True)")
         return self._flags_edit(
@@ -603,16 +368,16 @@ class AnnotationStore:
             If False, frames already flagged keep their flag (foot, author) where the mask
             is True; if True they are replaced.
         """
-        kind = _check_kind(kind)
-        foot = _check_foot(foot)
+        kind = check_kind(kind)
+        foot = check_foot(foot)
         if kind == EXCLUDED and foot is not None:
             raise AnnotationError("excluded frames have no foot")
         arr = np.asarray(mask)
         if arr.ndim != 1 or (arr.size and arr.dtype != np.bool_):
             raise AnnotationError(f"mask must be a (T,) bool array, got {arr.dtype} {arr.shape}")
-        start = _count(start_frame, "start_frame")
+        start = count(start_frame, "start_frame")
         self._check_frame_bound(trial, start + arr.size)
-        source = _check_source(source)
+        source = check_source(source)
 
         def build(prov: Provenance) -> dict[Key, Any]:
             flags = self._state.trial(trial).flags[kind]
@@ -639,9 +404,9 @@ class AnnotationStore:
         foot: str | None,
         source: str,
     ) -> Edit:
-        source = _check_source(source)
-        _check_trial(trial)
-        frame_list = _frames(frames)
+        source = check_source(source)
+        check_trial(trial)
+        frame_list = frames_list(frames)
         self._check_frame_bound(trial, max(frame_list) + 1)
 
         def build(prov: Provenance) -> dict[Key, Any]:
@@ -655,8 +420,8 @@ class AnnotationStore:
     # =================================================================== editing: other
     def set_reviewed(self, trial: str, reviewed: bool = True, *, source: str = "manual") -> Edit:
         """Mark the trial as reviewed (or not)."""
-        source = _check_source(source)
-        _check_trial(trial)
+        source = check_source(source)
+        check_trial(trial)
         return self._commit(
             "reviewed", trial, source, lambda prov: {("reviewed", trial): (bool(reviewed), prov)}
         )
@@ -671,8 +436,8 @@ class AnnotationStore:
         AnnotationError
             If frames at or past ``n_frames`` are already annotated.
         """
-        _check_trial(trial)
-        n = None if n_frames is None else _count(n_frames, "n_frames")
+        check_trial(trial)
+        n = None if n_frames is None else count(n_frames, "n_frames")
         if n == 0:
             raise AnnotationError("n_frames must be >= 1")
         rate = None if rate_hz is None else float(rate_hz)
@@ -769,9 +534,9 @@ class AnnotationStore:
         note: str,
         source: str,
     ) -> Edit:
-        _check_trial(trial)
-        source = _check_source(source)
-        s, e = _span(start, stop)
+        check_trial(trial)
+        source = check_source(source)
+        s, e = span(start, stop)
         self._check_frame_bound(trial, e)
         if label not in ACTIVITY_LABELS:
             raise AnnotationError(
@@ -826,15 +591,15 @@ class AnnotationStore:
         stop: int | None,
         source: str,
     ) -> Edit:
-        _check_trial(trial)
-        source = _check_source(source)
+        check_trial(trial)
+        source = check_source(source)
         if not isinstance(text, str):
             raise AnnotationError(f"note text must be text, got {type(text).__name__}")
         if (start is None) != (stop is None):
             raise AnnotationError("give both start and stop, or neither (note on the whole trial)")
         s = e = None
         if start is not None:
-            s, e = _span(start, stop)
+            s, e = span(start, stop)
             self._check_frame_bound(trial, e)
 
         def build(prov: Provenance) -> dict[Key, Any]:
@@ -871,211 +636,6 @@ class AnnotationStore:
         """Redo the last undone edit; ``None`` if nothing to redo."""
         return self._step(self._redo, "redo")
 
-    def _step(self, stack: list[_History], what: str) -> Edit | None:
-        with self._tlock:
-            self._check_open()
-            if not stack:
-                return None
-            h = stack[-1]
-            skipped: dict[Key, Any] = {}
-
-            def build(prov: Provenance) -> dict[Key, Any]:
-                restore, skip = undo_puts(self._state, h.applied, h.replaced)
-                skipped.update(skip)
-                return restore
-
-            return self._commit(
-                h.op,
-                h.trial,
-                "manual",
-                build,
-                kind=h.kind,
-                item_id=h.item_id,
-                history=what,
-                skipped=skipped,
-                reverts=h.edit_id,
-            )
-
-    # =================================================================== machinery
-    def _commit(
-        self,
-        op_name: str,
-        trial: str | None,
-        source: str,
-        build: Callable[[Provenance], dict[Key, Any]],
-        *,
-        kind: str | None = None,
-        item_id: str | None = None,
-        history: str = "edit",
-        skipped: dict[Key, Any] | None = None,
-        clear_ids: tuple[str, ...] = (),
-        reverts: str | None = None,
-    ) -> Edit:
-        with self._tlock:
-            self._check_open()
-            with self._locked(fcntl.LOCK_EX):
-                window = self._refresh_locked(repair=True)
-                prov = Provenance(self._reviewer, self._now(), source)
-                puts = build(prov)
-                edit_id = uuid.uuid4().hex
-                conflicts = detect_overrides(
-                    puts, window, session=self._session, edit_id=edit_id, provenance=prov
-                )
-                if skipped:
-                    conflicts += skipped_conflicts(
-                        skipped, edit_id=edit_id, provenance=prov, reason=f"{history}_skipped"
-                    )
-                name = op_name if puts or op_name in ("flags", "clear_conflicts") else "none"
-                prior = {k: self._state.get(k) for k in puts}
-                op = Operation(
-                    seq=self._seq + 1,
-                    id=edit_id,
-                    session=self._session,
-                    op=name,
-                    trial=trial,
-                    provenance=prov,
-                    puts=puts,
-                    conflicts=tuple(conflicts),
-                    clear_ids=clear_ids,
-                    undo_of=reverts if history == "undo" else None,
-                    redo_of=reverts if history == "redo" else None,
-                    kind=kind if name == "flags" else None,
-                )
-                line = encode_line(operation_to_json(op))
-                append_durably(self._jfd, line, valid_size=self._offset, path=self.paths.journal)
-                self._seq += 1
-                self._offset += len(line)
-                self._lines += 1
-                self._state.apply(op)
-                self._since_compact += 1
-                self._record_history(
-                    history, _History(op_name, trial, kind, puts, prior, item_id, edit_id)
-                )
-                if self._since_compact >= self._compact_every:
-                    self._compact_quietly()
-            return Edit(edit_id, op.seq, name, trial, prov, item_id, len(puts), tuple(conflicts))
-
-    def _record_history(self, history: str, step: _History) -> None:
-        if step.trial is None:
-            return
-        if history == "edit":
-            if step.applied:
-                self._undo.append(step)
-                self._redo.clear()
-        elif history == "undo":
-            self._undo.pop()
-            self._redo.append(step)
-        else:
-            self._redo.pop()
-            self._undo.append(step)
-        if len(self._undo) > self._max_undo:
-            del self._undo[: len(self._undo) - self._max_undo]
-
-    def _refresh_locked(self, *, repair: bool) -> list[Operation]:
-        """Apply operations appended by others since our offset (lock held)."""
-        if os.stat(self.paths.journal).st_ino != os.fstat(self._jfd).st_ino:
-            raise AnnotationFileError(
-                "the journal was replaced by another program while this store was open; "
-                "close and reopen the store",
-                path=self.paths.journal,
-            )
-        size = os.fstat(self._jfd).st_size
-        if size < self._offset:
-            raise AnnotationFileError(
-                f"the journal shrank below the part already read ({size} < {self._offset} bytes)",
-                path=self.paths.journal,
-            )
-        if size == self._offset:
-            return []
-        data = os.pread(self._jfd, size - self._offset, self._offset)
-        result = scan(
-            data, path=self.paths.journal, first_line=self._lines + 1, next_seq=self._seq + 1
-        )
-        for op in result.ops:
-            self._state.apply(op)
-        if result.ops:
-            self._seq = result.ops[-1].seq
-            self._since_compact += len(result.ops)
-        self._offset += result.consumed
-        self._lines += result.lines
-        if result.tail and repair:
-            os.ftruncate(self._jfd, self._offset)  # an interrupted, never acknowledged write
-            os.fsync(self._jfd)
-        return result.ops
-
-    def compact(self) -> None:
-        """Rewrite the subject file now (atomically) to include every journal operation.
-
-        Raises
-        ------
-        AnnotationFileError
-            If the subject file on disk is damaged (it is left as it is).
-        """
-        with self._tlock:
-            self._check_open()
-            with self._locked(fcntl.LOCK_EX):
-                self._refresh_locked(repair=True)
-                self._compact_locked()
-
-    def _compact_quietly(self) -> None:
-        try:
-            self._compact_locked()
-        except AnnotationFileError as exc:
-            msg = str(exc)
-            if msg not in self._problems:
-                self._problems.append(msg)
-            warnings.warn(msg, stacklevel=4)
-
-    def _compact_locked(self) -> None:
-        p = self.paths
-        current = _stat_key(p.main)
-        if current is not None and current != self._main_stat:
-            # Changed by someone else: overwrite only a valid file of our journal.
-            try:
-                other = decode_subject_file(p.main.read_bytes(), p.main)
-            except AnnotationFileError as exc:
-                raise AnnotationFileError(
-                    f"{exc.message}; the file is damaged and was not overwritten; every edit is "
-                    f"in {p.journal.name}: close the stores and run AnnotationStore.recover()",
-                    path=p.main,
-                    where=exc.where,
-                ) from None
-            if other.journal_id != self._journal_id or other.last_seq > self._seq:
-                raise AnnotationFileError(
-                    "the subject file now belongs to another journal or is ahead of it; "
-                    "not overwritten",
-                    path=p.main,
-                )
-        data = encode_subject_file(
-            self._state,
-            last_seq=self._seq,
-            journal_id=self._journal_id,
-            journal_offset=self._offset,
-            journal_lines=self._lines,
-            saved_at=self._now(),
-        )
-        atomic_write(p.main, data, tmp_tag=self._session)
-        self._main_stat = _stat_key(p.main)
-        self._since_compact = 0
-
-    @contextmanager
-    def _locked(self, how: int) -> Iterator[None]:
-        fcntl.flock(self._lock_fd, how)
-        try:
-            yield
-        finally:
-            fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise AnnotationError("the store is closed", path=self.paths.main)
-
-    def _now(self) -> str:
-        try:
-            return format_timestamp(self._clock())
-        except ValueError as exc:
-            raise AnnotationError(f"the clock gave an invalid time: {exc}") from None
-
     def _check_frame_bound(self, trial: str, stop: int) -> None:
         with self._tlock:
             t = self._state.trials.get(trial)
@@ -1085,76 +645,3 @@ class AnnotationStore:
             raise AnnotationError(
                 f"frame {stop - 1} is past the end of the trial ({limit} frames)", where=trial
             )
-
-
-_OPEN_TOKEN = object()
-
-
-# =================================================================== argument checks
-def _check_kind(kind: str) -> str:
-    if kind not in FLAG_KINDS:
-        raise AnnotationError(f"unknown flag kind {kind!r}; expected one of {FLAG_KINDS}")
-    return kind
-
-
-def _check_foot(foot: str | None) -> str | None:
-    if foot is not None and foot not in FEET:
-        raise AnnotationError(f"unknown foot {foot!r}; expected one of {FEET} or None")
-    return foot
-
-
-def _check_source(source: str) -> str:
-    if source not in SOURCES:
-        raise AnnotationError(f"unknown source {source!r}; expected one of {SOURCES}")
-    return source
-
-
-def _check_trial(trial: str) -> None:
-    if (
-        not isinstance(trial, str)
-        or not trial
-        or len(trial) > 200
-        or any(ord(c) < 32 for c in trial)
-    ):
-        raise AnnotationError(f"trial must be a non-empty name, got {trial!r}")
-
-
-def _count(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-        raise AnnotationError(f"{name} must be a non-negative integer, got {value!r}")
-    return int(value)
-
-
-def _span(start: Any, stop: Any) -> tuple[int, int]:
-    s, e = _count(start, "start"), _count(stop, "stop")
-    if e <= s:
-        raise AnnotationError(f"empty or reversed frame range [{s}, {e})")
-    return s, e
-
-
-def _frames(frames: FramesLike) -> list[int]:
-    """Frame indices from an int, a range or an iterable of ints (not booleans)."""
-    if isinstance(frames, bool | np.bool_):
-        raise AnnotationError("frames must be frame indices, got a boolean")
-    if isinstance(frames, int | np.integer):
-        out = [int(frames)]
-    elif isinstance(frames, range):
-        if frames.step != 1:
-            raise AnnotationError("a frame range must have step 1")
-        if frames.stop > MAX_FRAME:
-            raise AnnotationError(f"frame range {frames} is beyond {MAX_FRAME} frames")
-        out = list(frames)
-    else:
-        arr = np.asarray(list(frames) if not isinstance(frames, np.ndarray) else frames)
-        if arr.dtype == np.bool_:
-            raise AnnotationError("frames is a boolean mask; use set_mask() for masks")
-        if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
-            raise AnnotationError(
-                f"frames must be integer frame indices, got {arr.dtype} {arr.shape}"
-            )
-        out = sorted(set(arr.tolist()))
-    if not out:
-        raise AnnotationError("no frames given")
-    if min(out) < 0:
-        raise AnnotationError(f"frame indices must be >= 0, got {min(out)}")
-    return out

@@ -278,3 +278,19 @@ def test_missing_journal_restarts_one_after_the_file(subject: Path, clock) -> No
     again = AnnotationStore.open(subject, reviewer="bob")
     assert again.ranges("walk", "excluded") == [(100, 104), (130, 131)]
     again.close()
+
+
+def test_subject_file_pointing_into_the_middle_of_a_journal_line_is_refused(
+    subject: Path, clock
+) -> None:
+    expected = _make_subject(subject, clock)
+    main = subject / "annotations.json"
+    _mutate(main, lambda d: d["journal"].update(offset=d["journal"]["offset"] - 7))
+    before = _files(subject)
+    with pytest.raises(AnnotationFileError, match="not the start of a line"):
+        AnnotationStore.open(subject, reviewer="bob")
+    assert _files(subject) == before
+    assert AnnotationStore.recover(subject).action == "rebuilt_from_journal"
+    store = AnnotationStore.open(subject, reviewer="bob")
+    assert store.snapshot() == expected
+    store.close()
