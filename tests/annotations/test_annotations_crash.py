@@ -28,20 +28,20 @@ TRIAL = "walk"
 def _run_and_kill(subject: Path, seed: int, first: int, delay_s: float) -> list[int]:
     """Start the child, SIGKILL it after ``delay_s``; return the acknowledged op numbers."""
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
-    child = subprocess.Popen(
+    lines: list[bytes] = []
+    with subprocess.Popen(
         [sys.executable, str(WORKER), "crash", str(subject), TRIAL, str(seed), str(first), "17"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         env=env,
-    )
-    lines: list[bytes] = []
-    reader = threading.Thread(target=lambda: lines.extend(child.stdout), daemon=True)
-    reader.start()
-    time.sleep(delay_s)
-    child.send_signal(signal.SIGKILL)
-    child.wait(timeout=30)
-    reader.join(timeout=30)
-    err = child.stderr.read().decode()
+    ) as child:
+        reader = threading.Thread(target=lambda: lines.extend(child.stdout), daemon=True)
+        reader.start()
+        time.sleep(delay_s)
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
+        reader.join(timeout=30)
+        err = child.stderr.read().decode()
     assert "Traceback" not in err, err
     return [int(x.split()[1]) for x in lines if x.startswith(b"ACK ")]
 
