@@ -1,0 +1,426 @@
+"""The dynamics fit: coordinates and body masses that trade marker error for root residuals.
+
+For each trial, over all frames t (Werling et al. 2023, the AddBiomechanics dynamics pass,
+solved here by Gauss-Newton on a banded system):
+
+    min_Q  sum_t sum_m |p_m(q_t) - y_tm|² / s_m²                              markers, every frame
+         + sum_{t observed} |F_res(t)|² / s_F² + |M_res(t)|² / s_M²            residuals, measured frames only
+         + sum_t |q_{t+1} - 2 q_t + q_{t-1}|² / (h² s_a)²                       smoothness
+
+where F_res = pdot - m g - F_ext and M_res = kdot_G - sum_i (r_i - c) x f_i - tau_i are the
+net force and the net moment about the centre of mass that the ground would have to add
+to the measured external wrenches (the root residual wrench), pdot and kdot_G the rates
+of linear and angular momentum (pinocchio's centroidal dynamics and their analytic
+derivatives), velocities and accelerations the linear operators of
+:mod:`solver.dynamics.spline` applied to Q. Frames with unmeasured force keep their marker
+and smoothness terms only: the centre of mass accelerates freely there, and the motion
+stays one continuous trajectory through them.
+
+The normal equations are block-banded in time (the derivative operators are truncated to
+``band`` frames for the Jacobian; residuals and costs use the full operators), solved with
+a banded Cholesky (scipy ``solveh_banded``) with Levenberg-Marquardt damping and an exact
+line search on the cost. Between rounds of coordinate steps, the body mass factors solve a
+linear least-squares problem (the root generalized forces are linear in the inertial
+parameters: pinocchio's joint torque regressor) with a prior toward the scaled model's mass
+distribution.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+from scipy.linalg import LinAlgError, solveh_banded
+
+from solver.dynamics.spline import derivative_operators
+from solver.kinematics.ik import solver_bounds
+from solver.model.skeleton import Skeleton
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Weights (as standard deviations) and iteration limits of the dynamics fit.
+
+    Attributes
+    ----------
+    marker_sigma
+        s_m, m per marker coordinate.
+    force_sigma
+        s_F, N per residual force component.
+    moment_sigma
+        s_M, N·m per residual moment component.
+    accel_sigma
+        s_a, rad/s² (m/s²) per coordinate: a weak smoothness prior.
+    mass_sigma
+        Prior deviation of each body's mass factor from 1 (relative).
+    rounds
+        Alternations of coordinate steps and mass solves.
+    iterations
+        Gauss-Newton iterations per round.
+    band
+        Frames kept on each side in the Jacobian of the derivative operators.
+    tolerance
+        Stop a round when the relative cost decrease is below this.
+    derivative
+        ``"spline"`` (OpenSim-consistent) or ``"central"``.
+    """
+
+    marker_sigma: float = 0.01
+    force_sigma: float = 2.0
+    moment_sigma: float = 2.0
+    accel_sigma: float = 500.0
+    mass_sigma: float = 0.25
+    rounds: int = 4
+    iterations: int = 12
+    band: int = 2
+    tolerance: float = 1e-4
+    derivative: str = "spline"
+
+
+@dataclass(frozen=True)
+class FitTrialInput:
+    """One trial for the fit, on its common frames.
+
+    Attributes
+    ----------
+    q
+        ``(T, n)`` starting coordinates.
+    markers
+        ``(M,)`` model marker indices of the observations.
+    observed_markers
+        ``(T, M, 3)`` observed positions, NaN where missing.
+    observed
+        ``(T,)`` frames whose external force is measured (residual terms apply).
+    force
+        ``(T, 3)`` total external force, N, ground frame.
+    moment
+        ``(T, 3)`` total external moment about the ground origin, N·m.
+    wrenches
+        Per loaded body: (body name, ``(T, 6)`` [force, moment about the origin]) for the
+        inverse-dynamics based mass solve.
+    dt
+        Frame interval, s.
+    """
+
+    q: FloatArray
+    markers: IntArray
+    observed_markers: FloatArray
+    observed: NDArray[np.bool_]
+    force: FloatArray
+    moment: FloatArray
+    wrenches: list[tuple[str, FloatArray]] = field(default_factory=list)
+    dt: float = 0.01
+
+
+@dataclass(frozen=True)
+class FitOutput:
+    """Fitted coordinates per trial and the mass factor of every body."""
+
+    q: tuple[FloatArray, ...]
+    mass_factors: dict[str, float]
+    history: tuple[float, ...]
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+class _TrialProblem:
+    """Residuals and linearization of one trial for a fixed model."""
+
+    def __init__(self, sk: Skeleton, data: FitTrialInput, st: FitSettings) -> None:
+        self.sk, self.data, self.st = sk, data, st
+        self.t = data.q.shape[0]
+        self.free = np.flatnonzero(sk.is_independent & ~sk.locked)
+        self.nf = self.free.size
+        self.d1, self.d2 = derivative_operators(self.t, data.dt, st.derivative)
+        self.seen = np.isfinite(data.observed_markers).all(axis=2)
+        self.y = np.nan_to_num(data.observed_markers)
+        self.mass = sk.total_mass
+        self.g = np.asarray(sk.osim.gravity, dtype=float)
+        lo, hi = solver_bounds(sk)
+        # the filtered starting motion may overshoot a bound slightly: never pull it back
+        self.lo = np.minimum(lo, data.q.min(axis=0))
+        self.hi = np.maximum(hi, data.q.max(axis=0))
+        self.w_res = np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3)
+
+    # -------------------------------------------------------------- residuals
+    def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        qd, qdd = self.d1 @ q, self.d2 @ q
+        qp, vp, ap = self.sk.cmap.expand(q, qd, qdd)
+        return qd, qdd, qp, vp, ap
+
+    def momentum_rate(self, qp: FloatArray, vp: FloatArray, ap: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(T, 6) centroidal momentum rate [pdot, kdot_G] and (T, 3) centre of mass."""
+        model, data = self.sk.model, self.sk.data
+        hdot = np.empty((self.t, 6))
+        com = np.empty((self.t, 3))
+        for k in range(self.t):
+            hdot[k] = pin.computeCentroidalMomentumTimeVariation(model, data, qp[k], vp[k], ap[k]).vector
+            com[k] = data.com[0]
+        return hdot, com
+
+    def residual_wrench(self, hdot: FloatArray, com: FloatArray) -> FloatArray:
+        """(T, 6) root residual [force, moment about the centre of mass], ground frame."""
+        f = hdot[:, :3] - self.mass * self.g - self.data.force
+        m = hdot[:, 3:] - (self.data.moment - np.cross(com, self.data.force))
+        return np.concatenate([f, m], axis=1)
+
+    def cost(self, q: FloatArray) -> float:
+        """Total cost (see the module docstring)."""
+        st = self.st
+        _, qdd, qp, vp, ap = self.kinematics(q)
+        pos = self.sk.marker_positions(q, self.data.markers)
+        e = np.where(self.seen[..., None], pos - self.y, 0.0) / st.marker_sigma
+        total = float(np.sum(e**2))
+        if self.data.observed.any():
+            hdot, com = self.momentum_rate(qp, vp, ap)
+            r = self.residual_wrench(hdot, com)[self.data.observed] * self.w_res
+            total += float(np.sum(r**2))
+        smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
+        return total + float(np.sum(smooth**2))
+
+    # -------------------------------------------------------------- linearization
+    def normal_equations(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Banded (upper) normal matrix and gradient for a step on the free coordinates.
+
+        Returns
+        -------
+        ab
+            ``(u + 1, T nf)`` upper banded storage for ``solveh_banded``.
+        grad
+            ``(T nf,)`` gradient of half the cost.
+        """
+        st, t, nf, free = self.st, self.t, self.nf, self.free
+        b = st.band
+        nb = 2 * b  # block bandwidth of J^T J
+        blocks = np.zeros((t, nb + 1, nf, nf))  # blocks[i, o] = H(i, i + o)
+        grad = np.zeros((t, nf))
+        _, _, qp, vp, ap = self.kinematics(q)
+        model, data = self.sk.model, self.sk.data
+        obs = self.data.observed
+        sm = self.st.marker_sigma
+        dq = np.zeros((t, 6, nf))
+        dv = np.zeros((t, 6, nf))
+        da = np.zeros((t, 6, nf))
+        res = np.zeros((t, 6))
+        if obs.any():
+            hdot_all, com_all = self.momentum_rate(qp, vp, ap)
+            res = self.residual_wrench(hdot_all, com_all) * self.w_res
+        for k in range(t):
+            # markers: only frame k
+            seen = self.seen[k]
+            if seen.any():
+                pos, jac = self.sk.marker_jacobian(q[k], self.data.markers[seen])
+                jm = jac[:, :, free].reshape(-1, nf) / sm
+                rm = ((pos - self.y[k, seen]) / sm).reshape(-1)
+                blocks[k, 0] += jm.T @ jm
+                grad[k] += jm.T @ rm
+            if obs[k]:
+                _, hdot_dq, hdot_dv, hdot_da = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+                jcom = pin.jacobianCenterOfMass(model, data, qp[k], False)
+                cmat = self.sk.cmap.jacobian(q[k])[:, free]
+                f_ext = self.data.force[k]
+                d_q = hdot_dq.copy()
+                d_q[3:] -= _skew(f_ext) @ jcom
+                dq[k] = (d_q @ cmat) * self.w_res[:, None]
+                dv[k] = (hdot_dv @ cmat) * self.w_res[:, None]
+                da[k] = (hdot_da @ cmat) * self.w_res[:, None]
+        # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k)
+        idx = np.flatnonzero(obs)
+        for o1 in range(-b, b + 1):
+            s1 = idx + o1
+            ok1 = (s1 >= 0) & (s1 < t)
+            j1 = (self.d1[idx, np.clip(s1, 0, t - 1)][:, None, None] * dv[idx]
+                  + self.d2[idx, np.clip(s1, 0, t - 1)][:, None, None] * da[idx]
+                  + (dq[idx] if o1 == 0 else 0.0))
+            j1[~ok1] = 0.0
+            np.add.at(grad, np.clip(s1, 0, t - 1), np.einsum("kri,kr->ki", j1, res[idx]) * ok1[:, None])
+            for o2 in range(o1, b + 1):
+                s2 = idx + o2
+                ok2 = (s2 >= 0) & (s2 < t)
+                j2 = (self.d1[idx, np.clip(s2, 0, t - 1)][:, None, None] * dv[idx]
+                      + self.d2[idx, np.clip(s2, 0, t - 1)][:, None, None] * da[idx]
+                      + (dq[idx] if o2 == 0 else 0.0))
+                both = ok1 & ok2
+                prod = np.einsum("kri,krj->kij", j1[both], j2[both])
+                np.add.at(blocks, (s1[both], o2 - o1), prod)
+        # smoothness: central second differences
+        ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
+        sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
+        coef = np.array([1.0, -2.0, 1.0]) * ws
+        eye = np.eye(nf)
+        for a in range(3):
+            np.add.at(grad, np.arange(t - 2) + a, coef[a] * sd)
+            for c in range(a, 3):
+                blocks[np.arange(t - 2) + a, c - a] += coef[a] * coef[c] * eye
+        return _to_banded(blocks, nf), grad.reshape(-1)
+
+    # -------------------------------------------------------------- steps
+    def step(self, q: FloatArray, mu: float, cost0: float | None = None) -> tuple[FloatArray, float, float]:
+        """One damped Gauss-Newton step with a backtracking line search; returns (q, cost, mu).
+
+        The damping grows (and the system is solved again) only when no step length along
+        the current direction lowers the cost.
+        """
+        ab, grad = self.normal_equations(q)
+        free, nf = self.free, self.nf
+        x = q[:, free]
+        g2 = grad.reshape(-1, nf)
+        held = (((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))).reshape(-1)
+        diag = np.maximum(ab[-1].copy(), 1e-9)
+        grad = np.where(held, 0.0, grad)
+        base = ab[-1] + held * 1e12
+        cost0 = self.cost(q) if cost0 is None else cost0
+        for _ in range(4):
+            ab[-1] = base + mu * diag
+            try:
+                delta = -solveh_banded(ab, grad, lower=False, check_finite=False).reshape(-1, nf)
+            except LinAlgError:
+                mu *= 10
+                continue
+            for alpha in (1.0, 0.5, 0.25, 0.1):
+                q_new = q.copy()
+                q_new[:, free] += alpha * delta
+                q_new = np.clip(q_new, self.lo, self.hi)
+                q_new[:, self.sk.locked] = self.sk.defaults[self.sk.locked]
+                q_new = self.sk.cmap.complete(q_new)
+                cost1 = self.cost(q_new)
+                if cost1 < cost0:
+                    return q_new, cost1, (max(mu / 3, 1e-9) if alpha == 1.0 else mu)
+            mu *= 10
+        return q, cost0, mu
+
+
+@lru_cache(maxsize=8)
+def _banded_index(t: int, nbp1: int, nf: int) -> tuple[tuple[NDArray[np.intp], ...], NDArray[np.intp], NDArray[np.intp], int]:
+    """Where each entry of the block bands goes in upper banded storage (cached per shape)."""
+    u = nbp1 * nf - 1
+    bi, o, i, j = np.indices((t, nbp1, nf, nf))
+    r = bi * nf + i
+    c = (bi + o) * nf + j
+    keep = (bi + o < t) & (c >= r)
+    return tuple(np.nonzero(keep)), (u + r - c)[keep], c[keep], u
+
+
+def _to_banded(blocks: FloatArray, nf: int) -> FloatArray:
+    """Block upper bands ``(T, nb+1, nf, nf)`` -> upper banded storage of the full matrix
+    (``ab[u + r - c, c] = H[r, c]`` for c >= r), as ``solveh_banded`` takes it."""
+    t, nbp1 = blocks.shape[:2]
+    src, rows, cols, u = _banded_index(t, nbp1, nf)
+    ab = np.zeros((u + 1, t * nf))
+    ab[rows, cols] = blocks[src]
+    return ab
+
+
+def mass_regression(
+    sk: Skeleton, q: FloatArray, qd: FloatArray, qdd: FloatArray, wrenches: list[tuple[str, FloatArray]], observed: NDArray[np.bool_]
+) -> tuple[FloatArray, FloatArray, list[int]]:
+    """Root generalized forces as a linear function of per-joint mass factors.
+
+    Returns
+    -------
+    a, b
+        ``(6 K, J)`` and ``(6 K,)`` with tau_root = a @ k + b over the K observed frames.
+    joints
+        Pinocchio joint index of each of the J factors (joints that carry mass).
+    """
+    from solver.model.skeleton import ExternalWrench
+
+    model, data = sk.model, sk.data
+    joints = [j for j in range(1, model.njoints) if model.inertias[j].mass > 0]
+    params = {j: model.inertias[j].toDynamicParameters() for j in joints}
+    idx = np.flatnonzero(observed)
+    qp, vp, ap = sk.cmap.expand(q[idx], qd[idx], qdd[idx])
+    ext = [ExternalWrench(b, w[idx, :3], np.zeros((idx.size, 3)), w[idx, 3:]) for b, w in wrenches]
+    tau_ext = sk.inverse_dynamics(q[idx], qd[idx], qdd[idx], ext).tau - sk.inverse_dynamics(q[idx], qd[idx], qdd[idx]).tau
+    root = list(sk.root_transform_axes())
+    a = np.zeros((idx.size, 6, len(joints)))
+    for k in range(idx.size):
+        y = pin.computeJointTorqueRegressor(model, data, qp[k], vp[k], ap[k])
+        cmat = sk.cmap.jacobian(q[idx[k]])
+        for c, j in enumerate(joints):
+            tau_pin = y[:, 10 * (j - 1) : 10 * j] @ params[j]
+            a[k, :, c] = (cmat.T @ tau_pin)[root]
+    return a.reshape(-1, len(joints)), tau_ext[:, root].reshape(-1), joints
+
+
+def fit_dynamics(
+    build: object,
+    trials: Sequence[FitTrialInput],
+    settings: FitSettings | None = None,
+    progress: object | None = None,
+) -> FitOutput:
+    """Run the fit (see the module docstring).
+
+    Parameters
+    ----------
+    build
+        Callable ``(mass_factors: dict[body, float]) -> Skeleton`` giving the model with
+        each body's mass and inertia multiplied by its factor.
+    trials
+        The trials of the subject that have force data.
+    settings
+        Weights and limits.
+    progress
+        Optional callable (message, fraction).
+    """
+    st = settings or FitSettings()
+    factors = {}
+    sk: Skeleton = build(factors)  # type: ignore[operator]
+    qs = [np.array(tr.q, dtype=float) for tr in trials]
+    history = []
+    body_of_joint = {}
+    for b, j in zip(sk.body_names, sk.body_joint):
+        body_of_joint.setdefault(int(j), []).append(b)
+    for rnd in range(st.rounds):
+        for i, tr in enumerate(trials):
+            prob = _TrialProblem(sk, tr, st)
+            cost = prob.cost(qs[i])
+            mu = 1e-6
+            for it in range(st.iterations):
+                if progress:
+                    progress(f"dynamics fit: round {rnd + 1}, trial {i + 1}, step {it + 1}", (rnd * st.iterations + it) / (st.rounds * st.iterations))  # type: ignore[operator]
+                q_new, cost_new, mu = prob.step(qs[i], mu, cost)
+                rel = (cost - cost_new) / max(cost, 1e-30)
+                qs[i], cost = q_new, cost_new
+                if rel < st.tolerance:
+                    break
+            history.append(cost)
+        if rnd == st.rounds - 1:
+            break
+        # mass factors: linear least squares on the root generalized forces of observed frames
+        rows_a, rows_b, weights = [], [], []
+        joints: list[int] = []
+        for i, tr in enumerate(trials):
+            if not tr.observed.any():
+                continue
+            d1, d2 = derivative_operators(qs[i].shape[0], tr.dt, st.derivative)
+            a, b_vec, joints = mass_regression(sk, qs[i], d1 @ qs[i], d2 @ qs[i], tr.wrenches, tr.observed)
+            w = np.tile(np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3), a.shape[0] // 6)
+            rows_a.append(a * w[:, None])
+            rows_b.append(b_vec * w)
+        if not rows_a:
+            break
+        a_all = np.vstack(rows_a)
+        b_all = np.concatenate(rows_b)
+        # current factors are 1 for this skeleton; prior pulls new factors toward 1 scaled by mass share
+        masses = np.array([sk.model.inertias[j].mass for j in joints])
+        share = masses / masses.sum()
+        prior_w = np.sqrt(a_all.shape[0] / 6 * share) / st.mass_sigma * np.sqrt(np.mean(np.sum(a_all**2, axis=0)) / max(a_all.shape[0], 1))
+        lhs = np.vstack([a_all, np.diag(prior_w)])
+        rhs = np.concatenate([-b_all, prior_w])
+        k_new, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
+        k_new = np.clip(k_new, 0.5, 2.0)
+        for j, k in zip(joints, k_new):
+            for body in body_of_joint.get(j, []):
+                factors[body] = factors.get(body, 1.0) * float(k)
+        sk = build(factors)  # type: ignore[operator]
+    return FitOutput(tuple(qs), dict(factors), tuple(history))

@@ -1,0 +1,408 @@
+"""The dynamics stage: from kinematics and force plates to mass, motion, torques and residuals.
+
+Per trial with force data:
+
+1. common frames at ``rate_hz`` over the time both markers and forces cover; coordinates
+   (from IK) and plate wrenches (force and moment about the origin, at the plate rate)
+   low-passed with the 3rd-order zero-phase Butterworth filter, then resampled; CoP and
+   free moment recomputed from the filtered wrench on the plate plane;
+2. each plate's wrench assigned to the foot on it; unmeasured-force frames proposed
+   (:mod:`.contact`), replaced by the reviewer's flags when given;
+then for the subject:
+3. the centre-of-mass fit with free accelerations on unobserved frames (:mod:`.com_fit`)
+   gives the mass; the root translation is shifted so that the model's centre of mass
+   follows the fitted path;
+4. the dynamics fit of coordinates and body masses (:mod:`.fit`);
+5. inverse dynamics: joint torques and root residuals; Hicks-style metrics.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.dynamics.com_fit import ComTrial, fit_com
+from solver.dynamics.contact import ContactResult, ContactSettings, assign_contacts
+from solver.dynamics.fit import FitSettings, FitTrialInput, fit_dynamics
+from solver.dynamics.metrics import residual_metrics
+from solver.dynamics.preprocess import common_time, cop_from_wrench, lowpass, moment_about_origin, resample
+from solver.dynamics.spline import differentiate
+from solver.errors import DynamicsError
+from solver.io.types import ForceRecording, MarkerTrajectories
+from solver.kinematics.result import KinematicsResult, TrialKinematics
+from solver.model.osim import Body, OsimModel
+from solver.model.skeleton import ExternalWrench, Skeleton
+from solver.results import PlateData
+
+FloatArray = NDArray[np.float64]
+Progress = Callable[[str, float], None]
+
+#: A plate force above this many body weights is not a measurement.
+ABSURD_FORCE_BW = 20.0
+
+
+@dataclass(frozen=True)
+class DynamicsOptions:
+    """Options of the dynamics stage.
+
+    Attributes
+    ----------
+    rate_hz
+        Common frame rate, Hz.
+    cutoff_hz
+        Low-pass cut-off of coordinates and forces, Hz.
+    filter_order
+        Butterworth order (applied forward and backward).
+    alpha
+        Regularization of unobserved centre-of-mass accelerations in the mass fit.
+    fit_motion
+        Run the dynamics fit (off: inverse dynamics of the filtered kinematics).
+    contact
+        Thresholds of contact assignment and proposals.
+    fit
+        Weights of the dynamics fit (its ``derivative`` also sets the ID's derivatives).
+    """
+
+    rate_hz: float = 100.0
+    cutoff_hz: float = 30.0
+    filter_order: int = 3
+    alpha: float = 1e-6
+    fit_motion: bool = True
+    contact: ContactSettings = field(default_factory=ContactSettings)
+    fit: FitSettings = field(default_factory=FitSettings)
+
+
+@dataclass(frozen=True)
+class TrialDynamics:
+    """Dynamics of one trial on its common frames (see :class:`solver.results.ProcessedTrial`)."""
+
+    name: str
+    time: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    marker_names: tuple[str, ...]
+    observed_markers: FloatArray
+    plates: tuple[PlateData, ...]
+    contact: ContactResult
+    unobserved: NDArray[np.bool_]
+    reasons: tuple[str, ...]
+    com: FloatArray
+    com_acc: FloatArray
+    tau: FloatArray
+    residual_force: FloatArray
+    residual_moment: FloatArray
+    wrenches: tuple[ExternalWrench, ...]
+    metrics: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class DynamicsResult:
+    """Output of the dynamics stage: the mass-fitted model and the trials with force data."""
+
+    model: OsimModel
+    mass_kg: float
+    trials: tuple[TrialDynamics, ...]
+    seconds: dict[str, float]
+    settings: dict[str, Any]
+
+    def trial(self, name: str) -> TrialDynamics:
+        """The trial called ``name``; raises ``KeyError``."""
+        for t in self.trials:
+            if t.name == name:
+                return t
+        raise KeyError(f"no trial {name!r} with dynamics")
+
+
+def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOptions, bw: float, trial: str) -> tuple[PlateData, ...]:
+    """Plates filtered at their own rate and resampled onto ``time``."""
+    out = []
+    for p in forces.plates:
+        f = np.asarray(p.force, dtype=float)
+        if not np.isfinite(f).all():
+            bad = int(np.argmax(~np.isfinite(f).all(axis=1)))
+            raise DynamicsError(f"plate {p.name}: force is NaN at {forces.time[bad]:.3f} s", path=forces.source or None, where=f"trial {trial}")
+        peak = float(np.abs(f).max()) if f.size else 0.0
+        if peak > ABSURD_FORCE_BW * bw:
+            raise DynamicsError(
+                f"plate {p.name}: force of {peak:.0f} N is {peak / bw:.0f} body weights (more than {ABSURD_FORCE_BW:.0f}); "
+                "check the units and the subject's mass",
+                path=forces.source or None,
+                where=f"trial {trial}",
+            )
+        m_o = moment_about_origin(f, np.asarray(p.cop), np.asarray(p.free_moment))
+        loaded = f[:, 1] > 0.02 * bw
+        plane = float(np.nanmedian(np.asarray(p.cop)[loaded, 1])) if loaded.any() else 0.0
+        f_f = lowpass(f, forces.rate_hz, opts.cutoff_hz, opts.filter_order)
+        m_f = lowpass(m_o, forces.rate_hz, opts.cutoff_hz, opts.filter_order)
+        f_r, m_r = resample(forces.time, f_f, time), resample(forces.time, m_f, time)
+        cop, free = cop_from_wrench(f_r, m_r, plane, 0.02 * bw)
+        out.append(PlateData(p.name, f_r, cop, free, p.corners, np.full(time.size, -1)))
+    return tuple(out)
+
+
+def _trial_frames(markers: MarkerTrajectories, forces: ForceRecording, rate: float, trial: str) -> FloatArray:
+    start = max(float(markers.time[0]), float(forces.time[0]))
+    stop = min(float(markers.time[-1]), float(forces.time[-1]))
+    if stop - start < 10.0 / rate:
+        raise DynamicsError(
+            f"markers ({markers.time[0]:.3f}-{markers.time[-1]:.3f} s) and forces ({forces.time[0]:.3f}-{forces.time[-1]:.3f} s) "
+            "do not overlap in time",
+            where=f"trial {trial}",
+        )
+    return common_time(start, stop, rate)
+
+
+def _with_mass(model: OsimModel, total: float, factors: Mapping[str, float] | None = None) -> OsimModel:
+    """``model`` with each body's mass and inertia multiplied by its factor, then all by one
+    factor so that the total mass is ``total``."""
+    factors = factors or {}
+    bodies = [
+        Body(b.name, b.mass * factors.get(b.name, 1.0), b.com, tuple(map(tuple, np.array(b.inertia) * factors.get(b.name, 1.0))), b.meshes)
+        for b in model.bodies
+    ]
+    k = total / sum(b.mass for b in bodies)
+    bodies = [Body(b.name, b.mass * k, b.com, tuple(map(tuple, np.array(b.inertia) * k)), b.meshes) for b in bodies]
+    return replace(model, bodies=tuple(bodies))
+
+
+def _resample_mask(mask: NDArray[np.bool_], src_time: FloatArray, time: FloatArray) -> NDArray[np.bool_]:
+    """A frame is flagged when the nearest source frame is flagged."""
+    idx = np.clip(np.searchsorted(src_time, time), 1, src_time.size - 1)
+    left = idx - 1
+    nearest = np.where(np.abs(src_time[left] - time) <= np.abs(src_time[idx] - time), left, idx)
+    return np.asarray(mask, dtype=bool)[nearest]
+
+
+@dataclass
+class _Prepared:
+    name: str
+    time: FloatArray
+    q: FloatArray
+    obs: FloatArray
+    marker_names: tuple[str, ...]
+    plates: tuple[PlateData, ...]
+    contact: ContactResult
+    unobserved: NDArray[np.bool_]
+    reasons: list[str]
+
+
+def run_dynamics(
+    kinematics: KinematicsResult,
+    trials: Sequence[tuple[str, MarkerTrajectories, ForceRecording | None]],
+    *,
+    mass_kg: float,
+    foot_bodies: Sequence[str],
+    height_m: float | None = None,
+    unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
+    options: DynamicsOptions | None = None,
+    progress: Progress | None = None,
+) -> DynamicsResult | None:
+    """Run the dynamics stage on the trials that have force data.
+
+    Parameters
+    ----------
+    kinematics
+        Output of the kinematics stage (scaled model, IK per trial).
+    trials
+        ``(name, markers, forces or None)`` of every trial; trials without forces are skipped.
+    mass_kg
+        The subject's stated mass (prior of the mass fit, thresholds).
+    foot_bodies
+        Bodies that can stand on plates (``footBodyNames``).
+    height_m
+        Subject height, m (for the angular residual in body weight x height).
+    unmeasured
+        Trial name -> ``(T,)`` bool mask at the trial's marker rate of frames with
+        unmeasured force (the reviewer's flags); replaces the automatic proposals.
+    options
+        Stage options.
+    progress
+        Called with (message, fraction).
+
+    Returns
+    -------
+    DynamicsResult, or None when no trial has force data.
+
+    Raises
+    ------
+    DynamicsError
+        NaN or absurd (> 20 BW) plate forces, forces that do not overlap the markers in
+        time, an unknown foot body, or a failed mass fit; naming the trial.
+    """
+    opts = options or DynamicsOptions()
+    say = progress or (lambda m, f: None)
+    t0 = _time.perf_counter()
+    with_forces = [(n, m, f) for n, m, f in trials if f is not None and f.plates]
+    if not with_forces:
+        return None
+    model = kinematics.model
+    for foot in foot_bodies:
+        if foot not in model.body_names:
+            raise DynamicsError(f"foot body {foot!r} (footBodyNames) is not a body of the model", path=model.source)
+    sk = Skeleton(model)
+    g = float(np.linalg.norm(model.gravity))
+    bw = mass_kg * g
+    dt = 1.0 / opts.rate_hz
+    prepared: list[_Prepared] = []
+    for name, markers, forces in with_forces:
+        say(f"preprocessing {name}", 0.02)
+        kin: TrialKinematics = kinematics.trial(name)
+        time = _trial_frames(markers, forces, opts.rate_hz, name)
+        rate_m = 1.0 / float(np.median(np.diff(kin.time)))
+        q = resample(kin.time, lowpass(kin.q, rate_m, opts.cutoff_hz, opts.filter_order), time)
+        obs = resample(kin.time, kin.observed, time)
+        plates = _filtered_plates(forces, time, opts, bw, name)
+        com_acc = differentiate(sk.center_of_mass(q), dt, opts.fit.derivative)[1]
+        contact = assign_contacts(sk, q, plates, foot_bodies, mass_kg, dt, com_acc, opts.contact)
+        plates = tuple(
+            replace(p, body=np.where(contact.plate_foot[i] >= 0, np.array([sk.body_index(f) for f in foot_bodies])[np.maximum(contact.plate_foot[i], 0)], -1))
+            for i, p in enumerate(plates)
+        )
+        reasons = list(contact.reasons)
+        stray = np.zeros(time.size, dtype=bool)
+        for i, p in enumerate(plates):
+            stray |= (p.force[:, 1] > opts.contact.loaded_bw * bw) & (contact.plate_foot[i] < 0)
+        for k in np.flatnonzero(contact.ambiguous | stray):
+            reasons[k] = reasons[k] or ("two feet on one plate" if contact.ambiguous[k] else "plate force with no foot on the plate")
+        if unmeasured is not None and name in unmeasured:
+            unobserved = _resample_mask(unmeasured[name], kin.time, time)
+            reasons = ["flagged by the reviewer" if u else "" for u in unobserved]
+        else:
+            unobserved = contact.proposed | contact.ambiguous | stray
+        prepared.append(_Prepared(name, time, q, obs, kin.marker_names, plates, contact, unobserved, reasons))
+    t_pre = _time.perf_counter()
+
+    # ---- centre-of-mass fit: mass and a force-consistent path
+    say("centre-of-mass fit", 0.1)
+    wrenches = {p.name: _foot_wrenches(p, foot_bodies, sk) for p in prepared}
+    com_trials = []
+    for p in prepared:
+        f_tot, _ = _totals(wrenches[p.name], p.time.size)
+        com_trials.append(ComTrial(sk.center_of_mass(p.q), f_tot, ~p.unobserved, dt))
+    cfit = fit_com(com_trials, np.asarray(model.gravity), alpha=opts.alpha)
+    mass = cfit.mass_kg
+    model_m = _with_mass(model, mass)
+    sk_m = Skeleton(model_m)
+    root = list(sk_m.root_transform_axes())
+    trans = [c for c in root if sk_m.motion_types[c] == "translational"]
+    for p, c_fit in zip(prepared, cfit.com):
+        shift = c_fit - sk_m.center_of_mass(p.q)
+        p.q = p.q.copy()
+        p.q[:, trans] += shift  # the root translations run along the ground axes
+    t_com = _time.perf_counter()
+
+    # ---- dynamics fit
+    factors: dict[str, float] = {}
+    if opts.fit_motion:
+        inputs = []
+        for p in prepared:
+            f_tot, m_tot = _totals(wrenches[p.name], p.time.size)
+            inputs.append(
+                FitTrialInput(
+                    q=p.q,
+                    markers=sk_m.marker_index(list(p.marker_names)),
+                    observed_markers=p.obs,
+                    observed=~p.unobserved,
+                    force=f_tot,
+                    moment=m_tot,
+                    wrenches=[(w.body, np.concatenate([w.force, np.cross(w.point, w.force) + w.moment], axis=1)) for w in wrenches[p.name]],
+                    dt=dt,
+                )
+            )
+
+        def build(fac: Mapping[str, float]) -> Skeleton:
+            return Skeleton(_with_mass(model_m, mass, fac) if fac else model_m)
+
+        out = fit_dynamics(build, inputs, opts.fit, progress=lambda m, f: say(m, 0.15 + 0.75 * f))
+        factors = out.mass_factors
+        for p, q in zip(prepared, out.q):
+            p.q = q
+    final_model = _with_mass(model_m, mass, factors) if factors else model_m
+    sk_f = Skeleton(final_model)
+    t_fit = _time.perf_counter()
+
+    # ---- inverse dynamics and metrics
+    say("inverse dynamics", 0.92)
+    results = []
+    for p in prepared:
+        qd, qdd = differentiate(p.q, dt, opts.fit.derivative)
+        ws = wrenches[p.name]
+        idr = sk_f.inverse_dynamics(p.q, qd, qdd, list(ws))
+        com = sk_f.center_of_mass(p.q)
+        com_acc = differentiate(com, dt, opts.fit.derivative)[1]
+        modeled = sk_f.marker_positions(p.q, sk_f.marker_index(list(p.marker_names)))
+        metrics = residual_metrics(
+            idr.root_force, idr.root_moment, modeled, p.obs, ~p.unobserved, mass, height_m
+        )
+        results.append(
+            TrialDynamics(
+                name=p.name,
+                time=p.time,
+                q=p.q,
+                qd=qd,
+                qdd=qdd,
+                marker_names=p.marker_names,
+                observed_markers=p.obs,
+                plates=p.plates,
+                contact=p.contact,
+                unobserved=p.unobserved,
+                reasons=tuple(p.reasons),
+                com=com,
+                com_acc=com_acc,
+                tau=idr.tau,
+                residual_force=idr.root_force,
+                residual_moment=idr.root_moment,
+                wrenches=tuple(ws),
+                metrics=metrics,
+            )
+        )
+    t_end = _time.perf_counter()
+    settings = {
+        "rate_hz": opts.rate_hz,
+        "cutoff_hz": opts.cutoff_hz,
+        "filter_order": opts.filter_order,
+        "alpha": opts.alpha,
+        "derivative": opts.fit.derivative,
+        "fit_motion": opts.fit_motion,
+        "fit": {k: getattr(opts.fit, k) for k in opts.fit.__dataclass_fields__},
+        "contact": {k: getattr(opts.contact, k) for k in opts.contact.__dataclass_fields__},
+    }
+    return DynamicsResult(
+        model=final_model,
+        mass_kg=mass,
+        trials=tuple(results),
+        seconds={"preprocess": t_pre - t0, "com_fit": t_com - t_pre, "dynamics_fit": t_fit - t_com, "inverse_dynamics": t_end - t_fit},
+        settings=settings,
+    )
+
+
+def _foot_wrenches(p: _Prepared, feet: Sequence[str], sk: Skeleton) -> tuple[ExternalWrench, ...]:
+    """The plate wrenches applied to each foot: per foot, the sum over the plates assigned
+    to it, as a force at a point with a free moment (zero where no plate is assigned)."""
+    out = []
+    t = p.time.size
+    for k, foot in enumerate(feet):
+        f = np.zeros((t, 3))
+        m_o = np.zeros((t, 3))
+        for i, plate in enumerate(p.plates):
+            on = p.contact.plate_foot[i] == k
+            f[on] += plate.force[on]
+            m_o[on] += moment_about_origin(plate.force[on], plate.cop[on], plate.free_moment[on])
+        out.append(ExternalWrench(foot, f, np.zeros((t, 3)), m_o))
+    return tuple(out)
+
+
+def _totals(wrenches: Sequence[ExternalWrench], t: int) -> tuple[FloatArray, FloatArray]:
+    """Total external force and moment about the origin, ``(T, 3)`` each."""
+    f = np.zeros((t, 3))
+    m = np.zeros((t, 3))
+    for w in wrenches:
+        f += w.force
+        m += np.cross(w.point, w.force) + w.moment
+    return f, m
