@@ -20,6 +20,10 @@ Handler = Callable[[argparse.Namespace], int]
 COMMANDS = (
     "addb_viewer.commands.info",
     "addb_viewer.commands.kinematics",
+    "addb_viewer.commands.view",
+    "addb_viewer.commands.process",
+    "addb_viewer.commands.record",
+    "addb_viewer.commands.export",
 )
 
 

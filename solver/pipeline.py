@@ -16,14 +16,18 @@ from typing import Any
 
 import numpy as np
 
+from solver import single_threaded_blas
 from solver.errors import KinematicsError
-from solver.io.mot import write_coordinates
+from solver.dynamics.preprocess import cop_from_wrench
+from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
+from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
+from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
-from solver.io.types import ForceRecording
+from solver.io.types import ForcePlate, ForceRecording, Table
 from solver.kinematics.observations import find_marker_settings
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.stage import KinematicsOptions, run_kinematics
-from solver.model.osim import read_osim
+from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
@@ -40,11 +44,14 @@ class ProcessOptions:
     ----------
     kinematics
         Options of the kinematics stage.
+    dynamics
+        Options of the dynamics stage.
     trials
         Names of the trials to write (all trials are still used for scaling); None: all.
     """
 
     kinematics: KinematicsOptions = field(default_factory=KinematicsOptions)
+    dynamics: DynamicsOptions = field(default_factory=DynamicsOptions)
     trials: tuple[str, ...] | None = None
 
 
@@ -142,6 +149,13 @@ def process_kinematics(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError
         Bad input, naming the file or trial.
     """
+    with single_threaded_blas():
+        return _process_kinematics(subject_dir, out_dir, options, progress)
+
+
+def _process_kinematics(
+    subject_dir: str | Path, out_dir: str | Path, options: ProcessOptions | None, progress: Progress | None
+) -> SubjectKinematics:
     opts = options or ProcessOptions()
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
@@ -178,7 +192,7 @@ def process_subject(
     options: ProcessOptions | None = None,
     unmeasured: dict[str, np.ndarray] | None = None,
     progress: Progress | None = None,
-) -> SubjectKinematics:
+) -> ProcessResult:
     """Run every stage on a subject and write ``out_dir`` (see :mod:`solver.outputs`).
 
     Parameters
@@ -186,21 +200,192 @@ def process_subject(
     subject_dir
         AddBiomechanics subject folder.
     out_dir
-        Output folder, replaced atomically.
+        Output folder, replaced atomically (nothing is half-written on an error).
     options
         Stage options and the trials to write.
     unmeasured
         Trial name -> ``(T,)`` bool mask, at the trial's marker frame rate, of frames with
-        unmeasured external force (the reviewer's flags); they override the automatic
-        proposals of the dynamics stage.
+        unmeasured external force (the reviewer's flags); they replace the automatic
+        proposals of the dynamics stage for that trial.
     progress
         Called with (message, fraction done).
 
-    Notes
-    -----
-    Until the dynamics stage lands this runs the kinematics stage only.
+    Returns
+    -------
+    ProcessResult
+
+    Raises
+    ------
+    SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
+        Bad input, naming the file or trial.
     """
-    return process_kinematics(subject_dir, out_dir, options=options, progress=progress)
+    with single_threaded_blas():
+        return _process_subject(subject_dir, out_dir, options, unmeasured, progress)
+
+
+def _process_subject(
+    subject_dir: str | Path,
+    out_dir: str | Path,
+    options: ProcessOptions | None,
+    unmeasured: dict[str, np.ndarray] | None,
+    progress: Progress | None,
+) -> ProcessResult:
+    opts = options or ProcessOptions()
+    say = progress or (lambda m, f: None)
+    t0 = time.perf_counter()
+    subject = load_subject(subject_dir)
+    sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f))
+    t_kin = time.perf_counter()
+    dyn = None
+    if not subject.disable_dynamics:
+        dyn = run_dynamics(
+            sk.kinematics,
+            [(t.name, t.markers, t.forces) for t in sk.trials],
+            mass_kg=subject.mass_kg,
+            foot_bodies=subject.foot_body_names,
+            height_m=subject.height_m,
+            unmeasured=unmeasured,
+            options=opts.dynamics,
+            progress=lambda m, f: say(m, 0.4 + 0.55 * f),
+        )
+    t_dyn = time.perf_counter()
+    say("writing results", 0.96)
+    kin = sk.kinematics
+    model = dyn.model if dyn is not None else kin.model
+    wanted = _selected(opts.trials, [t.name for t in kin.trials])
+    rotational = [c.name for c in model.coordinates if c.motion_type == "rotational"]
+    out_path = Path(out_dir).resolve()
+    model_file = out_path / f"{subject.name}_scaled.osim"
+    with staged_output(out_dir) as tmp:
+        write_osim(model, tmp / model_file.name, name=f"{subject.name}_scaled", path_point_scales=kin.body_scales)
+        for trial in kin.trials:
+            if trial.name not in wanted:
+                continue
+            folder = tmp / trial.name
+            metrics = kinematics_metrics(trial)
+            seconds = {"load": sk.load_seconds, "kinematics": t_kin - t0 - sk.load_seconds, "ik_trial": trial.seconds}
+            td = _trial_dynamics(dyn, trial.name)
+            if td is None:
+                write_trial_kinematics(folder, trial, rotational)
+                metrics["rate_hz"] = float(1.0 / np.median(np.diff(trial.time))) if trial.time.size > 1 else None
+                processed = build_processed(sk, trial, model_path=str(model_file), metrics=metrics)
+            else:
+                write_dynamics_files(folder, trial.name, td, model, rotational)
+                metrics.update(td.metrics)
+                metrics["opensim_convention_max_diff"] = float(np.abs(td.tau_opensim - td.tau).max())
+                metrics["rate_hz"] = opts.dynamics.rate_hz
+                metrics["mass_kg"] = dyn.mass_kg
+                metrics["unobserved_frames"] = np.flatnonzero(td.unobserved).tolist()
+                metrics["unobserved_reasons"] = sorted({r for r in td.reasons if r})
+                seconds.update(dyn.seconds)
+                processed = build_processed(
+                    sk, trial, model_path=str(model_file), plates=td.plates, metrics=metrics, dynamics=_dynamics_fields(td, dyn)
+                )
+            seconds["total"] = time.perf_counter() - t0
+            metrics["stage_seconds"] = seconds
+            write_json(folder / "results.json", metrics)
+            save_processed(folder / "trial.npz", replace(processed, metrics=metrics))
+        write_subject_summary(
+            tmp,
+            sk,
+            {
+                "fitted_mass_kg": dyn.mass_kg if dyn else None,
+                "dynamics_seconds": dyn.seconds if dyn else None,
+                "dynamics_settings": dyn.settings if dyn else None,
+                "total_seconds": time.perf_counter() - t0,
+                "stage_seconds": {"kinematics": t_kin - t0, "dynamics": t_dyn - t_kin},
+            },
+        )
+    say("done", 1.0)
+    return ProcessResult(sk, dyn, out_path)
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    """What :func:`process_subject` computed (and wrote to ``out_dir``)."""
+
+    kinematics: SubjectKinematics
+    dynamics: DynamicsResult | None
+    out_dir: Path
+
+
+def _trial_dynamics(dyn: DynamicsResult | None, name: str) -> TrialDynamics | None:
+    if dyn is None:
+        return None
+    try:
+        return dyn.trial(name)
+    except KeyError:
+        return None
+
+
+def _dynamics_fields(td: TrialDynamics, dyn: DynamicsResult) -> dict[str, Any]:
+    """The dynamics arrays of :func:`build_processed`."""
+    return {
+        "model": dyn.model,
+        "time": td.time,
+        "q": td.q,
+        "qd": td.qd,
+        "qdd": td.qdd,
+        "observed": td.observed_markers,
+        "com": td.com,
+        "com_acc": td.com_acc,
+        "residual_force": td.residual_force,
+        "residual_moment": td.residual_moment,
+        "tau": td.tau,
+        "unobserved": td.unobserved,
+        "proposed": td.contact.proposed,
+        "proposal_reasons": list(td.contact.reasons),
+        "mass_kg": dyn.mass_kg,
+        "settings": dyn.settings,
+    }
+
+
+def write_dynamics_files(folder: Path, name: str, td: TrialDynamics, model: OsimModel, rotational: Sequence[str]) -> None:
+    """Write ``_ik.mot``, ``_id.sto``, ``_grf.mot`` and ``_external_loads.xml`` of a trial.
+
+    ``_id.sto`` holds the generalized forces in OpenSim's convention (``tau_opensim``: they
+    include Simbody's inexact CustomJoint velocity term, see
+    :mod:`solver.model.opensim_compat`), so that OpenSim reproduces them; the exact ones
+    are in ``trial.npz`` and results.json reports the largest difference.
+
+    The GRF file holds one column set per foot: the sum of the plate wrenches applied to
+    that foot, as a force at a centre of pressure on the ground plane plus a vertical free
+    moment; the ExternalLoads file applies each set to its foot body in the ground frame.
+    OpenSim's InverseDynamicsTool on these files (no extra filtering) reproduces ``_id.sto``.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    names = [c.name for c in model.coordinates]
+    write_coordinates(folder / f"{name}_ik.mot", names, td.q, td.time, rotational=rotational)
+    kinds = {c.name: ("force" if c.motion_type == "translational" else "moment") for c in model.coordinates}
+    write_table(
+        folder / f"{name}_id.sto",
+        Table(tuple(f"{n}_{kinds[n]}" for n in names), td.tau_opensim, td.time, {"name": f"{name} inverse dynamics"}),
+        kind="sto",
+    )
+    plane = float(np.nanmedian(np.concatenate([p.cop[:, 1] for p in td.plates] or [np.zeros(1)])))
+    plane = plane if np.isfinite(plane) else 0.0
+    plates, forces = [], []
+    for w in td.wrenches:
+        m_o = np.cross(w.point, w.force) + w.moment
+        cop, free = cop_from_wrench(w.force, m_o, plane, 1e-6)
+        # where the vertical force is ~0 the wrench is expressed at the origin's projection
+        zero = ~np.isfinite(cop).all(axis=1)
+        cop[zero] = [0.0, plane, 0.0]
+        free[zero] = m_o[zero] - np.cross(cop[zero], w.force[zero])
+        plates.append(ForcePlate(w.body, w.force, cop, free))
+        forces.append(
+            ExternalForce(
+                name=f"{w.body}_GRF",
+                applied_to_body=w.body,
+                force_identifier=f"ground_force_{w.body}_v",
+                point_identifier=f"ground_force_{w.body}_p",
+                torque_identifier=f"ground_torque_{w.body}_",
+            )
+        )
+    grf = folder / f"{name}_grf.mot"
+    rate = 1.0 / float(np.median(np.diff(td.time)))
+    write_forces(grf, ForceRecording(td.time, rate, tuple(plates), str(grf)))
+    write_external_loads(folder / f"{name}_external_loads.xml", ExternalLoads(f"{name}_external_loads", tuple(forces), grf.name))
 
 
 def plates_on_frames(forces: ForceRecording | None, time: np.ndarray) -> tuple[PlateData, ...]:

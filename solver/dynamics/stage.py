@@ -79,7 +79,12 @@ class DynamicsOptions:
 
 @dataclass(frozen=True)
 class TrialDynamics:
-    """Dynamics of one trial on its common frames (see :class:`solver.results.ProcessedTrial`)."""
+    """Dynamics of one trial on its common frames (see :class:`solver.results.ProcessedTrial`).
+
+    ``tau`` are the exact generalized forces; ``tau_opensim`` the same with Simbody's
+    CustomJoint velocity term (:mod:`solver.model.opensim_compat`), which is what OpenSim's
+    InverseDynamicsTool computes from the written files; ``_id.sto`` holds the latter.
+    """
 
     name: str
     time: FloatArray
@@ -95,6 +100,7 @@ class TrialDynamics:
     com: FloatArray
     com_acc: FloatArray
     tau: FloatArray
+    tau_opensim: FloatArray
     residual_force: FloatArray
     residual_moment: FloatArray
     wrenches: tuple[ExternalWrench, ...]
@@ -334,6 +340,7 @@ def run_dynamics(
         qd, qdd = differentiate(p.q, dt, opts.fit.derivative)
         ws = wrenches[p.name]
         idr = sk_f.inverse_dynamics(p.q, qd, qdd, list(ws))
+        tau_osim = sk_f.inverse_dynamics(p.q, qd, qdd, list(ws), opensim_compatible=True).tau
         com = sk_f.center_of_mass(p.q)
         com_acc = differentiate(com, dt, opts.fit.derivative)[1]
         modeled = sk_f.marker_positions(p.q, sk_f.marker_index(list(p.marker_names)))
@@ -356,6 +363,7 @@ def run_dynamics(
                 com=com,
                 com_acc=com_acc,
                 tau=idr.tau,
+                tau_opensim=tau_osim,
                 residual_force=idr.root_force,
                 residual_moment=idr.root_moment,
                 wrenches=tuple(ws),
