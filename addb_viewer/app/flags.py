@@ -1,0 +1,257 @@
+"""The reviewer's edits of one trial, through :class:`annotations.AnnotationStore`.
+
+Every edit method returns only once the store has made the edit durable (journal
+fsync-ed), so the page may say "saved" when it returns. :class:`FlagView` is what the
+page shows: flagged frames per foot, and the solver's automatic proposals split into
+pending, accepted (flags whose provenance source is ``proposal_accepted``) and rejected.
+
+Rejections are recorded as frame-range notes whose text starts with
+:data:`REJECTED_NOTE` (the store has no record type for a declined proposal yet), so
+they are durable, attributed and undoable like every other edit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from addb_viewer.app.state import run_at
+from annotations import FEET, UNMEASURED_FORCE, AnnotationError, AnnotationStore, Edit, TrialReview
+
+REJECTED_NOTE = "[addb] proposal rejected"
+"""Text prefix of the notes that record a rejected automatic proposal."""
+
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class FlagView:
+    """The review state of one trial as masks over its frames.
+
+    Attributes
+    ----------
+    flagged
+        ``(T,)`` frames flagged with unmeasured force (any foot or none said).
+    left, right
+        ``(T,)`` frames flagged for that foot (``"both"`` counts for each).
+    accepted
+        ``(T,)`` flagged frames whose flag came from an accepted proposal.
+    proposed
+        ``(T,)`` the solver's automatic proposals.
+    rejected
+        ``(T,)`` proposals the reviewer rejected.
+    pending
+        ``(T,)`` proposals neither flagged nor rejected.
+    feet
+        ``(T,)`` object array: the flag's foot ("left", "right", "both", "" when not
+        said) or None where not flagged.
+    reviewed
+        Whether the trial is marked as reviewed.
+    beyond
+        Number of flagged frames at or past the end of the trial (a record that does not
+        belong to this trial's length); they are not shown.
+    """
+
+    flagged: BoolArray
+    left: BoolArray
+    right: BoolArray
+    accepted: BoolArray
+    proposed: BoolArray
+    rejected: BoolArray
+    pending: BoolArray
+    feet: NDArray[np.object_]
+    reviewed: bool
+    beyond: int = 0
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames T."""
+        return int(self.flagged.size)
+
+
+def build_view(review: TrialReview, proposed: BoolArray) -> FlagView:
+    """:class:`FlagView` of a store snapshot and the solver's ``(T,)`` proposals."""
+    n = int(proposed.size)
+    flagged = np.zeros(n, bool)
+    left = np.zeros(n, bool)
+    right = np.zeros(n, bool)
+    accepted = np.zeros(n, bool)
+    feet = np.full(n, None, dtype=object)
+    beyond = 0
+    for run in review.unmeasured_force:
+        s, e = min(run.start, n), min(run.stop, n)
+        beyond += run.stop - max(run.start, e)
+        if s >= e:
+            continue
+        flagged[s:e] = True
+        feet[s:e] = run.foot or ""
+        if run.foot in ("left", "both"):
+            left[s:e] = True
+        if run.foot in ("right", "both"):
+            right[s:e] = True
+        if run.provenance.source == "proposal_accepted":
+            accepted[s:e] = True
+    rejected = np.zeros(n, bool)
+    for note in review.notes:
+        if note.start is not None and note.stop is not None and note.text.startswith(REJECTED_NOTE):
+            rejected[min(note.start, n) : min(note.stop, n)] = True
+    rejected &= proposed
+    return FlagView(
+        flagged=flagged,
+        left=left,
+        right=right,
+        accepted=accepted,
+        proposed=proposed.copy(),
+        rejected=rejected,
+        pending=proposed & ~flagged & ~rejected,
+        feet=feet,
+        reviewed=review.reviewed,
+        beyond=beyond,
+    )
+
+
+def toggled_foot(current: str | None, foot: str) -> str | None:
+    """The foot a frame is flagged for after toggling ``foot`` (None: not flagged).
+
+    ``current`` is the frame's flag (None not flagged, "" flagged without a foot).
+    Toggling a foot on an unflagged frame flags it; on a frame flagged for the other
+    foot it gives "both"; on "both" it leaves the other foot; toggling the frame's own
+    foot, "both", or any foot on a flag without a foot clears it.
+    """
+    if foot not in FEET:
+        raise AnnotationError(f"foot must be one of {FEET}, got {foot!r}")
+    if current is None:
+        return foot
+    if current == "" or current == foot or foot == "both":
+        return None
+    if current == "both":
+        return "left" if foot == "right" else "right"
+    return "both"
+
+
+class TrialEditor:
+    """Reads and edits one trial's flags in an open store.
+
+    Parameters
+    ----------
+    store
+        The subject's open store (its reviewer is recorded with every edit).
+    trial
+        Trial name.
+    proposed
+        ``(T,)`` the solver's automatic proposals.
+    reasons
+        ``(T,)`` the reason of each proposal ("" where none).
+    """
+
+    def __init__(
+        self, store: AnnotationStore, trial: str, proposed: BoolArray, reasons: tuple[str, ...]
+    ) -> None:
+        self.store = store
+        self.trial = trial
+        self.proposed = np.asarray(proposed, dtype=bool)
+        self.reasons = reasons
+        self.n_frames = int(self.proposed.size)
+
+    def view(self) -> FlagView:
+        """The current :class:`FlagView` (includes other writers' saved edits once the
+        store has been refreshed)."""
+        return build_view(self.store.review(self.trial), self.proposed)
+
+    def solver_mask(self) -> BoolArray:
+        """``(T,)`` frames to give the solver as having unmeasured force."""
+        return self.store.mask(self.trial, self.n_frames, kind=UNMEASURED_FORCE)
+
+    # ------------------------------------------------------------------ flags
+    def toggle(self, frame: int, foot: str) -> Edit:
+        """Toggle ``foot``'s unmeasured-force flag on one frame (see :func:`toggled_foot`)."""
+        frame = self._frame(frame)
+        new = toggled_foot(self.view().feet[frame], foot)
+        if new is None:
+            return self.store.set_unmeasured(self.trial, frame, False)
+        return self.store.set_unmeasured(self.trial, frame, True, foot=new)
+
+    def flag_range(self, start: int, stop: int, foot: str | None) -> Edit:
+        """Flag frames ``[start, stop)`` for ``foot`` (replacing earlier flags there)."""
+        return self.store.set_unmeasured(self.trial, self._range(start, stop), True, foot=foot)
+
+    def clear_range(self, start: int, stop: int) -> Edit:
+        """Clear the unmeasured-force flags of frames ``[start, stop)``."""
+        return self.store.set_unmeasured(self.trial, self._range(start, stop), False)
+
+    # ------------------------------------------------------------------ proposals
+    def proposal_at(self, frame: int) -> tuple[int, int, str] | None:
+        """The pending proposal run ``(start, stop, reason)`` containing ``frame``."""
+        run = run_at(self.view().pending, frame)
+        if run is None:
+            return None
+        return run[0], run[1], self.reasons[run[0]] if run[0] < len(self.reasons) else ""
+
+    def accept(self, frame: int | None = None) -> Edit | None:
+        """Accept the pending proposal at ``frame`` (all pending ones when None) as
+        unmeasured-force flags; None when there is nothing to accept."""
+        pending = self.view().pending
+        if frame is not None:
+            run = run_at(pending, self._frame(frame))
+            if run is None:
+                return None
+            frames: range | list[int] = range(*run)
+        else:
+            frames = np.flatnonzero(pending).tolist()
+            if not frames:
+                return None
+        return self.store.set_unmeasured(self.trial, frames, True, source="proposal_accepted")
+
+    def reject(self, frame: int | None = None) -> list[Edit]:
+        """Reject the pending proposal at ``frame`` (all pending ones when None).
+
+        Returns one edit per rejected run (empty when there was nothing to reject).
+        """
+        pending = self.view().pending
+        if frame is not None:
+            run = run_at(pending, self._frame(frame))
+            runs = [] if run is None else [run]
+        else:
+            edges = np.flatnonzero(np.diff(np.concatenate(([0], pending.astype(np.int8), [0]))))
+            runs = list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
+        edits = []
+        for s, e in runs:
+            reason = self.reasons[s] if s < len(self.reasons) else ""
+            text = f"{REJECTED_NOTE}: {reason}" if reason else REJECTED_NOTE
+            edits.append(self.store.add_note(self.trial, text, start=s, stop=e))
+        return edits
+
+    # ------------------------------------------------------------------ other
+    def set_reviewed(self, reviewed: bool = True) -> Edit:
+        """Mark the trial as reviewed (or not)."""
+        return self.store.set_reviewed(self.trial, reviewed)
+
+    def _frame(self, frame: int) -> int:
+        f = int(frame)
+        if not 0 <= f < self.n_frames:
+            raise AnnotationError(f"frame {f} is outside the trial (0..{self.n_frames - 1})")
+        return f
+
+    def _range(self, start: int, stop: int) -> range:
+        s, e = int(start), int(stop)
+        if not 0 <= s < e <= self.n_frames:
+            raise AnnotationError(f"frame range [{s}, {e}) is not inside the trial (0..{self.n_frames})")
+        return range(s, e)
+
+
+def describe_frame(view: FlagView, frame: int, reasons: tuple[str, ...]) -> str:
+    """One line about a frame's flag and proposal, for the page."""
+    parts = []
+    foot = view.feet[frame] if 0 <= frame < view.n_frames else None
+    if foot is not None:
+        what = "unmeasured force" + (f" ({foot} foot)" if foot in ("left", "right") else "")
+        what += " (both feet)" if foot == "both" else ""
+        what += ", accepted proposal" if view.accepted[frame] else ""
+        parts.append("**flagged**: " + what)
+    if 0 <= frame < view.n_frames and view.proposed[frame]:
+        reason = reasons[frame] if frame < len(reasons) and reasons[frame] else "no reason given"
+        state = "pending" if view.pending[frame] else "rejected" if view.rejected[frame] else "accepted"
+        parts.append(f"proposal ({state}): {reason}")
+    return "; ".join(parts) if parts else "not flagged"

@@ -1,0 +1,289 @@
+"""The solver in a separate process, with progress and cancel, never blocking the server.
+
+:class:`SolverJob` starts ``python -m addb_viewer.app.jobs SPEC.json`` in a child process.
+The child runs :func:`solver.pipeline.process_subject` and reports on its standard
+output, one JSON object per line after :data:`PREFIX` (other output is ignored):
+``{"progress": message, "fraction": f}``, then ``{"done": true}`` or
+``{"error": {type, message, path, line, where, traceback}}``. A thread of the parent reads
+those lines and calls back; :meth:`SolverJob.cancel` terminates the child. The solver
+writes its output folder atomically, so a cancelled or failed run leaves the previous
+result in place.
+
+A reprocess of one trial writes into a scratch folder; :func:`install_trial` then moves
+the new ``<trial>`` folder into the output folder with renames.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+import traceback
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PREFIX = "@@addb-job "
+"""Marks the protocol lines on the child's standard output."""
+
+
+@dataclass(frozen=True)
+class JobSpec:
+    """What a solver run does.
+
+    Attributes
+    ----------
+    subject_dir
+        AddBiomechanics subject folder.
+    out_dir
+        Output folder (replaced atomically by the solver).
+    trials
+        Trials to write (all trials are used for scaling); None: all.
+    unmeasured
+        Trial -> ``(T,)`` bool frames with unmeasured force (the reviewer's flags).
+    """
+
+    subject_dir: Path
+    out_dir: Path
+    trials: tuple[str, ...] | None = None
+    unmeasured: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class JobResult:
+    """How a run ended.
+
+    Attributes
+    ----------
+    status
+        "done", "failed" or "cancelled".
+    error
+        For "failed": ``type``, ``message`` and, when known, ``path``, ``line``,
+        ``where``, ``traceback``; None otherwise.
+    seconds
+        Wall time of the run, s.
+    """
+
+    status: str
+    error: dict[str, Any] | None
+    seconds: float
+
+    @property
+    def message(self) -> str:
+        """One line for the page."""
+        if self.status != "failed" or not self.error:
+            return self.status
+        e = self.error
+        where = ", ".join(str(x) for x in (e.get("path"), e.get("line"), e.get("where")) if x)
+        return f"{e.get('type', 'Error')}{f' ({where})' if where else ''}: {e.get('message', '')}"
+
+
+Progress = Callable[[str, float], None]
+Done = Callable[[JobResult], None]
+
+
+class SolverJob:
+    """One solver run in a child process.
+
+    Parameters
+    ----------
+    spec
+        What to run.
+    work_dir
+        Scratch folder for the spec, masks and the child's log (created; removed by
+        :meth:`cleanup`).
+    on_progress
+        Called from the reader thread with (message, fraction in [0, 1]).
+    on_done
+        Called once from the reader thread when the child has exited.
+    """
+
+    def __init__(self, spec: JobSpec, work_dir: Path, *, on_progress: Progress, on_done: Done) -> None:
+        self.spec = spec
+        self.work_dir = Path(work_dir)
+        self.on_progress = on_progress
+        self.on_done = on_done
+        self.result: JobResult | None = None
+        self._proc: subprocess.Popen[str] | None = None
+        self._cancelled = threading.Event()
+        self._finished = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def running(self) -> bool:
+        """True from :meth:`start` until the child has exited and ``on_done`` ran."""
+        return self._thread is not None and not self._finished.is_set()
+
+    def start(self) -> None:
+        """Write the spec and start the child process and its reader thread."""
+        self.work_dir.mkdir(parents=True, exist_ok=True)
+        masks = self.work_dir / "unmeasured.npz"
+        np.savez(masks, **{f"m{i}": np.asarray(m, bool) for i, m in enumerate(self.spec.unmeasured.values())})
+        spec_file = self.work_dir / "job.json"
+        spec_file.write_text(
+            json.dumps(
+                {
+                    "subject_dir": str(self.spec.subject_dir),
+                    "out_dir": str(self.spec.out_dir),
+                    "trials": list(self.spec.trials) if self.spec.trials is not None else None,
+                    "mask_trials": list(self.spec.unmeasured),
+                    "masks": str(masks),
+                }
+            )
+        )
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[2])
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env["PYTHONUNBUFFERED"] = "1"
+        log = open(self.work_dir / "child.log", "w")  # noqa: SIM115 (closed by the reader)
+        self._t0 = time.monotonic()
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "addb_viewer.app.jobs", str(spec_file)],
+            stdout=subprocess.PIPE,
+            stderr=log,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            env=env,
+        )
+        self._thread = threading.Thread(target=self._read, args=(log,), name="addb-solver-job", daemon=True)
+        self._thread.start()
+
+    def cancel(self) -> None:
+        """Stop the child (SIGTERM, then SIGKILL after 3 s). Safe to call at any time."""
+        self._cancelled.set()
+        proc = self._proc
+        if proc is None or proc.poll() is not None:
+            return
+        proc.terminate()
+        try:
+            proc.wait(3.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+    def wait(self, timeout: float | None = None) -> JobResult | None:
+        """Wait until the run has ended and ``on_done`` returned; the result or None."""
+        self._finished.wait(timeout)
+        return self.result
+
+    def cleanup(self) -> None:
+        """Remove the scratch folder (call after the result has been used)."""
+        shutil.rmtree(self.work_dir, ignore_errors=True)
+
+    def _read(self, log: Any) -> None:
+        assert self._proc is not None and self._proc.stdout is not None
+        error: dict[str, Any] | None = None
+        done = False
+        try:
+            for line in self._proc.stdout:
+                if not line.startswith(PREFIX):
+                    continue
+                try:
+                    msg = json.loads(line[len(PREFIX) :])
+                except ValueError:
+                    continue
+                if "progress" in msg:
+                    self._safe_progress(str(msg["progress"]), float(msg.get("fraction", 0.0)))
+                elif msg.get("done"):
+                    done = True
+                elif "error" in msg:
+                    error = dict(msg["error"])
+            code = self._proc.wait()
+        finally:
+            log.close()
+        seconds = time.monotonic() - self._t0
+        if self._cancelled.is_set() and not done:
+            result = JobResult("cancelled", None, seconds)
+        elif done and code == 0:
+            result = JobResult("done", None, seconds)
+        else:
+            if error is None:
+                error = {"type": "SolverCrashed", "message": f"the solver process exited with code {code}; {self._log_tail()}"}
+            result = JobResult("failed", error, seconds)
+        self.result = result
+        try:
+            self.on_done(result)
+        finally:
+            self._finished.set()
+
+    def _safe_progress(self, message: str, fraction: float) -> None:
+        try:
+            self.on_progress(message, min(max(fraction, 0.0), 1.0))
+        except Exception:  # noqa: BLE001 - a display problem must not stop the reader
+            traceback.print_exc()
+
+    def _log_tail(self, n: int = 600) -> str:
+        try:
+            text = (self.work_dir / "child.log").read_text(errors="replace")
+        except OSError:
+            return "no log"
+        return "last output: " + text[-n:].strip() if text.strip() else "no output"
+
+
+def install_trial(job_out: Path, out_dir: Path, trial: str) -> None:
+    """Move ``job_out/<trial>`` into ``out_dir/<trial>``, replacing the old folder.
+
+    Two renames (old aside, new in) and then the old folder is deleted, so ``out_dir``
+    always holds a complete trial folder except for the instant between the renames.
+
+    Raises
+    ------
+    FileNotFoundError
+        The run did not produce that trial.
+    """
+    new = Path(job_out) / trial
+    if not (new / "trial.npz").is_file():
+        raise FileNotFoundError(str(new / "trial.npz"))
+    target = Path(out_dir) / trial
+    old = Path(out_dir) / f".{trial}.old-{uuid.uuid4().hex[:8]}"
+    if target.exists():
+        os.replace(target, old)
+    os.replace(new, target)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def new_work_dir(jobs_dir: Path, label: str) -> Path:
+    """A fresh scratch folder ``jobs_dir/<label>-<time>-<id>`` (not created)."""
+    return Path(jobs_dir) / f"{label}-{time.strftime('%Y%m%d-%H%M%S')}-{uuid.uuid4().hex[:6]}"
+
+
+# ---------------------------------------------------------------------- child process
+def _emit(obj: dict[str, Any]) -> None:
+    sys.stdout.write(PREFIX + json.dumps(obj) + "\n")
+    sys.stdout.flush()
+
+
+def _child(spec_path: str) -> int:
+    try:
+        spec = json.loads(Path(spec_path).read_text())
+        with np.load(spec["masks"]) as data:
+            masks = {t: data[f"m{i}"] for i, t in enumerate(spec["mask_trials"])}
+        from solver.pipeline import ProcessOptions, process_subject
+
+        trials = tuple(spec["trials"]) if spec["trials"] is not None else None
+        _emit({"progress": "loading the subject", "fraction": 0.0})
+        process_subject(
+            spec["subject_dir"],
+            spec["out_dir"],
+            options=ProcessOptions(trials=trials),
+            unmeasured=masks or None,
+            progress=lambda m, f: _emit({"progress": m, "fraction": f}),
+        )
+    except Exception as exc:  # noqa: BLE001 - every failure is reported to the page
+        info = exc.to_dict() if hasattr(exc, "to_dict") else {"type": type(exc).__name__, "message": str(exc)}
+        info["traceback"] = traceback.format_exc(limit=8)
+        _emit({"error": info})
+        return 1
+    _emit({"done": True})
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - run as the child process
+    sys.exit(_child(sys.argv[1]))

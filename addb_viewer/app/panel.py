@@ -1,0 +1,140 @@
+"""The review app's controls: playback, flags, proposals, reprocess, display, export.
+
+Only builds the viser GUI elements and keeps their handles; the behaviour is attached
+by :class:`~addb_viewer.app.server.ReviewApp`. The controls are shared by every browser
+tab (viser's server-wide GUI), so two tabs of one reviewer stay in step.
+
+Keyboard shortcuts go through viser's command palette (:data:`HOTKEYS`). Letters that
+viser's camera also uses (W/A/S/D/Q/E, arrow keys) are avoided.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import viser
+
+from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
+
+#: Command label -> (hotkey, description).
+HOTKEYS: dict[str, tuple[str, str]] = {
+    "Play / pause": ("space", "start or stop playback"),
+    "Previous frame": ("J", "step one frame back"),
+    "Next frame": ("L", "step one frame forward"),
+    "Toggle flag": ("F", "toggle unmeasured force on this frame for the selected foot"),
+    "Set in point": ("I", "mark the start of a range"),
+    "Set out point": ("O", "mark the end of a range"),
+    "Next flagged frame": ("N", "jump to the next flagged range"),
+    "Next frame over Hicks threshold": ("H", "jump to the next range whose residual is too large"),
+    "Undo": ("U", "undo your last edit"),
+}
+
+LEGEND = (
+    "<small>"
+    "<span style='color:rgb(30,150,255)'>●</span> observed marker · "
+    "<span style='color:rgb(255,140,0)'>●</span> model marker · "
+    "<span style='color:rgb(220,20,60)'>—</span> error over threshold<br>"
+    "GRF arrows from the CoP: <span style='color:rgb(40,110,255)'>left</span> / "
+    "<span style='color:rgb(240,60,60)'>right</span> / "
+    "<span style='color:rgb(250,190,0)'>unassigned</span> foot; at the centre of mass: "
+    "<span style='color:rgb(0,160,80)'>measured net GRF</span> vs "
+    "<span style='color:rgb(190,0,190)'>m(a − g) required</span>; "
+    "their mismatch is the residual force.</small>"
+)
+
+
+@dataclass
+class ReviewPanel:
+    """Handles of every control (built by :func:`build_panel`)."""
+
+    status: viser.GuiMarkdownHandle
+    error: viser.GuiMarkdownHandle
+    trial: viser.GuiDropdownHandle
+    frame: viser.GuiSliderHandle
+    transport: viser.GuiButtonGroupHandle
+    speed: viser.GuiSliderHandle
+    loop: viser.GuiCheckboxHandle
+    jump: viser.GuiButtonGroupHandle
+    foot: viser.GuiDropdownHandle
+    toggle_flag: viser.GuiButtonHandle
+    marks: viser.GuiButtonGroupHandle
+    range_info: viser.GuiMarkdownHandle
+    range_flags: viser.GuiButtonGroupHandle
+    proposal_info: viser.GuiMarkdownHandle
+    proposal_here: viser.GuiButtonGroupHandle
+    proposal_all: viser.GuiButtonGroupHandle
+    reviewed: viser.GuiCheckboxHandle
+    history: viser.GuiButtonGroupHandle
+    saved: viser.GuiMarkdownHandle
+    reprocess: viser.GuiButtonHandle
+    cancel: viser.GuiButtonHandle
+    progress: viser.GuiProgressBarHandle
+    job_status: viser.GuiMarkdownHandle
+    comparison: viser.GuiMarkdownHandle
+    show_labels: viser.GuiCheckboxHandle
+    show_markers: viser.GuiCheckboxHandle
+    show_bones: viser.GuiCheckboxHandle
+    show_forces: viser.GuiCheckboxHandle
+    marker_threshold_cm: viser.GuiNumberHandle
+    m_per_bw: viser.GuiNumberHandle
+    plots_folder: viser.GuiFolderHandle
+    record_name: viser.GuiTextHandle
+    record: viser.GuiButtonHandle
+    record_status: viser.GuiMarkdownHandle
+    commands: dict[str, viser.CommandHandle]
+
+
+def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
+    """Add the review controls to ``server``'s GUI (see :class:`ReviewPanel`)."""
+    gui = server.gui
+    gui.configure_theme(
+        titlebar_content=None, control_layout="collapsible", control_width="large",
+        dark_mode=False, show_share_button=False,
+    )
+    gui.set_panel_label(title)
+    h: dict = {}
+    h["status"] = gui.add_markdown("Starting…")
+    h["error"] = gui.add_markdown("", visible=False)
+    with gui.add_folder("Playback"):
+        h["trial"] = gui.add_dropdown("Trial", ("(none)",), initial_value="(none)", disabled=True)
+        h["frame"] = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0, disabled=True)
+        h["transport"] = gui.add_button_group("Step", ("◀ Prev", "Play / Pause", "Next ▶"))
+        h["speed"] = gui.add_slider("Speed (x)", min=SPEED_MIN, max=SPEED_MAX, step=0.1, initial_value=1.0)
+        h["loop"] = gui.add_checkbox("Loop", initial_value=True)
+        h["jump"] = gui.add_button_group("Jump to next", ("Flagged", "Proposal", "Over Hicks"))
+    with gui.add_folder("Flags (unmeasured force)"):
+        h["foot"] = gui.add_dropdown("Foot", ("both", "left", "right"), initial_value="both")
+        h["toggle_flag"] = gui.add_button("Toggle flag at this frame", hint="hotkey F")
+        h["marks"] = gui.add_button_group("Range", ("Set in", "Set out", "Clear marks"))
+        h["range_info"] = gui.add_markdown("Range: no in/out points")
+        h["range_flags"] = gui.add_button_group("Range flags", ("Flag range", "Unflag range"))
+        h["proposal_info"] = gui.add_markdown("Automatic proposals: none")
+        h["proposal_here"] = gui.add_button_group("Proposal here", ("Accept", "Reject"))
+        h["proposal_all"] = gui.add_button_group("All proposals", ("Accept all", "Reject all"))
+        h["reviewed"] = gui.add_checkbox("Trial reviewed", initial_value=False)
+        h["history"] = gui.add_button_group("Edits", ("Undo", "Redo"))
+        h["saved"] = gui.add_markdown("No edits yet.")
+    with gui.add_folder("Reprocess"):
+        h["reprocess"] = gui.add_button("Reprocess", hint="run the solver on this trial with the current flags")
+        h["progress"] = gui.add_progress_bar(0.0, animated=True, visible=False)
+        h["cancel"] = gui.add_button("Cancel", disabled=True, color="red")
+        h["job_status"] = gui.add_markdown("")
+        h["comparison"] = gui.add_markdown("")
+    h["plots_folder"] = gui.add_folder("Plots")
+    with gui.add_folder("Display", expand_by_default=False):
+        h["show_labels"] = gui.add_checkbox("Marker names", initial_value=False)
+        h["show_markers"] = gui.add_checkbox("Markers", initial_value=True)
+        h["show_bones"] = gui.add_checkbox("Bones", initial_value=True)
+        h["show_forces"] = gui.add_checkbox("Forces", initial_value=True)
+        h["marker_threshold_cm"] = gui.add_number("Error line above (cm)", initial_value=2.0, min=0.0, max=100.0, step=0.5)
+        h["m_per_bw"] = gui.add_number("Arrow length of 1 BW (m)", initial_value=1.0, min=0.05, max=5.0, step=0.05)
+        gui.add_markdown(LEGEND)
+    with gui.add_folder("Export", expand_by_default=False):
+        h["record_name"] = gui.add_text("File name", initial_value="trial.rrd")
+        h["record"] = gui.add_button("Record to Rerun")
+        h["record_status"] = gui.add_markdown("")
+    h["commands"] = {
+        label: gui.add_command(label, description=desc, hotkey=key)  # type: ignore[arg-type]
+        for label, (key, desc) in HOTKEYS.items()
+    }
+    return ReviewPanel(**h)

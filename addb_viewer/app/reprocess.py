@@ -1,0 +1,230 @@
+"""Solver runs started from the page (first processing of a subject, Reprocess of a trial)
+and the "Record to Rerun" export, with their progress, cancel and results in the panel.
+
+One run at a time. A Reprocess gives the solver every trial's reviewer flags (frames with
+unmeasured force), writes into a scratch folder beside the output folder and, when it
+succeeds, moves the new trial folder into place and reloads the trial at the same
+frame, then shows the before/after table. A failed or cancelled run leaves the previous
+result on screen and on disk, and says why in the page.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, install_trial, new_work_dir
+from addb_viewer.app.summary import comparison_markdown, trial_summary
+from annotations import AnnotationError, TrialReview
+
+if TYPE_CHECKING:
+    from addb_viewer.app.server import ReviewApp
+
+
+class Reprocessor:
+    """The solver-run controls of a :class:`~addb_viewer.app.server.ReviewApp`."""
+
+    def __init__(self, app: ReviewApp) -> None:
+        self.app = app
+        self.job: SolverJob | None = None
+        self._lock = threading.Lock()
+        self.last_result: JobResult | None = None
+        self.finished = threading.Event()
+
+    @property
+    def running(self) -> bool:
+        """Whether a solver run is in progress."""
+        return self.job is not None and self.job.running
+
+    # ------------------------------------------------------------------ starting
+    def process_subject(self) -> None:
+        """Process the whole subject into the output folder (first start)."""
+        paths = self.app.paths
+        spec = JobSpec(paths.subject_dir, paths.out_dir, None, self._masks())
+        self._start(spec, new_work_dir(paths.jobs_dir, "process"), label="Processing the subject", trial=None)
+
+    def reprocess(self, trial: str | None = None) -> None:
+        """Run the solver on ``trial`` (default: the one shown) with the current flags."""
+        app = self.app
+        name = trial or (app.trial.trial if app.trial is not None else None)
+        if name is None:
+            self._say("No trial to reprocess.")
+            return
+        work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
+        spec = JobSpec(app.paths.subject_dir, work / "out", (name,), self._masks())
+        self._start(spec, work, label=f"Reprocessing {name}", trial=name)
+
+    def _masks(self) -> dict[str, np.ndarray]:
+        """Every trial's unmeasured-force mask whose length the store knows."""
+        store = self.app.store
+        if store is None:
+            return {}
+        out = {}
+        for name in store.trials():
+            rev = store.review(name)
+            if rev.n_frames:
+                try:
+                    out[name] = store.mask(name, rev.n_frames)
+                except AnnotationError as exc:
+                    self.app.show_error(f"Flags of {name} not used", exc)
+        return out
+
+    def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None) -> None:
+        with self._lock:
+            if self.running:
+                self._say("A solver run is already in progress; cancel it first.")
+                return
+            before = trial_summary(self.app.trial) if trial and self.app.trial is not None and self.app.trial.trial == trial else None
+            p = self.app.panel
+            p.progress.value = 0.0
+            p.progress.visible = True
+            p.cancel.disabled = False
+            p.reprocess.disabled = True
+            p.job_status.content = f"{label}: starting…"
+            p.comparison.content = ""
+            self.finished.clear()
+            self.job = SolverJob(
+                spec,
+                work,
+                on_progress=lambda m, f: self._progress(label, m, f),
+                on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work),
+            )
+            self.job.start()
+
+    # ------------------------------------------------------------------ progress / end
+    def _progress(self, label: str, message: str, fraction: float) -> None:
+        p = self.app.panel
+        p.progress.value = round(100.0 * fraction, 1)
+        p.job_status.content = f"{label}: {message} ({100 * fraction:.0f} %)"
+        if self.app.trial is None:
+            self.app.set_status(f"{label}: {message} ({100 * fraction:.0f} %)")
+
+    def _done(self, result: JobResult, *, label: str, trial: str | None, before: dict | None, work: Any) -> None:
+        app, p = self.app, self.app.panel
+        try:
+            if result.status == "done":
+                p.job_status.content = f"{label}: done in {result.seconds:.1f} s."
+                if trial is None:
+                    app.after_processing()
+                else:
+                    self._install(trial, before, work)
+            elif result.status == "cancelled":
+                p.job_status.content = f"{label}: cancelled; the previous result is kept."
+                if trial is None:
+                    app.set_status("Processing was cancelled. Reload the page's server to try again.")
+            else:
+                p.job_status.content = (
+                    f"<span style='color:#c00'>**{label} failed**</span>; the previous result is kept."
+                )
+                app.show_error(f"{label} failed", result.message)
+                if trial is None:
+                    app.set_status("The subject could not be processed (see the error).")
+        except Exception as exc:  # noqa: BLE001 - shown in the page
+            app.show_error(f"{label}: could not use the result", exc)
+        finally:
+            p.progress.visible = False
+            p.cancel.disabled = True
+            p.reprocess.disabled = False
+            self.last_result = result
+            if self.job is not None:
+                self.job.cleanup()
+            self.finished.set()
+            if trial is None:
+                app.ready.set()
+
+    def _install(self, trial: str, before: dict | None, work: Any) -> None:
+        app = self.app
+        install_trial(work / "out", app.paths.out_dir, trial)
+        if trial not in app.trials:
+            app.trials = sorted([*app.trials, trial])
+        showing = app.trial is not None and app.trial.trial == trial
+        if not showing:
+            self._say(f"{trial} was reprocessed; pick it in the trial list to see it.")
+            return
+        frame = app.playback.frame if app.playback is not None else 0
+        app.load_trial(trial, frame=frame)
+        after = trial_summary(app.trial)
+        app.panel.comparison.content = "**Reprocess result**\n\n" + comparison_markdown(before or {}, after)
+
+    def cancel(self, *, wait: bool = False) -> None:
+        """Cancel the running solver (no-op when none); ``wait`` for its end."""
+        job = self.job
+        if job is None:
+            return
+        job.cancel()
+        if wait:
+            job.wait(10.0)
+
+    def _say(self, text: str) -> None:
+        self.app.panel.job_status.content = text
+
+    # ------------------------------------------------------------------ Rerun export
+    def record(self, file_name: str) -> None:
+        """Write the shown trial to ``<recordings>/<file_name>.rrd`` in a background thread."""
+        app = self.app
+        status = app.panel.record_status
+        trial = app.trial
+        if trial is None:
+            status.content = "No trial loaded."
+            return
+        try:
+            from addb_viewer.recording.rerun_writer import write_rerun
+        except ImportError as exc:
+            status.content = (
+                "Recording to Rerun is not available in this installation yet "
+                f"(addb_viewer.recording.rerun_writer: {exc})."
+            )
+            return
+        path = app.paths.recording_file(file_name)  # refuses names leaving the folder
+        review = app.store.review(trial.trial) if app.store is not None else None
+        settings = {
+            "marker_threshold_m": app.settings.marker_threshold_m,
+            "m_per_bw": app.settings.m_per_bw,
+        }
+        status.content = f"Recording {trial.trial} to {path}…"
+
+        def run() -> None:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_rerun(trial, path, annotations=review_dict(review), settings=settings)
+                status.content = f"✓ wrote {path} ({path.stat().st_size / 1e6:.1f} MB)"
+            except Exception as exc:  # noqa: BLE001 - shown in the page
+                status.content = f"<span style='color:#c00'>Recording failed</span>: {exc}"
+                app.show_error("Record to Rerun", exc)
+
+        threading.Thread(target=run, name="addb-record", daemon=True).start()
+
+
+def review_dict(review: TrialReview | None) -> dict[str, Any] | None:
+    """A JSON-ready description of a trial's review record for the recorders.
+
+    Returns
+    -------
+    dict or None
+        ``trial``, ``reviewed``, and for ``unmeasured_force`` / ``excluded`` a list of
+        ``{start, stop, foot, reviewer, timestamp, source}`` runs (half-open frames);
+        ``notes`` as ``{text, start, stop, reviewer, timestamp}``.
+    """
+    if review is None:
+        return None
+
+    def runs(items: Any) -> list[dict[str, Any]]:
+        return [
+            {"start": r.start, "stop": r.stop, "foot": r.foot, "reviewer": r.provenance.reviewer,
+             "timestamp": r.provenance.timestamp, "source": r.provenance.source}
+            for r in items
+        ]
+
+    return {
+        "trial": review.trial,
+        "reviewed": review.reviewed,
+        "unmeasured_force": runs(review.unmeasured_force),
+        "excluded": runs(review.excluded),
+        "notes": [
+            {"text": n.text, "start": n.start, "stop": n.stop, "reviewer": n.provenance.reviewer,
+             "timestamp": n.provenance.timestamp}
+            for n in review.notes
+        ],
+    }

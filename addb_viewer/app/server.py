@@ -1,0 +1,576 @@
+"""The review app: one viser server, one subject, the annotation store, playback.
+
+State lives here (loaded trial, playback, flags view); the scene, plots and panel read
+it. Threads: viser runs GUI callbacks in a thread pool, a playback thread advances the
+frame by the wall clock and polls the store for other writers' edits, and solver runs
+report from their own reader threads (:mod:`~addb_viewer.app.reprocess`). ``_lock``
+guards the state and the scene; store edits (which fsync) run outside it so playback
+never waits for the disk.
+
+Every callback is wrapped so that an exception is shown in the page (and printed on the
+terminal) instead of being lost or stopping the server.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+import viser
+
+from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
+from addb_viewer.app.meshes import body_mesh
+from addb_viewer.app.panel import ReviewPanel, build_panel
+from addb_viewer.app.paths import ReviewPaths, safe_name
+from addb_viewer.app.plots import TrialPlots
+from addb_viewer.app.reprocess import Reprocessor
+from addb_viewer.app.scene import SceneSettings, TrialScene
+from addb_viewer.app.state import Playback, next_run_start
+from addb_viewer.app.summary import hicks_exceeded
+from annotations import AnnotationError, AnnotationStore, Edit
+from solver.results import ProcessedTrial, load_processed, processed_trials
+
+PLOT_INTERVAL_S = 0.25
+"""Least time between two chart cursor updates while playing (they re-send the data)."""
+TICK_S = 1 / 60
+"""Playback thread period (viser sends at most ~60 updates per second anyway)."""
+REFRESH_S = 1.0
+"""How often the store is polled for other writers' edits."""
+
+
+class ReviewApp:
+    """The ``addb view`` server for one subject.
+
+    Parameters
+    ----------
+    paths
+        The subject's folders (:class:`~addb_viewer.app.paths.ReviewPaths`).
+    reviewer
+        Name recorded with every annotation edit.
+    host, port
+        Where to listen (port 0: any free port; viser takes the next port when the one
+        asked for is busy, see :attr:`port`).
+    background
+        Load (and if needed process) the subject in a background thread, so the page is
+        reachable at once; False loads before returning (tests).
+    """
+
+    def __init__(
+        self,
+        paths: ReviewPaths,
+        *,
+        reviewer: str,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        background: bool = True,
+    ) -> None:
+        self.paths = paths
+        self.reviewer = reviewer
+        self.started_at = time.monotonic()
+        self.first_frame_seconds: float | None = None
+        self.ready = threading.Event()
+        self.server = viser.ViserServer(host=host, port=port, label="addb review", verbose=False)
+        self.server.scene.set_up_direction("+y")
+        self.server.scene.configure_default_lights(cast_shadow=False)
+        self.panel: ReviewPanel = build_panel(self.server, title=f"addb · {paths.subject_dir.name}")
+        self.settings = SceneSettings()
+        self._lock = threading.RLock()
+        self._quiet = threading.local()
+        self._stop = threading.Event()
+        self.store: AnnotationStore | None = None
+        self.trials: list[str] = []
+        self.trial: ProcessedTrial | None = None
+        self.scene: TrialScene | None = None
+        self.plots: TrialPlots | None = None
+        self.playback: Playback | None = None
+        self.editor: TrialEditor | None = None
+        self.view: FlagView | None = None
+        self.hicks: np.ndarray | None = None
+        self._last_plot = 0.0
+        self.jobs = Reprocessor(self)
+        self._wire()
+        self._player = threading.Thread(target=self._playback_loop, name="addb-playback", daemon=True)
+        self._player.start()
+        if background:
+            threading.Thread(target=self.startup, name="addb-startup", daemon=True).start()
+        else:
+            self.startup()
+
+    # ================================================================== lifecycle
+    @property
+    def port(self) -> int:
+        """The port the server listens on."""
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        """Address of the page."""
+        host = self.server.get_host()
+        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        return f"http://{shown}:{self.port}"
+
+    def startup(self) -> None:
+        """Open the review record, then show the first processed trial, processing the
+        subject first when it has no output yet. Errors are shown in the page."""
+        try:
+            self._open_store()
+            self.trials = processed_trials(self.paths.out_dir) if self.paths.out_dir.is_dir() else []
+            if self.trials:
+                self._set_trial_options()
+                self.load_trial(_preferred(self.trials))
+            else:
+                self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet: processing…")
+                self.jobs.process_subject()
+        except Exception as exc:  # noqa: BLE001 - shown in the page
+            self.show_error("Could not open the subject", exc)
+        finally:
+            if not self.jobs.running:
+                self.ready.set()
+
+    def after_processing(self) -> None:
+        """Called once the first processing run has written the output folder."""
+        try:
+            self.trials = processed_trials(self.paths.out_dir)
+            if not self.trials:
+                raise FileNotFoundError(f"the solver wrote no trial into {self.paths.out_dir}")
+            self._set_trial_options()
+            self.load_trial(_preferred(self.trials))
+        except Exception as exc:  # noqa: BLE001
+            self.show_error("Could not load the processed subject", exc)
+        finally:
+            self.ready.set()
+
+    def _open_store(self) -> None:
+        self.paths.annotations.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.store = AnnotationStore.open(self.paths.annotations, reviewer=self.reviewer)
+        except AnnotationError as exc:
+            self.store = None
+            self.show_error("The review record cannot be opened; flagging is disabled", exc)
+
+    def stop(self) -> None:
+        """Stop playback, cancel a running solver, close the store, stop the server."""
+        self._stop.set()
+        self.jobs.cancel(wait=True)
+        self._player.join(timeout=2.0)
+        if self.store is not None:
+            with contextlib.suppress(AnnotationError):
+                self.store.close()
+        self.server.stop()
+
+    # ================================================================== loading
+    def _set_trial_options(self) -> None:
+        with self._quiet_updates():
+            self.panel.trial.options = tuple(self.trials)
+            self.panel.trial.disabled = len(self.trials) < 2
+
+    def load_trial(self, name: str, *, frame: int = 0) -> None:
+        """Load ``OUT/<name>`` and show it from ``frame``.
+
+        Raises
+        ------
+        UnsafePathError, FileNotFoundError, ValueError
+            A name that is not a processed trial, or an unreadable trial file.
+        """
+        name = safe_name(name, what="trial name")
+        if name not in self.trials:
+            raise FileNotFoundError(f"trial {name!r} is not processed in {self.paths.out_dir}")
+        trial = load_processed(self.paths.out_dir, name)
+        meshes, problems = {}, []
+        for body, files in trial.body_meshes.items():
+            meshes[body], p = body_mesh(trial.geometry_dir, files) if trial.geometry_dir else (None, [])
+            problems += p
+        editor = self._editor_for(trial)
+        view = editor.view() if editor is not None else None
+        with self._lock:
+            self._drop_trial()
+            self.trial, self.editor, self.view = trial, editor, view
+            self.hicks = hicks_exceeded(trial)
+            self.playback = Playback(trial.n_frames, trial.rate_hz or 100.0, frame=frame)
+            self.scene = TrialScene(self.server, trial, meshes, self.settings)
+            with self.panel.plots_folder:
+                self.plots = TrialPlots(self.server.gui, trial)
+            if view is not None:
+                self.plots.update(flagged=view.flagged, proposed=view.pending)
+            self._sync_controls(name)
+            self._aim_camera(trial)
+            self.render(self.playback.frame, force_plots=True)
+        self.clear_error()
+        if problems:
+            self.show_error("Some bone meshes could not be read (drawn as axes)", "; ".join(problems[:5]))
+        if self.first_frame_seconds is None:
+            self.first_frame_seconds = time.monotonic() - self.started_at
+
+    def _editor_for(self, trial: ProcessedTrial) -> TrialEditor | None:
+        if self.store is None:
+            return None
+        rev = self.store.review(trial.trial)
+        if rev.n_frames != trial.n_frames:
+            try:
+                self.store.set_trial_info(trial.trial, n_frames=trial.n_frames, rate_hz=trial.rate_hz or None)
+            except AnnotationError as exc:
+                self.show_error("The review record does not match this trial's length", exc)
+        return TrialEditor(self.store, trial.trial, trial.proposed, trial.proposal_reasons)
+
+    def _drop_trial(self) -> None:
+        if self.scene is not None:
+            self.scene.remove()
+        if self.plots is not None:
+            self.plots.remove()
+        self.scene = self.plots = None
+
+    def _sync_controls(self, name: str) -> None:
+        p, t = self.panel, self.trial
+        assert t is not None and self.playback is not None
+        with self._quiet_updates():
+            p.trial.value = name
+            p.frame.max = max(t.n_frames - 1, 1)
+            p.frame.value = self.playback.frame
+            p.frame.disabled = False
+            p.speed.value = self.playback.speed
+            p.loop.value = self.playback.loop
+            p.reviewed.value = bool(self.view and self.view.reviewed)
+            p.record_name.value = f"{name}.rrd"
+        self._show_flags_info()
+        self._show_range_info()
+
+    def _aim_camera(self, trial: ProcessedTrial) -> None:
+        pel = trial.body_position[:, 0, :]
+        ok = np.isfinite(pel).all(axis=1)
+        look = np.median(pel[ok], axis=0) if ok.any() else np.array([0.0, 1.0, 0.0])
+        pos = look + np.array([0.0, 0.4, 3.2])
+        cam = self.server.initial_camera
+        cam.look_at, cam.position, cam.up = tuple(look), tuple(pos), (0.0, 1.0, 0.0)
+
+    # ================================================================== drawing
+    def render(self, k: int, *, force_plots: bool = False) -> None:
+        """Show frame ``k``: scene, frame slider, status line, chart cursors. Call with
+        ``_lock`` held."""
+        if self.scene is None or self.playback is None or self.trial is None:
+            return
+        self.scene.show(k, self._banner(k))
+        with self._quiet_updates():
+            self.panel.frame.value = k
+        self.panel.status.content = self._status(k)
+        now = time.monotonic()
+        if self.plots is not None and (force_plots or not self.playback.playing or now - self._last_plot >= PLOT_INTERVAL_S):
+            self.plots.update(frame=k)
+            self._last_plot = now
+
+    def _banner(self, k: int) -> str | None:
+        v = self.view
+        if v is None:
+            return None
+        foot = v.feet[k]
+        if foot is not None:
+            return "UNMEASURED FORCE" + (f" · {foot}" if foot else "")
+        if v.pending[k]:
+            return "proposed: unmeasured force"
+        return None
+
+    def _status(self, k: int) -> str:
+        t, pb = self.trial, self.playback
+        assert t is not None and pb is not None
+        flag = describe_frame(self.view, k, t.proposal_reasons) if self.view is not None else "flags unavailable"
+        rms = t.marker_rms_per_frame[k] if t.n_frames else np.nan
+        parts = [
+            f"**{t.subject}** · **{t.trial}** · frame {k} / {t.n_frames - 1} · t = {t.time[k]:.2f} s",
+            f"marker RMS {100 * rms:.1f} cm" if np.isfinite(rms) else "no markers seen",
+        ]
+        if t.has_dynamics:
+            f = float(np.linalg.norm(t.residual_force[k]))
+            m = float(np.linalg.norm(t.residual_moment[k]))
+            over = " · **over Hicks**" if self.hicks is not None and self.hicks[k] else ""
+            parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
+        else:
+            parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")
+        return " · ".join(parts[:2]) + "<br>" + parts[2] + "<br>" + flag
+
+    def set_status(self, text: str) -> None:
+        """Replace the status line at the top of the panel."""
+        self.panel.status.content = text
+
+    def show_error(self, context: str, exc: BaseException | str) -> None:
+        """Show an error in the page and on the terminal (with the traceback of an
+        unexpected exception)."""
+        text = str(exc) if str(exc) else type(exc).__name__
+        self.panel.error.content = f"<span style='color:#c00'>**{context}**</span><br>{_escape(text)}"
+        self.panel.error.visible = True
+        print(f"addb view: {context}: {text}", file=sys.stderr, flush=True)
+        if isinstance(exc, BaseException) and not isinstance(exc, AnnotationError | FileNotFoundError) and not hasattr(exc, "to_dict"):
+            traceback.print_exception(exc, file=sys.stderr)
+
+    def clear_error(self) -> None:
+        """Hide the error area."""
+        self.panel.error.visible = False
+        self.panel.error.content = ""
+
+    # ================================================================== playback
+    def _playback_loop(self) -> None:
+        last_refresh = time.monotonic()
+        while not self._stop.wait(TICK_S):
+            now = time.monotonic()
+            try:
+                with self._lock:
+                    pb, sc = self.playback, self.scene
+                    if pb is not None and sc is not None and pb.playing:
+                        k = pb.tick(now)
+                        if k != sc.frame or not pb.playing:
+                            self.render(k, force_plots=not pb.playing)
+                if now - last_refresh >= REFRESH_S:
+                    last_refresh = now
+                    if self.store is not None and self.editor is not None and self.store.refresh():
+                        self.refresh_flags()
+            except Exception as exc:  # noqa: BLE001 - keep playing whatever happens
+                self.show_error("Playback", exc)
+
+    def seek(self, frame: int) -> None:
+        """Go to ``frame`` (clamped)."""
+        with self._lock:
+            if self.playback is not None:
+                self.render(self.playback.seek(frame, time.monotonic()), force_plots=True)
+
+    def step(self, delta: int) -> None:
+        """Pause and move ``delta`` frames."""
+        with self._lock:
+            if self.playback is not None:
+                self.render(self.playback.step(delta, time.monotonic()), force_plots=True)
+
+    def toggle_play(self) -> None:
+        """Play or pause."""
+        with self._lock:
+            if self.playback is not None:
+                playing = self.playback.toggle(time.monotonic())
+                if not playing:
+                    self.render(self.playback.frame, force_plots=True)
+
+    def jump(self, what: str) -> None:
+        """Go to the next run of flagged frames ("Flagged"), pending proposals
+        ("Proposal") or frames over a Hicks threshold ("Over Hicks")."""
+        with self._lock:
+            if self.playback is None or self.trial is None:
+                return
+            v = self.view
+            masks = {
+                "Flagged": v.flagged if v is not None else None,
+                "Proposal": v.pending if v is not None else None,
+                "Over Hicks": self.hicks,
+            }
+            mask = masks.get(what)
+            target = None if mask is None else next_run_start(mask, self.playback.frame)
+        if target is None:
+            self.panel.saved.content = f"No {what.lower()} frames in this trial."
+            return
+        with self._lock:
+            self.playback.pause(time.monotonic())
+        self.seek(target)
+
+    # ================================================================== flags
+    def edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
+        """Run one store edit on the current trial and frame; say "saved" once it is durable."""
+        with self._lock:
+            editor, pb = self.editor, self.playback
+            frame = pb.frame if pb is not None else 0
+        if editor is None:
+            self.panel.saved.content = "Flagging is unavailable (no trial or no review record)."
+            return
+        self.panel.saved.content = f"saving: {what}…"
+        try:
+            result = action(editor, frame, self.panel.foot.value)
+        except AnnotationError as exc:
+            self.panel.saved.content = f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}"
+            return
+        edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
+        if not edits:
+            self.panel.saved.content = f"Nothing to do: {what}."
+        else:
+            e = edits[-1]
+            when = datetime.now().strftime("%H:%M:%S")
+            self.panel.saved.content = f"✓ saved: {what} — {e.provenance.reviewer}, edit #{e.seq}, {when}"
+        self.refresh_flags()
+
+    def refresh_flags(self) -> None:
+        """Re-read the trial's flags from the store and redraw what shows them."""
+        editor = self.editor
+        if editor is None:
+            return
+        view = editor.view()
+        with self._lock:
+            if self.editor is not editor:
+                return
+            self.view = view
+            if self.plots is not None:
+                self.plots.update(flagged=view.flagged, proposed=view.pending)
+                self._last_plot = time.monotonic()
+            with self._quiet_updates():
+                self.panel.reviewed.value = view.reviewed
+            self._show_flags_info()
+            if self.playback is not None:
+                self.render(self.playback.frame)
+
+    def _show_flags_info(self) -> None:
+        v = self.view
+        if v is None:
+            self.panel.proposal_info.content = "Flags unavailable."
+            return
+        n_prop = int(v.proposed.sum())
+        text = (
+            f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right). "
+            f"Automatic proposals: {n_prop} frames"
+        )
+        if n_prop:
+            text += f" — {int(v.pending.sum())} pending, {int((v.proposed & v.accepted).sum())} accepted, {int(v.rejected.sum())} rejected"
+        if v.beyond:
+            text += f". {v.beyond} flagged frames lie past the end of this trial."
+        self.panel.proposal_info.content = text
+
+    def mark(self, what: str) -> None:
+        """"Set in", "Set out" or "Clear marks" at the current frame."""
+        with self._lock:
+            pb = self.playback
+            if pb is None:
+                return
+            {"Set in": pb.mark_in, "Set out": pb.mark_out, "Clear marks": pb.clear_marks}[what]()
+        self._show_range_info()
+
+    def _show_range_info(self) -> None:
+        pb = self.playback
+        sel = pb.selection() if pb is not None else None
+        if sel is None:
+            self.panel.range_info.content = "Range: no in/out points (press I / O)"
+        else:
+            self.panel.range_info.content = f"Range: frames {sel[0]}–{sel[1] - 1} ({sel[1] - sel[0]} frames)"
+
+    def range_edit(self, what: str) -> None:
+        """"Flag range" (for the selected foot) or "Unflag range" over the in/out points."""
+        pb = self.playback
+        sel = pb.selection() if pb is not None else None
+        if sel is None:
+            self.panel.saved.content = "Set an in point and an out point first (I / O)."
+            return
+        s, e = sel
+        if what == "Flag range":
+            self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
+        else:
+            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
+
+    def history(self, what: str) -> None:
+        """"Undo" or "Redo" this session's last edit."""
+        if self.store is None:
+            return
+        step = self.store.undo if what == "Undo" else self.store.redo
+        self.edit(what.lower(), lambda _ed, _k, _f: step())
+
+    # ================================================================== GUI wiring
+    @contextlib.contextmanager
+    def _quiet_updates(self) -> Iterator[None]:
+        """Set GUI values from Python without running their on_update handlers (viser
+        calls them synchronously in the setting thread)."""
+        prev = getattr(self._quiet, "on", False)
+        self._quiet.on = True
+        try:
+            yield
+        finally:
+            self._quiet.on = prev
+
+    def _guard(self, context: str, fn: Callable[..., Any]) -> Callable[[Any], None]:
+        def handler(event: Any) -> None:
+            if getattr(self._quiet, "on", False):
+                return
+            try:
+                fn(event)
+            except Exception as exc:  # noqa: BLE001 - shown in the page
+                self.show_error(context, exc)
+
+        return handler
+
+    def _wire(self) -> None:
+        p = self.panel
+        on = self._guard
+        p.trial.on_update(on("Trial", lambda e: self.load_trial(e.target.value)))
+        p.frame.on_update(on("Seek", lambda e: self.seek(int(e.target.value))))
+        p.transport.on_click(on("Playback", lambda e: self._transport(e.target.value)))
+        p.speed.on_update(on("Speed", lambda e: self._with_playback(lambda pb: pb.set_speed(e.target.value, time.monotonic()))))
+        p.loop.on_update(on("Loop", lambda e: self._with_playback(lambda pb: setattr(pb, "loop", bool(e.target.value)))))
+        p.jump.on_click(on("Jump", lambda e: self.jump(e.target.value)))
+        p.toggle_flag.on_click(on("Flag", lambda e: self.toggle_flag()))
+        p.marks.on_click(on("Range", lambda e: self.mark(e.target.value)))
+        p.range_flags.on_click(on("Range flags", lambda e: self.range_edit(e.target.value)))
+        p.proposal_here.on_click(on("Proposal", lambda e: self._proposal(e.target.value, here=True)))
+        p.proposal_all.on_click(on("Proposals", lambda e: self._proposal(e.target.value, here=False)))
+        p.reviewed.on_update(on("Reviewed", lambda e: self.edit(
+            "trial reviewed" if e.target.value else "trial not reviewed",
+            lambda ed, _k, _f: ed.set_reviewed(bool(e.target.value)))))
+        p.history.on_click(on("Undo", lambda e: self.history(e.target.value)))
+        p.reprocess.on_click(on("Reprocess", lambda e: self.jobs.reprocess()))
+        p.cancel.on_click(on("Cancel", lambda e: self.jobs.cancel()))
+        for h in (p.show_labels, p.show_markers, p.show_bones, p.show_forces, p.marker_threshold_cm, p.m_per_bw):
+            h.on_update(on("Display", lambda e: self._apply_display()))
+        p.record.on_click(on("Record to Rerun", lambda e: self.jobs.record(p.record_name.value)))
+        commands: dict[str, Callable[[], None]] = {
+            "Play / pause": self.toggle_play,
+            "Previous frame": lambda: self.step(-1),
+            "Next frame": lambda: self.step(1),
+            "Toggle flag": self.toggle_flag,
+            "Set in point": lambda: self.mark("Set in"),
+            "Set out point": lambda: self.mark("Set out"),
+            "Next flagged frame": lambda: self.jump("Flagged"),
+            "Next frame over Hicks threshold": lambda: self.jump("Over Hicks"),
+            "Undo": lambda: self.history("Undo"),
+        }
+        for label, cmd in commands.items():
+            p.commands[label].on_trigger(on(label, lambda _e, cmd=cmd: cmd()))
+
+    def _transport(self, what: str) -> None:
+        if what.startswith("◀"):
+            self.step(-1)
+        elif what.startswith("Next"):
+            self.step(1)
+        else:
+            self.toggle_play()
+
+    def _with_playback(self, fn: Callable[[Playback], Any]) -> None:
+        with self._lock:
+            if self.playback is not None:
+                fn(self.playback)
+
+    def toggle_flag(self) -> None:
+        """Toggle the selected foot's flag on the current frame."""
+        self.edit("toggle flag", lambda ed, k, foot: ed.toggle(k, foot))
+
+    def _proposal(self, what: str, *, here: bool) -> None:
+        accept = what.startswith("Accept")
+        scope = "here" if here else "all"
+        self.edit(
+            f"{'accept' if accept else 'reject'} proposal ({scope})",
+            lambda ed, k, _f: (ed.accept if accept else ed.reject)(k if here else None),
+        )
+
+    def _apply_display(self) -> None:
+        p, s = self.panel, self.settings
+        with self._lock:
+            s.show_labels = bool(p.show_labels.value)
+            s.show_markers = bool(p.show_markers.value)
+            s.show_bones = bool(p.show_bones.value)
+            s.show_forces = bool(p.show_forces.value)
+            s.marker_threshold_m = max(float(p.marker_threshold_cm.value), 0.0) / 100.0
+            s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
+            if self.playback is not None:
+                self.render(self.playback.frame)
+
+
+def _preferred(trials: list[str]) -> str:
+    """The trial to open first: the first that is not a static trial, if any."""
+    moving = [t for t in trials if "static" not in t.lower()]
+    return (moving or trials)[0]
+
+
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")

@@ -1,0 +1,68 @@
+"""``addb view [SUBJECT_DIR]``: review a subject in the browser (default: the bundled demo).
+
+Prints the page's address, then serves until Ctrl-C (or SIGTERM). A subject without
+processed output is processed first, with the progress in the page; a subject that
+fails to load shows the error in the page and on the terminal, and the server keeps
+running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import os
+import signal
+import sys
+import threading
+from pathlib import Path
+
+
+def default_reviewer() -> str:
+    """``$ADDB_REVIEWER``, else the login name, else "reviewer"."""
+    name = os.environ.get("ADDB_REVIEWER", "").strip()
+    if name:
+        return name
+    try:
+        return getpass.getuser() or "reviewer"
+    except (OSError, KeyError):
+        return "reviewer"
+
+
+def run(args: argparse.Namespace) -> int:
+    from addb_viewer.app.paths import ReviewPaths
+    from addb_viewer.app.server import ReviewApp
+
+    subject = Path(args.subject) if args.subject else None
+    if subject is None:
+        from addb_viewer.demo import DEMO_SUBJECT
+
+        subject = DEMO_SUBJECT
+    if not subject.is_dir():
+        print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
+        return 1
+    paths = ReviewPaths.for_subject(subject, args.out)
+    app = ReviewApp(paths, reviewer=args.reviewer or default_reviewer(), host=args.host, port=args.port)
+    print(f"addb view: {paths.subject_dir.name} at {app.url}  (output {paths.out_dir}; Ctrl-C to stop)", flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        if app.ready.wait(timeout=None if args.ready_timeout <= 0 else args.ready_timeout) and app.first_frame_seconds is not None:
+            print(f"addb view: first frame shown {app.first_frame_seconds:.2f} s after start", flush=True)
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("view", help="review a subject in the browser: replay, flag frames, reprocess")
+    p.add_argument("subject", nargs="?", help="AddBiomechanics subject folder (default: the bundled demo subject)")
+    p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080; the next free one if busy; 0: any)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, this machine only)")
+    p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")
+    p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo)")
+    p.add_argument("--ready-timeout", type=float, default=0, help=argparse.SUPPRESS)
+    p.set_defaults(handler=run)

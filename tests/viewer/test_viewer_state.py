@@ -1,0 +1,90 @@
+"""Playback controller (addb_viewer.app.state): wall-clock playback, stepping, loop,
+speed limits, in/out points, jumps to runs of a mask. No server."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from addb_viewer.app.state import SPEED_MAX, SPEED_MIN, Playback, next_run_start, run_at
+
+
+def test_playback_follows_the_wall_clock_and_speed() -> None:
+    pb = Playback(n_frames=500, rate_hz=100.0)
+    pb.play(now=10.0)
+    assert pb.tick(10.5) == 50  # 0.5 s at 100 Hz
+    pb.set_speed(0.5, now=10.5)
+    assert pb.tick(11.5) == 100  # one more second at half speed
+    pb.pause(now=11.5)
+    assert pb.tick(20.0) == 100 and not pb.playing
+
+
+def test_speed_is_limited_to_the_documented_range() -> None:
+    pb = Playback(n_frames=10, rate_hz=100.0)
+    assert pb.set_speed(10.0, now=0.0) == SPEED_MAX
+    assert pb.set_speed(0.0, now=0.0) == SPEED_MIN
+    assert pb.set_speed(float("nan"), now=0.0) == 1.0
+
+
+def test_loop_wraps_and_no_loop_stops_on_the_last_frame() -> None:
+    pb = Playback(n_frames=100, rate_hz=100.0, loop=True)
+    pb.play(now=0.0)
+    assert pb.tick(1.25) == 25 and pb.playing
+    pb = Playback(n_frames=100, rate_hz=100.0, loop=False)
+    pb.play(now=0.0)
+    assert pb.tick(5.0) == 99 and not pb.playing
+    pb.play(now=6.0)  # playing again from the end restarts
+    assert pb.frame == 0 and pb.playing
+
+
+def test_step_pauses_clamps_or_wraps() -> None:
+    pb = Playback(n_frames=10, rate_hz=50.0, loop=False)
+    pb.play(now=0.0)
+    assert pb.step(1, now=0.0) == 1 and not pb.playing
+    assert pb.step(-5, now=0.0) == 0
+    pb.loop = True
+    assert pb.step(-1, now=0.0) == 9
+    assert pb.seek(1000, now=0.0) == 9 and pb.seek(-3, now=0.0) == 0
+
+
+def test_seek_while_playing_continues_from_the_new_frame() -> None:
+    pb = Playback(n_frames=1000, rate_hz=100.0)
+    pb.play(now=0.0)
+    pb.seek(500, now=2.0)
+    assert pb.tick(2.1) == 510
+
+
+def test_in_out_points_give_a_half_open_range_in_either_order() -> None:
+    pb = Playback(n_frames=100, rate_hz=100.0)
+    assert pb.selection() is None
+    pb.seek(40, now=0.0)
+    pb.mark_in()
+    assert pb.selection() == (40, 41)
+    pb.mark_out(12)
+    assert pb.selection() == (12, 41)
+    pb.clear_marks()
+    assert pb.selection() is None
+
+
+def test_bad_trial_sizes_are_refused() -> None:
+    with pytest.raises(ValueError, match="at least one frame"):
+        Playback(n_frames=0, rate_hz=100.0)
+    with pytest.raises(ValueError, match="frame rate"):
+        Playback(n_frames=5, rate_hz=0.0)
+
+
+def test_next_run_start_visits_each_run_and_wraps() -> None:
+    m = np.zeros(20, bool)
+    m[3:6] = m[10:12] = True
+    assert next_run_start(m, 0) == 3
+    assert next_run_start(m, 4) == 10  # inside a run: go to the next one
+    assert next_run_start(m, 11) == 3  # wraps
+    assert next_run_start(m, 11, wrap=False) is None
+    assert next_run_start(np.zeros(5, bool), 0) is None
+
+
+def test_run_at() -> None:
+    m = np.array([0, 1, 1, 1, 0, 1], bool)
+    assert run_at(m, 2) == (1, 4)
+    assert run_at(m, 5) == (5, 6)
+    assert run_at(m, 0) is None and run_at(m, 9) is None
