@@ -50,7 +50,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 from numpy.typing import NDArray
@@ -254,15 +254,24 @@ class McapRecording:
         with self._reading("decoding the metadata records"):
             self.info: dict[str, Any] = json.loads(meta[META_INFO]["info"])
             self.time = np.array(json.loads(meta[META_FRAMES]["time_s"]), dtype=np.float64)
-            self.log_time_ns = np.array(json.loads(meta[META_FRAMES]["log_time_ns"]), dtype=np.int64)
-        if self.info.get("format") != RECORDING_FORMAT or self.info.get("version") != RECORDING_VERSION:
+            self.log_time_ns = np.array(
+                json.loads(meta[META_FRAMES]["log_time_ns"]), dtype=np.int64
+            )
+        if (
+            self.info.get("format") != RECORDING_FORMAT
+            or self.info.get("version") != RECORDING_VERSION
+        ):
             raise McapFormatError(
                 f"expected format {RECORDING_FORMAT!r} version {RECORDING_VERSION}, found "
                 f"{self.info.get('format')!r} version {self.info.get('version')!r}",
                 path=path,
             )
-        if self.time.shape != self.log_time_ns.shape or self.time.size != int(self.info["n_frames"]):
-            raise McapFormatError("frame table does not match n_frames", path=path, where=META_FRAMES)
+        if self.time.shape != self.log_time_ns.shape or self.time.size != int(
+            self.info["n_frames"]
+        ):
+            raise McapFormatError(
+                "frame table does not match n_frames", path=path, where=META_FRAMES
+            )
         self._channels = {cid: (ch.topic, ch.metadata) for cid, ch in summary.channels.items()}
 
     # ------------------------------------------------------------------ basics
@@ -280,7 +289,7 @@ class McapRecording:
         """Close the file."""
         self._stream.close()
 
-    def __enter__(self) -> McapRecording:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -296,10 +305,21 @@ class McapRecording:
             yield
         except McapFormatError:
             raise
-        except (McapError, zstandard.ZstdError, struct.error, EOFError, ValueError, KeyError,
-                IndexError, TypeError, zlib.error) as exc:
+        except (
+            McapError,
+            zstandard.ZstdError,
+            struct.error,
+            EOFError,
+            ValueError,
+            KeyError,
+            IndexError,
+            TypeError,
+            zlib.error,
+        ) as exc:
             detail = str(exc) or type(exc).__name__
-            raise McapFormatError(f"damaged file while {what}: {type(exc).__name__}: {detail}", path=self.path) from exc
+            raise McapFormatError(
+                f"damaged file while {what}: {type(exc).__name__}: {detail}", path=self.path
+            ) from exc
 
     def _check_summary_crc(self) -> None:
         """Check the magic at both ends and the footer's summary CRC (the library does not)."""
@@ -309,18 +329,26 @@ class McapRecording:
             raise McapFormatError(f"file too short for an MCAP file ({size} bytes)", path=self.path)
         s.seek(size - len(_MAGIC) - _FOOTER_LEN)
         tail = s.read(_FOOTER_LEN + len(_MAGIC))
-        if tail[-len(_MAGIC):] != _MAGIC or tail[0] != 0x02:
-            raise McapFormatError("no MCAP footer at the end of the file (truncated?)", path=self.path)
+        if tail[-len(_MAGIC) :] != _MAGIC or tail[0] != 0x02:
+            raise McapFormatError(
+                "no MCAP footer at the end of the file (truncated?)", path=self.path
+            )
         summary_start, _, crc = struct.unpack("<QQI", tail[9:_FOOTER_LEN])
         if crc and summary_start:
             end = size - len(_MAGIC) - 4
             if not 0 < summary_start < end:
-                raise McapFormatError(f"footer points outside the file (summary at {summary_start})", path=self.path)
+                raise McapFormatError(
+                    f"footer points outside the file (summary at {summary_start})", path=self.path
+                )
             s.seek(summary_start)
             if zlib.crc32(s.read(end - summary_start)) != crc:
-                raise McapFormatError("summary section checksum mismatch (damaged index)", path=self.path)
+                raise McapFormatError(
+                    "summary section checksum mismatch (damaged index)", path=self.path
+                )
 
-    def _decode(self, frames: _Frames, channel_id: int, log_time: int, data: bytes, k: int | None) -> None:
+    def _decode(
+        self, frames: _Frames, channel_id: int, log_time: int, data: bytes, k: int | None
+    ) -> None:
         topic, meta = self._channels[channel_id]
         plate = int(meta["plate_index"]) if "plate_index" in meta else None
         if topic in (TOPIC_SCENE, TOPIC_ANNOTATIONS):
@@ -332,11 +360,15 @@ class McapRecording:
         else:
             frame = int(msg["frame"])
         if not 0 <= frame < self.n_frames or (k is not None and frame != k):
-            raise McapFormatError(f"message of frame {frame} at an unexpected log time {log_time}", path=self.path, where=topic)
+            raise McapFormatError(
+                f"message of frame {frame} at an unexpected log time {log_time}",
+                path=self.path,
+                where=topic,
+            )
         frames.add(topic, plate, frame if k is None else 0, msg)
-        frames.seen.setdefault(topic + ("" if plate is None else f"#{plate}"), np.zeros(frames.a["time"].size, bool))[
-            frame if k is None else 0
-        ] = True
+        frames.seen.setdefault(
+            topic + ("" if plate is None else f"#{plate}"), np.zeros(frames.a["time"].size, bool)
+        )[frame if k is None else 0] = True
 
     def _expected_channels(self) -> set[str]:
         out = set()
@@ -351,7 +383,11 @@ class McapRecording:
             seen = frames.seen.get(key)
             missing = frames.a["time"].size if seen is None else int((~seen).sum())
             if missing:
-                raise McapFormatError(f"{what}: {missing} frame(s) missing on channel", path=self.path, where=key.split("#")[0])
+                raise McapFormatError(
+                    f"{what}: {missing} frame(s) missing on channel",
+                    path=self.path,
+                    where=key.split("#")[0],
+                )
 
     # ------------------------------------------------------------------ reading
     def frame(self, k: int) -> McapFrame:
@@ -371,7 +407,9 @@ class McapRecording:
         t = int(self.log_time_ns[k])
         frames = _Frames(self.info, 1)
         with self._reading(f"reading frame {k}"):
-            for _, channel, message in self._reader.iter_messages(starting_at=t, ending_before=t + 1):
+            for _, channel, message in self._reader.iter_messages(
+                starting_at=t, ending_before=t + 1
+            ):
                 self._decode(frames, channel.id, message.log_time, message.data, k)
         self._check_complete(frames, f"frame {k}")
         row = {name: v[0] for name, v in frames.a.items()}
@@ -423,7 +461,9 @@ class McapRecording:
                 force=a["plate_force"][:, i].copy(),
                 cop=a["plate_cop"][:, i].copy(),
                 free_moment=a["plate_free_moment"][:, i].copy(),
-                corners=None if p.get("corners") is None else np.array(p["corners"], dtype=np.float64),
+                corners=None
+                if p.get("corners") is None
+                else np.array(p["corners"], dtype=np.float64),
                 body=a["plate_body"][:, i].copy(),
             )
             for i, p in enumerate(info["plates"])
@@ -475,7 +515,8 @@ def open_recording(path: str | os.PathLike[str]) -> McapRecording:
         Not an MCAP file, truncated, damaged summary, or not an addb recording.
     """
     p = Path(path)
-    stream = open(p, "rb")  # noqa: SIM115 - closed by McapRecording.close
+    # closed by McapRecording.close
+    stream = open(p, "rb")  # noqa: SIM115
     try:
         return McapRecording(p, stream)
     except BaseException:

@@ -22,7 +22,10 @@ def test_demo_goes_to_user_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     out = default_output_dir(DEMO_SUBJECT)
     assert out.parent == tmp_path / "cache" / "addb"
-    assert out.name.startswith("rajagopal2016_walk-") and len(out.name) == len("rajagopal2016_walk-") + 8
+    assert (
+        out.name.startswith("rajagopal2016_walk-")
+        and len(out.name) == len("rajagopal2016_walk-") + 8
+    )
     ann = annotations_path(DEMO_SUBJECT, out)
     # beside the output folder, never inside it (the pipeline replaces that folder)
     assert ann.parent == out.parent and not ann.is_relative_to(out)
