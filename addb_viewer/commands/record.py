@@ -1,0 +1,36 @@
+"""``addb record SUBJECT_DIR --trial NAME -o FILE.rrd``: a Rerun recording, no viewer."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def run(args: argparse.Namespace) -> int:
+    from addb_viewer.progress import ProgressBar
+    from addb_viewer.recording.jobs import record_subject_trial
+
+    path = record_subject_trial(
+        args.subject, args.trial, args.output, fmt="rrd", out_dir=args.out, progress=ProgressBar()
+    )
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB); open it with: rerun {path}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "record",
+        help="write a Rerun recording (.rrd) of a processed trial: 3D scene, residuals, GRF, torques",
+        description=(
+            "Write a Rerun recording of one trial (markers, skeleton, GRF arrows, centre of mass, "
+            "residuals, GRF, joint torques, marker RMS, flags; solver settings and review state) "
+            "with a ready-made layout. The subject is processed first if it has no output yet."
+        ),
+    )
+    p.add_argument("subject", help="AddBiomechanics subject folder")
+    p.add_argument("--trial", required=True, help="trial name")
+    p.add_argument("-o", "--output", required=True, help="the .rrd file to write")
+    p.add_argument(
+        "--out",
+        help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
+    )
+    p.set_defaults(handler=run)

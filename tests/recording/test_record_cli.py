@@ -1,0 +1,150 @@
+"""``addb record`` and ``addb export`` through ``addb_viewer.cli.main``."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from addb_viewer.cli import main
+from addb_viewer.demo import DEMO_SUBJECT
+from addb_viewer.locations import annotations_path
+from annotations import AnnotationStore
+from solver.io.mcap_file import open_recording
+from solver.results import load_processed
+
+
+def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "record" in out and "export" in out
+
+
+def test_record_writes_a_readable_rrd(
+    tmp_path: Path, demo_out: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out_file = tmp_path / "walk.rrd"
+    assert (
+        main(
+            [
+                "record",
+                str(DEMO_SUBJECT),
+                "--trial",
+                "walk",
+                "-o",
+                str(out_file),
+                "--out",
+                str(demo_out),
+            ]
+        )
+        == 0
+    )
+    assert f"wrote {out_file}" in capsys.readouterr().out
+    reader = RrdReader(out_file)
+    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+
+
+def test_export_mcap_round_trips(tmp_path: Path, demo_out: Path) -> None:
+    out_file = tmp_path / "walk.mcap"
+    argv = ["export", str(DEMO_SUBJECT), "--trial", "walk", "--format", "mcap", "-o", str(out_file)]
+    assert main([*argv, "--out", str(demo_out)]) == 0
+    trial = load_processed(demo_out, "walk")
+    with open_recording(out_file) as rec:
+        np.testing.assert_array_equal(rec.to_arrays()["observed"], trial.observed)
+
+
+def test_export_format_from_suffix(tmp_path: Path, demo_out: Path) -> None:
+    out_file = tmp_path / "walk.rrd"
+    assert (
+        main(
+            [
+                "export",
+                str(DEMO_SUBJECT),
+                "--trial",
+                "walk",
+                "-o",
+                str(out_file),
+                "--out",
+                str(demo_out),
+            ]
+        )
+        == 0
+    )
+    assert len(RrdReader(out_file).recordings()) == 1
+
+
+def test_unknown_trial_is_a_clear_error(
+    tmp_path: Path, demo_out: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "export",
+        str(DEMO_SUBJECT),
+        "--trial",
+        "run",
+        "-o",
+        str(tmp_path / "x.mcap"),
+        "--out",
+        str(demo_out),
+    ]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "no processed trial 'run'" in err and "static, walk" in err
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_missing_subject_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "record",
+        str(tmp_path / "nope"),
+        "--trial",
+        "walk",
+        "-o",
+        str(tmp_path / "x.rrd"),
+        "--out",
+        str(tmp_path / "o"),
+    ]
+    assert main(argv) == 1
+    assert "nope" in capsys.readouterr().err
+
+
+def test_default_output_and_review_record(
+    tmp_path: Path, demo_out: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A writable subject without --out: processed into <subject>/addb_out (the processing
+    is stubbed with a copy of the session's output), and its review record is recorded."""
+    import solver.pipeline
+
+    subject = tmp_path / "s01"
+    shutil.copytree(DEMO_SUBJECT, subject)
+    calls = []
+
+    def fake_process(subject_dir: Path, out_dir: Path, **kw: object) -> None:
+        calls.append((Path(subject_dir), Path(out_dir)))
+        shutil.copytree(demo_out, out_dir)
+
+    monkeypatch.setattr(solver.pipeline, "process_subject", fake_process)
+    with AnnotationStore.open(
+        annotations_path(subject, subject / "addb_out"), reviewer="ana"
+    ) as store:
+        store.set_unmeasured("walk", range(40, 55), foot="left")
+    out_file = tmp_path / "walk.mcap"
+    assert main(["export", str(subject), "--trial", "walk", "-o", str(out_file)]) == 0
+    assert calls == [(subject, subject.resolve() / "addb_out")]
+    with open_recording(out_file) as rec:
+        state = rec.annotations()["state"]
+    (run,) = state["unmeasured_force"]
+    assert (run["start"], run["stop"], run["foot"], run["provenance"]["reviewer"]) == (
+        40,
+        55,
+        "left",
+        "ana",
+    )
+    # second call: already processed, not processed again
+    assert main(["record", str(subject), "--trial", "walk", "-o", str(tmp_path / "walk.rrd")]) == 0
+    assert len(calls) == 1
