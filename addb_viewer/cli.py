@@ -42,8 +42,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """Warnings from the readers are messages for the user: one line, no source excerpt."""
+    print(f"addb: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``addb`` console script; returns the process exit code."""
+    import warnings
+
+    warnings.showwarning = _show_warning
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Handler | None = getattr(args, "handler", None)
@@ -55,6 +63,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AddbError as exc:
         print(f"addb {args.command}: {exc}", file=sys.stderr)
         return 1
+    except Exception as exc:
+        if type(exc).__name__ in ("AnnotationError", "AnnotationFileError"):  # annotations' own errors
+            print(f"addb {args.command}: {exc}", file=sys.stderr)
+            return 1
+        raise
     except FileNotFoundError as exc:
         print(f"addb {args.command}: no such file or folder: {exc.filename}", file=sys.stderr)
         return 1

@@ -1,0 +1,215 @@
+"""``addb process`` end to end on the real subjects: outputs, residual quality, OpenSim
+reproduction, the Camargo circuit with steps off the plates, and bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.errors import DynamicsError, SubjectFolderError
+from solver.io.mot import read_table
+from solver.pipeline import process_subject
+from solver.results import load_processed
+from tests.conftest import SHARED_DATA
+
+REPO = Path(__file__).resolve().parents[2]
+SUBJECTS = SHARED_DATA / "subjects"
+OPENSIM_WALK = {"linear_BW": 0.090, "angular_BWh": 0.032}  # shared/oracles/README.md
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def walk_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("walk") / "out"
+    assert cli(["process", str(SUBJECTS / "rajagopal2016_walk"), "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def opencap_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("opencap") / "out"
+    process_subject(SUBJECTS / "opencap_uhlrich2023", out)
+    return out
+
+
+def _results(out: Path, trial: str) -> dict:
+    return json.loads((out / trial / "results.json").read_text())
+
+
+def test_walk_writes_every_output_with_the_required_keys(walk_out: Path) -> None:
+    assert (walk_out / "rajagopal2016_walk_scaled.osim").is_file()
+    for f in ("walk_ik.mot", "walk_id.sto", "walk_grf.mot", "walk_external_loads.xml", "results.json", "trial.npz"):
+        assert (walk_out / "walk" / f).is_file(), f
+    r = _results(walk_out, "walk")
+    for key in ("n_frames", "rate_hz", "mass_kg", "marker_rms_m", "marker_max_m", "linear_residual_rms_N",
+                "angular_residual_rms_Nm", "linear_residual_rms_BW", "angular_residual_rms_BWh", "unobserved_frames", "stage_seconds"):
+        assert key in r, key
+    assert r["rate_hz"] == 100.0 and r["n_frames"] == 238
+    assert abs(r["mass_kg"] - 85.07) < 2.0  # fitted mass near the stated one
+    id_table = read_table(walk_out / "walk" / "walk_id.sto")
+    assert "pelvis_tx_force" in id_table.column_names and "knee_angle_r_moment" in id_table.column_names
+    # the static trial has no force plates: kinematics only
+    assert "linear_residual_rms_N" not in _results(walk_out, "static")
+
+
+def test_walk_residuals_beat_opensim_and_meet_hicks(walk_out: Path) -> None:
+    r = _results(walk_out, "walk")
+    assert r["linear_residual_rms_BW"] < OPENSIM_WALK["linear_BW"]
+    assert r["angular_residual_rms_BWh"] < OPENSIM_WALK["angular_BWh"]
+    assert r["hicks_linear_ok"] and r["hicks_angular_ok"]
+    assert r["linear_residual_rms_BW"] < 0.03 and r["angular_residual_rms_BWh"] < 0.05
+    # at least as many frames with measured force as AddBiomechanics kept (114), marker RMS below its 1.47 cm
+    assert r["n_observed_frames"] >= 114
+    assert r["marker_rms_m"] < 0.0147
+
+
+def test_walk_unobserved_frames_are_where_a_foot_is_on_the_floor(walk_out: Path) -> None:
+    trial = load_processed(walk_out, "walk")
+    unobserved = np.flatnonzero(trial.unobserved)
+    # the subject starts and ends the trial standing on uninstrumented floor
+    assert trial.unobserved[0] and trial.unobserved[-1]
+    assert not trial.unobserved[100:150].any()
+    assert all(trial.proposal_reasons[k] for k in unobserved)
+    # each plate's force goes to one foot, and to the foot that is over it
+    for plate in trial.plates:
+        loaded = plate.force[:, 1] > 50
+        assert (plate.body[loaded] >= 0).all()
+
+
+@pytest.mark.opensim
+def test_opensim_inverse_dynamics_reproduces_our_id_sto(walk_out: Path, tmp_path: Path) -> None:
+    osim = pytest.importorskip("opensim")
+    osim.Logger.setLevelString("error")
+    mine = read_table(walk_out / "walk" / "walk_id.sto")
+    tool = osim.InverseDynamicsTool()
+    tool.setModelFileName(str(walk_out / "rajagopal2016_walk_scaled.osim"))
+    tool.setCoordinatesFileName(str(walk_out / "walk" / "walk_ik.mot"))
+    tool.setExternalLoadsFileName(str(walk_out / "walk" / "walk_external_loads.xml"))
+    tool.setLowpassCutoffFrequency(-1)
+    tool.setStartTime(float(mine.time[0]))
+    tool.setEndTime(float(mine.time[-1]))
+    tool.setResultsDir(str(tmp_path))
+    tool.setOutputGenForceFileName("opensim_id.sto")
+    excluded = osim.ArrayStr()
+    excluded.append("Muscles")
+    tool.setExcludedForces(excluded)
+    tool.run()
+    theirs = read_table(tmp_path / "opensim_id.sto")
+    common = [c for c in mine.column_names if c in theirs.column_names]
+    assert len(common) >= 37  # every independent coordinate
+    diff = max(float(np.abs(mine.column(c) - theirs.column(c)).max()) for c in common)
+    assert diff < 1.0, diff
+
+
+def test_opencap_subject_processes_and_meets_the_targets(opencap_out: Path) -> None:
+    for trial in ("DJ1", "walking1"):
+        r = _results(opencap_out, trial)
+        assert r["hicks_linear_ok"] and r["hicks_angular_ok"], trial
+        assert r["linear_residual_rms_BW"] < 0.03 and r["angular_residual_rms_BWh"] < 0.05, trial
+
+
+def test_opencap_walking_proposals_agree_with_the_addbiomechanics_review(opencap_out: Path) -> None:
+    """The expert-reviewed AddBiomechanics file flags frames 0-23 of walking1 (a foot on the
+    floor before the plates); our automatic proposals must find that span."""
+    review = np.array(json.loads((SHARED_DATA / "trials" / "opencap_uhlrich2023" / "walking1" / "addb_review_segment_1.json").read_text())["missing_grf_data"])
+    trial = load_processed(opencap_out, "walking1")
+    ours = trial.unobserved[: review.size]  # both at 100 Hz from the first marker frame
+    agreement = float(np.mean(ours == review))
+    assert agreement > 0.9, agreement
+    assert ours[np.flatnonzero(review)].mean() > 0.8
+
+
+def test_reviewer_flags_override_proposals(tmp_path: Path) -> None:
+    """Flags given to process_subject replace the automatic proposals (frame for frame)."""
+    from solver.io.subject import load_subject, load_trial
+
+    subject = load_subject(SUBJECTS / "rajagopal2016_walk")
+    n = load_trial(next(t for t in subject.trials if t.name == "walk")).markers.n_frames
+    flags = np.zeros(n, dtype=bool)
+    flags[:50] = True
+    flags[200:] = True
+    res = process_subject(SUBJECTS / "rajagopal2016_walk", tmp_path / "out", unmeasured={"walk": flags})
+    td = res.dynamics.trial("walk")
+    np.testing.assert_array_equal(td.unobserved, flags[: td.unobserved.size])
+    assert set(r for r in td.reasons if r) == {"flagged by the reviewer"}
+
+
+def test_camargo_steps_off_the_plates_are_proposed_and_fit(tmp_path: Path) -> None:
+    subprocess.run([sys.executable, "scripts/make_example_subject.py", "camargo2021_levelground", str(tmp_path / "camargo")], check=True, cwd=REPO)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the file's moments are about plate origins (converted, warned)
+        res = process_subject(tmp_path / "camargo", tmp_path / "out")
+    td = res.dynamics.trial("levelground")
+    assert 0.1 < td.unobserved.mean() < 0.9  # several steps are on uninstrumented ground
+    assert any("in contact with no plate force" in r for r in td.reasons)
+    assert td.metrics["hicks_linear_ok"]
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+def _copy_subject(tmp_path: Path) -> Path:
+    dst = tmp_path / "subject"
+    shutil.copytree(SUBJECTS / "rajagopal2016_walk", dst)
+    for p in dst.rglob("*"):
+        p.chmod(0o644 if p.is_file() else 0o755)
+    return dst
+
+
+def _damage_grf(subject: Path, fn) -> None:
+    path = subject / "trials" / "walk" / "grf.mot"
+    lines = path.read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 2
+    lines[head:] = [fn(i, line) for i, line in enumerate(lines[head:])]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize(
+    "damage, match",
+    [
+        (lambda i, line: line.replace(line.split("\t")[2], "nan", 1) if i == 1500 else line, "NaN"),
+        (lambda i, line: "\t".join([line.split("\t")[0], line.split("\t")[1], "250000", *line.split("\t")[3:]]) if i == 1500 else line, "body weights"),
+    ],
+    ids=["nan_force", "absurd_force"],
+)
+def test_bad_forces_name_the_trial_and_leave_out_untouched(tmp_path: Path, damage, match: str) -> None:
+    subject = _copy_subject(tmp_path)
+    _damage_grf(subject, damage)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("previous results")
+    with pytest.raises(DynamicsError, match=match) as err:
+        process_subject(subject, out)
+    assert "walk" in str(err.value)
+    assert (out / "keep.txt").read_text() == "previous results"  # nothing half-written
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    assert not list(tmp_path.glob(".out.tmp-*"))
+
+
+def test_forces_that_do_not_overlap_the_markers(tmp_path: Path) -> None:
+    subject = _copy_subject(tmp_path)
+    _damage_grf(subject, lambda i, line: "\t".join([f"{float(line.split(chr(9))[0]) + 100.0:.6f}", *line.split("\t")[1:]]))
+    with pytest.raises(DynamicsError, match="do not overlap in time") as err:
+        process_subject(subject, tmp_path / "out")
+    assert "walk" in str(err.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_mass_names_the_file_and_key(tmp_path: Path) -> None:
+    subject = _copy_subject(tmp_path)
+    data = json.loads((subject / "_subject.json").read_text())
+    del data["massKg"]
+    (subject / "_subject.json").write_text(json.dumps(data))
+    with pytest.raises(SubjectFolderError, match="massKg") as err:
+        process_subject(subject, tmp_path / "out")
+    assert "_subject.json" in str(err.value)
+    assert cli(["process", str(subject), "--out", str(tmp_path / "out")]) == 1
