@@ -87,10 +87,8 @@ class ReviewPanel:
 def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     """Add the review controls to ``server``'s GUI (see :class:`ReviewPanel`)."""
     gui = server.gui
-    gui.configure_theme(
-        titlebar_content=None, control_layout="collapsible", control_width="large",
-        dark_mode=False, show_share_button=False,
-    )
+    gui.configure_theme(titlebar_content=None, control_width="large", dark_mode=False, show_share_button=False)
+    gui.main_panel.dock_right()
     gui.set_panel_label(title)
     h: dict = {}
     h["status"] = gui.add_markdown("Starting…")

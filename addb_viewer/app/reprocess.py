@@ -17,7 +17,7 @@ import numpy as np
 
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, install_trial, new_work_dir
 from addb_viewer.app.summary import comparison_markdown, trial_summary
-from annotations import AnnotationError, TrialReview
+from annotations import AnnotationError
 
 if TYPE_CHECKING:
     from addb_viewer.app.server import ReviewApp
@@ -48,7 +48,8 @@ class Reprocessor:
     def reprocess(self, trial: str | None = None) -> None:
         """Run the solver on ``trial`` (default: the one shown) with the current flags."""
         app = self.app
-        name = trial or (app.trial.trial if app.trial is not None else None)
+        selected = app.panel.trial.value if app.panel.trial.value in app.trials else None
+        name = trial or (app.trial.trial if app.trial is not None else selected)
         if name is None:
             self._say("No trial to reprocess.")
             return
@@ -137,9 +138,10 @@ class Reprocessor:
     def _install(self, trial: str, before: dict | None, work: Any) -> None:
         app = self.app
         install_trial(work / "out", app.paths.out_dir, trial)
+        showing = app.trial is None or app.trial.trial == trial
         if trial not in app.trials:
             app.trials = sorted([*app.trials, trial])
-        showing = app.trial is not None and app.trial.trial == trial
+            app._set_trial_options(trial if showing else app.trial.trial)
         if not showing:
             self._say(f"{trial} was reprocessed; pick it in the trial list to see it.")
             return
@@ -170,6 +172,7 @@ class Reprocessor:
             status.content = "No trial loaded."
             return
         try:
+            from addb_viewer.recording.metadata import review_state
             from addb_viewer.recording.rerun_writer import write_rerun
         except ImportError as exc:
             status.content = (
@@ -178,17 +181,13 @@ class Reprocessor:
             )
             return
         path = app.paths.recording_file(file_name)  # refuses names leaving the folder
-        review = app.store.review(trial.trial) if app.store is not None else None
-        settings = {
-            "marker_threshold_m": app.settings.marker_threshold_m,
-            "m_per_bw": app.settings.m_per_bw,
-        }
+        review = review_state(app.store.review(trial.trial)) if app.store is not None else None
         status.content = f"Recording {trial.trial} to {path}…"
 
         def run() -> None:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
-                write_rerun(trial, path, annotations=review_dict(review), settings=settings)
+                write_rerun(trial, path, annotations=review)
                 status.content = f"✓ wrote {path} ({path.stat().st_size / 1e6:.1f} MB)"
             except Exception as exc:  # noqa: BLE001 - shown in the page
                 status.content = f"<span style='color:#c00'>Recording failed</span>: {exc}"
@@ -196,35 +195,3 @@ class Reprocessor:
 
         threading.Thread(target=run, name="addb-record", daemon=True).start()
 
-
-def review_dict(review: TrialReview | None) -> dict[str, Any] | None:
-    """A JSON-ready description of a trial's review record for the recorders.
-
-    Returns
-    -------
-    dict or None
-        ``trial``, ``reviewed``, and for ``unmeasured_force`` / ``excluded`` a list of
-        ``{start, stop, foot, reviewer, timestamp, source}`` runs (half-open frames);
-        ``notes`` as ``{text, start, stop, reviewer, timestamp}``.
-    """
-    if review is None:
-        return None
-
-    def runs(items: Any) -> list[dict[str, Any]]:
-        return [
-            {"start": r.start, "stop": r.stop, "foot": r.foot, "reviewer": r.provenance.reviewer,
-             "timestamp": r.provenance.timestamp, "source": r.provenance.source}
-            for r in items
-        ]
-
-    return {
-        "trial": review.trial,
-        "reviewed": review.reviewed,
-        "unmeasured_force": runs(review.unmeasured_force),
-        "excluded": runs(review.excluded),
-        "notes": [
-            {"text": n.text, "start": n.start, "stop": n.stop, "reviewer": n.provenance.reviewer,
-             "timestamp": n.provenance.timestamp}
-            for n in review.notes
-        ],
-    }

@@ -35,6 +35,7 @@ from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
 from annotations import AnnotationError, AnnotationStore, Edit
+from solver.errors import AddbError
 from solver.results import ProcessedTrial, load_processed, processed_trials
 
 PLOT_INTERVAL_S = 0.25
@@ -43,6 +44,10 @@ TICK_S = 1 / 60
 """Playback thread period (viser sends at most ~60 updates per second anyway)."""
 REFRESH_S = 1.0
 """How often the store is polled for other writers' edits."""
+
+
+class TrialLoadError(AddbError):
+    """A processed trial cannot be shown (not processed, or its file is damaged)."""
 
 
 class ReviewApp:
@@ -93,6 +98,7 @@ class ReviewApp:
         self.editor: TrialEditor | None = None
         self.view: FlagView | None = None
         self.hicks: np.ndarray | None = None
+        self.rms: np.ndarray | None = None
         self._last_plot = 0.0
         self.jobs = Reprocessor(self)
         self._wire()
@@ -123,7 +129,7 @@ class ReviewApp:
             self._open_store()
             self.trials = processed_trials(self.paths.out_dir) if self.paths.out_dir.is_dir() else []
             if self.trials:
-                self._set_trial_options()
+                self._set_trial_options(_preferred(self.trials))
                 self.load_trial(_preferred(self.trials))
             else:
                 self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet: processing…")
@@ -140,7 +146,7 @@ class ReviewApp:
             self.trials = processed_trials(self.paths.out_dir)
             if not self.trials:
                 raise FileNotFoundError(f"the solver wrote no trial into {self.paths.out_dir}")
-            self._set_trial_options()
+            self._set_trial_options(_preferred(self.trials))
             self.load_trial(_preferred(self.trials))
         except Exception as exc:  # noqa: BLE001
             self.show_error("Could not load the processed subject", exc)
@@ -166,9 +172,10 @@ class ReviewApp:
         self.server.stop()
 
     # ================================================================== loading
-    def _set_trial_options(self) -> None:
+    def _set_trial_options(self, selected: str) -> None:
         with self._quiet_updates():
             self.panel.trial.options = tuple(self.trials)
+            self.panel.trial.value = selected
             self.panel.trial.disabled = len(self.trials) < 2
 
     def load_trial(self, name: str, *, frame: int = 0) -> None:
@@ -176,13 +183,21 @@ class ReviewApp:
 
         Raises
         ------
-        UnsafePathError, FileNotFoundError, ValueError
-            A name that is not a processed trial, or an unreadable trial file.
+        UnsafePathError
+            A name that is not a plain folder name.
+        TrialLoadError
+            Not a processed trial, or an unreadable trial file.
         """
         name = safe_name(name, what="trial name")
         if name not in self.trials:
-            raise FileNotFoundError(f"trial {name!r} is not processed in {self.paths.out_dir}")
-        trial = load_processed(self.paths.out_dir, name)
+            raise TrialLoadError(f"trial {name!r} is not processed", path=self.paths.out_dir)
+        try:
+            trial = load_processed(self.paths.out_dir, name)
+        except Exception as exc:  # noqa: BLE001 - any damage: numpy, zip, JSON, schema
+            raise TrialLoadError(
+                f"cannot read the processed trial ({type(exc).__name__}: {exc}); press Reprocess to recompute it",
+                path=self.paths.trial_dir(name) / "trial.npz",
+            ) from exc
         meshes, problems = {}, []
         for body, files in trial.body_meshes.items():
             meshes[body], p = body_mesh(trial.geometry_dir, files) if trial.geometry_dir else (None, [])
@@ -193,6 +208,7 @@ class ReviewApp:
             self._drop_trial()
             self.trial, self.editor, self.view = trial, editor, view
             self.hicks = hicks_exceeded(trial)
+            self.rms = trial.marker_rms_per_frame
             self.playback = Playback(trial.n_frames, trial.rate_hz or 100.0, frame=frame)
             self.scene = TrialScene(self.server, trial, meshes, self.settings)
             with self.panel.plots_folder:
@@ -279,7 +295,7 @@ class ReviewApp:
         t, pb = self.trial, self.playback
         assert t is not None and pb is not None
         flag = describe_frame(self.view, k, t.proposal_reasons) if self.view is not None else "flags unavailable"
-        rms = t.marker_rms_per_frame[k] if t.n_frames else np.nan
+        rms = self.rms[k] if self.rms is not None else np.nan
         parts = [
             f"**{t.subject}** · **{t.trial}** · frame {k} / {t.n_frames - 1} · t = {t.time[k]:.2f} s",
             f"marker RMS {100 * rms:.1f} cm" if np.isfinite(rms) else "no markers seen",

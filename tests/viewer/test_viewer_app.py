@@ -1,0 +1,161 @@
+"""The review app as a whole, no browser: bad input shown in the page (never a crashed
+server), paths from the page confined, trial picker, solver runs that fail or are
+cancelled leave the previous result, playback stays responsive during a run, Record to
+Rerun, and the ``addb view`` command in a subprocess."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import os
+import signal
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from viewer_support import ProtocolClient, wait_for
+
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.cli import main as cli_main
+from addb_viewer.demo import DEMO_SUBJECT
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _page_ok(app) -> bool:
+    with urllib.request.urlopen(app.url, timeout=10) as r:
+        return r.status == 200
+
+
+def _broken_subject(tmp_path: Path) -> Path:
+    subject = tmp_path / "broken_subject"
+    (subject / "trials" / "walk").mkdir(parents=True)
+    (subject / "_subject.json").write_text(json.dumps({"massKg": "70", "heightM": "1.7"}))
+    (subject / "trials" / "walk" / "markers.trc").write_text("this is not a TRC file\n")
+    return subject
+
+
+def test_unprocessed_broken_subject_shows_the_error_in_the_page(tmp_path, make_app, monkeypatch) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    subject = _broken_subject(tmp_path)
+    app = make_app(ReviewPaths.for_subject(subject))
+    assert app.ready.wait(120), "processing did not end"
+    assert app.jobs.last_result is not None and app.jobs.last_result.status == "failed"
+    assert app.panel.error.visible and "failed" in app.panel.error.content
+    assert app.trial is None and _page_ok(app)  # the server is still serving
+
+
+def test_unreadable_trial_file_is_reported_and_others_still_load(demo_paths, make_app) -> None:
+    (demo_paths.out_dir / "walk" / "trial.npz").write_bytes(b"garbage")
+    app = make_app(demo_paths)
+    assert app.trial is None and app.panel.error.visible
+    assert _page_ok(app)
+    app.panel.trial.value = "static"  # the trial picker
+    assert app.trial is not None and app.trial.trial == "static"
+    assert not app.panel.error.visible
+
+
+def test_trial_picker_refuses_names_from_the_page_that_leave_the_output(demo_paths, make_app) -> None:
+    app = make_app(demo_paths)
+    assert app.panel.trial.options == ("static", "walk") and app.panel.trial.value == "walk"
+    client = ProtocolClient(app.port)
+    try:
+        wait_for(lambda: app.server.get_clients(), what="client")
+        client.set_value(app.panel.trial, "../../etc")
+        wait_for(lambda: app.panel.error.visible, what="the error in the page")
+        assert "plain file or folder name" in app.panel.error.content
+        assert app.trial.trial == "walk" and app.scene is not None
+        client.set_value(app.panel.trial, "static")
+        wait_for(lambda: app.trial.trial == "static", what="static loaded")
+        assert app.scene.trial.trial == "static" and app.panel.frame.max == app.trial.n_frames - 1
+    finally:
+        client.close()
+
+
+def test_failing_solver_run_keeps_the_previous_result(demo_paths, make_app, tmp_path) -> None:
+    paths = dataclasses.replace(demo_paths, subject_dir=_broken_subject(tmp_path))
+    app = make_app(paths)
+    before = app.trial
+    app.seek(77)
+    app.jobs.reprocess()
+    assert app.jobs.finished.wait(120)
+    assert app.jobs.last_result.status == "failed"
+    assert app.panel.error.visible and "Reprocessing walk failed" in app.panel.error.content
+    assert "previous result is kept" in app.panel.job_status.content
+    assert app.trial is before and app.playback.frame == 77
+    assert (demo_paths.out_dir / "walk" / "trial.npz").is_file()
+    assert not app.panel.progress.visible and app.panel.cancel.disabled and not app.panel.reprocess.disabled
+
+
+def test_playback_runs_during_a_solver_run_which_can_be_cancelled(demo_paths, make_app) -> None:
+    app = make_app(demo_paths)
+    before = app.trial
+    app.jobs.reprocess()
+    assert app.jobs.running and not app.panel.cancel.disabled and app.panel.progress.visible
+    start = app.playback.frame
+    app.toggle_play()
+    wait_for(lambda: app.playback.frame >= start + 20, timeout=30, what="playback to advance")
+    assert app.jobs.running  # the solver is still busy in its own process
+    app.jobs.cancel()
+    assert app.jobs.finished.wait(30)
+    assert app.jobs.last_result.status == "cancelled"
+    assert "cancelled" in app.panel.job_status.content
+    assert app.trial is before
+    assert not any(app.paths.jobs_dir.glob("*/out")) if app.paths.jobs_dir.exists() else True
+
+
+def test_reprocess_uses_every_flagged_trial(demo_paths, make_app) -> None:
+    app = make_app(demo_paths)
+    app.panel.trial.value = "static"
+    app.edit("flag", lambda ed, _k, _f: ed.flag_range(3, 9, "left"))
+    app.panel.trial.value = "walk"
+    masks = app.jobs._masks()
+    assert set(masks) == {"static", "walk"}
+    assert np.flatnonzero(masks["static"]).tolist() == list(range(3, 9)) and not masks["walk"].any()
+
+
+def test_record_to_rerun(demo_paths, make_app) -> None:
+    app = make_app(demo_paths)
+    status = app.panel.record_status
+    with pytest.raises(Exception, match="plain file or folder name"):
+        app.jobs.record("../outside")
+    app.jobs.record("my walk")
+    if importlib.util.find_spec("addb_viewer.recording.rerun_writer") is None:
+        assert "not available" in status.content
+        return
+    wait_for(lambda: "✓ wrote" in status.content or "failed" in status.content, timeout=120, what="recording")
+    assert "✓ wrote" in status.content, status.content
+    assert (demo_paths.recordings_dir / "my walk.rrd").is_file()
+
+
+def test_cli_refuses_a_missing_folder(tmp_path, capsys) -> None:
+    assert cli_main(["view", str(tmp_path / "nope"), "--port", "0"]) == 1
+    assert "no such subject folder" in capsys.readouterr().err
+
+
+def test_cli_serves_the_demo_and_stops_on_sigterm(demo_out: Path, tmp_path: Path) -> None:
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "addb_viewer.cli", "view", "--out", str(demo_out), "--port", "0", "--reviewer", "cli"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path,
+    )
+    try:
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if "first frame shown" in line:
+                break
+        url = next(ln.split(" at ")[1].split()[0] for ln in lines if " at http://127.0.0.1:" in ln)
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.stdout.close()
+    assert (tmp_path / "out.annotations.json").exists() or (demo_out.parent / "out.annotations.json").exists()

@@ -1,0 +1,84 @@
+"""Helpers of the viewer tests: a minimal viser protocol client (no browser), waiting.
+
+The protocol client follows notes/libraries.md section 1.8: connect with the
+``viser-v<version>`` subprotocol, send a camera message (a browser is only registered as
+a client after its first camera message), then send ``GuiUpdateMessage``s as the page
+does when a control is used. It drains what the server sends in a background thread so
+the server never blocks on a full socket. It uses viser's private message classes, which
+is why ``viser`` is pinned to one version in pyproject.toml.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgspec
+import viser
+from viser import _messages
+from websockets.sync.client import connect
+
+
+class ProtocolClient:
+    """A fake browser tab connected to a viser server on 127.0.0.1.
+
+    Parameters
+    ----------
+    port
+        The server's port.
+    """
+
+    def __init__(self, port: int) -> None:
+        self.ws = connect(
+            f"ws://127.0.0.1:{port}",
+            subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+            max_size=None,
+        )
+        self.received = 0
+        self._stop = threading.Event()
+        self._reader = threading.Thread(target=self._drain, daemon=True)
+        self._reader.start()
+        self.send(
+            _messages.ViewerCameraMessage(
+                wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 1.0, 3.0), fov=1.0, near=0.01, far=100.0,
+                image_height=360, image_width=480, look_at=(0.0, 1.0, 0.0), up_direction=(0.0, 1.0, 0.0),
+            )
+        )
+
+    def _drain(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.ws.recv(timeout=0.2)
+                self.received += 1
+            except TimeoutError:
+                continue
+            except Exception:  # noqa: BLE001 - connection closed
+                return
+
+    def send(self, message: Any) -> None:
+        """Send one viser message object."""
+        self.ws.send(msgspec.msgpack.encode(message.as_serializable_dict()))
+
+    def set_value(self, handle: Any, value: Any) -> None:
+        """Change a control's value as the page does (for a button or a button group:
+        ``True`` or the clicked option)."""
+        self.send(_messages.GuiUpdateMessage(uuid=handle._impl.uuid, updates={"value": value}))
+
+    def close(self) -> None:
+        """Disconnect."""
+        self._stop.set()
+        self.ws.close()
+        self._reader.join(timeout=2.0)
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 20.0, what: str = "condition") -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail after ``timeout`` s."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
