@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from solver.results import ProcessedTrial
 
-#: The rerun CLI shipped in the venv's rerun-sdk wheel.
-RERUN = Path(__file__).resolve().parents[2] / ".venv" / "bin" / "rerun"
+#: The rerun CLI shipped in the rerun-sdk wheel, beside the running interpreter.
+RERUN = Path(sys.executable).parent / "rerun"
 
 #: A review state as ``review_state(TrialReview)`` gives it.
 REVIEW = {
