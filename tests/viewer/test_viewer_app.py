@@ -70,8 +70,9 @@ def test_trial_picker_refuses_names_from_the_page_that_leave_the_output(demo_pat
         assert "plain file or folder name" in app.panel.error.content
         assert app.trial.trial == "walk" and app.scene is not None
         client.set_value(app.panel.trial, "static")
-        wait_for(lambda: app.trial.trial == "static", what="static loaded")
-        assert app.scene.trial.trial == "static" and app.panel.frame.max == app.trial.n_frames - 1
+        wait_for(lambda: app.scene is not None and app.scene.trial.trial == "static", what="static shown")
+        with app._lock:  # the app swaps trials under its lock
+            assert app.trial.trial == "static" and app.panel.frame.max == app.trial.n_frames - 1
     finally:
         client.close()
 
