@@ -158,9 +158,11 @@ class ProcessedTrial:
     def marker_rms_per_frame(self) -> FloatArray:
         """``(T,)`` RMS marker error of each frame, m (NaN when no marker is seen)."""
         e = self.marker_errors
-        with np.errstate(invalid="ignore"), np.testing.suppress_warnings() as sup:
-            sup.filter(RuntimeWarning)
-            return np.sqrt(np.nanmean(e**2, axis=1))
+        seen = np.isfinite(e)
+        count = seen.sum(axis=1)
+        total = np.where(seen, e**2, 0.0).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
 
 
 _ARRAYS = (
