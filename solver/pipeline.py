@@ -12,14 +12,12 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from solver import single_threaded_blas
 from solver.errors import KinematicsError
-from solver.dynamics.preprocess import cop_from_wrench
-from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
@@ -33,6 +31,9 @@ from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
 from solver.results import PlateData, ProcessedTrial, save_processed
 
+if TYPE_CHECKING:  # the dynamics stage (scipy.signal) loads only when it runs
+    from solver.dynamics.stage import DynamicsResult, TrialDynamics
+
 Progress = Callable[[str, float], None]
 
 
@@ -45,13 +46,14 @@ class ProcessOptions:
     kinematics
         Options of the kinematics stage.
     dynamics
-        Options of the dynamics stage.
+        Options of the dynamics stage (a :class:`solver.dynamics.stage.DynamicsOptions`;
+        None: its defaults).
     trials
         Names of the trials to write (all trials are still used for scaling); None: all.
     """
 
     kinematics: KinematicsOptions = field(default_factory=KinematicsOptions)
-    dynamics: DynamicsOptions = field(default_factory=DynamicsOptions)
+    dynamics: Any = None
     trials: tuple[str, ...] | None = None
 
 
@@ -238,6 +240,8 @@ def _process_subject(
     t_kin = time.perf_counter()
     dyn = None
     if not subject.disable_dynamics:
+        from solver.dynamics.stage import DynamicsOptions, run_dynamics
+
         dyn = run_dynamics(
             sk.kinematics,
             [(t.name, t.markers, t.forces) for t in sk.trials],
@@ -245,7 +249,7 @@ def _process_subject(
             foot_bodies=subject.foot_body_names,
             height_m=subject.height_m,
             unmeasured=unmeasured,
-            options=opts.dynamics,
+            options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),
         )
     t_dyn = time.perf_counter()
@@ -273,7 +277,7 @@ def _process_subject(
                 write_dynamics_files(folder, trial.name, td, model, rotational)
                 metrics.update(td.metrics)
                 metrics["opensim_convention_max_diff"] = float(np.abs(td.tau_opensim - td.tau).max())
-                metrics["rate_hz"] = opts.dynamics.rate_hz
+                metrics["rate_hz"] = dyn.settings["rate_hz"]
                 metrics["mass_kg"] = dyn.mass_kg
                 metrics["unobserved_frames"] = np.flatnonzero(td.unobserved).tolist()
                 metrics["unobserved_reasons"] = sorted({r for r in td.reasons if r})
@@ -353,6 +357,8 @@ def write_dynamics_files(folder: Path, name: str, td: TrialDynamics, model: Osim
     moment; the ExternalLoads file applies each set to its foot body in the ground frame.
     OpenSim's InverseDynamicsTool on these files (no extra filtering) reproduces ``_id.sto``.
     """
+    from solver.dynamics.preprocess import cop_from_wrench
+
     folder.mkdir(parents=True, exist_ok=True)
     names = [c.name for c in model.coordinates]
     write_coordinates(folder / f"{name}_ik.mot", names, td.q, td.time, rotational=rotational)
@@ -420,15 +426,13 @@ def build_processed(
     ``proposed``, ``proposal_reasons``, ``mass_kg``, ``model``); without it the dynamic
     fields are NaN and the kinematics coordinates are used.
     """
-    from scipy.spatial.transform import Rotation
-
     dyn = dynamics or {}
     model = dyn.get("model", sk.kinematics.model)
     skel = Skeleton(model)
     q = dyn.get("q", trial.q)
     t = q.shape[0]
     rot, pos = skel.body_poses(q)
-    wxyz = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat(scalar_first=True).reshape(t, -1, 4)
+    wxyz = rotations_to_wxyz(rot)
     nan3 = np.full((t, 3), np.nan)
     raw = next(x for x in sk.trials if x.name == trial.name)
     return ProcessedTrial(
@@ -462,6 +466,19 @@ def build_processed(
         geometry_dir=str(geometry_dir(sk.subject.model_path)),
         settings=dyn.get("settings", {}),
     )
+
+
+def rotations_to_wxyz(rot: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` rotation matrices -> ``(..., 4)`` unit quaternions (w, x, y, z), w >= 0
+    (pinocchio's conversion; scipy.spatial would cost more to import than to run)."""
+    import pinocchio as pin
+
+    flat = rot.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for k in range(flat.shape[0]):
+        x, y, z, w = pin.Quaternion(flat[k]).coeffs()
+        out[k] = (w, x, y, z) if w >= 0 else (-w, -x, -y, -z)
+    return out.reshape(rot.shape[:-2] + (4,))
 
 
 def geometry_dir(model_path: Path) -> Path:

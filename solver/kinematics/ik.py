@@ -183,15 +183,27 @@ def solve_trajectory(
     t = obs.shape[0]
     out = np.empty((t, solver.sk.n))
     q = q_start
-    first = True
+    solved: list[int] = []
     for k in range(t):
         if not np.isfinite(obs[k]).all(axis=1).any():
             out[k] = q  # no marker at all: hold the pose
             continue
-        q, _ = solver.solve(q, obs[k], None if first else q, max_iterations=40 if first else None)
-        first = False
+        if not solved:
+            q, _ = solver.solve(q, obs[k], None, max_iterations=40)
+        else:
+            prev = out[solved[-1]]
+            start = prev
+            if len(solved) > 1 and solved[-1] == k - 1 and solved[-2] == k - 2:
+                start = solver.sk.cmap.complete(2 * prev - out[k - 2])  # constant-velocity guess
+            q, _ = solver.solve(start, obs[k], prev)
+        solved.append(k)
         out[k] = q
     return out
+
+
+#: RMS marker error (m) of a local solve from the default limb pose above which the
+#: joint-by-joint grid search (:func:`greedy_pose`) is used to start the frame.
+GREEDY_TRIGGER_M = 0.02
 
 
 def kabsch(model_pts: FloatArray, obs_pts: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -295,7 +307,9 @@ def initial_pose(solver: FrameSolver, y: FloatArray) -> FloatArray:
     The model's markers in its default pose are rigidly registered (Kabsch) to the
     observed ones (root-body markers if three or more are seen, else all markers); the
     root joint's coordinates are then solved alone to reproduce that rigid motion,
-    starting from headings 0, ±90° and 180° about the vertical and keeping the best.
+    starting from headings 0, ±90° and 180° about the vertical and keeping the best. A local
+    solve of all coordinates follows; when it still misses the markers by more than
+    :data:`GREEDY_TRIGGER_M` RMS, the limbs are posed by :func:`greedy_pose` instead.
     """
     sk = solver.sk
     q0 = sk.neutral()
@@ -322,4 +336,8 @@ def initial_pose(solver: FrameSolver, y: FloatArray) -> FloatArray:
         q, cost = sub.solve(start, target)
         if cost < best_cost:
             best, best_cost = q, cost
+    # a local solve from the default limb pose is enough unless the limbs are far from it
+    q_local, cost = solver.solve(best, y, max_iterations=30)
+    if np.sqrt(cost / max(int(seen.sum()), 1)) < GREEDY_TRIGGER_M:
+        return q_local
     return greedy_pose(solver, y, best)

@@ -1,0 +1,116 @@
+"""Scaling + IK from the command line against OpenSim's InverseKinematicsTool, side by side.
+
+    .venv/bin/python tests/benchmarks/bench_kinematics.py [--repeats 3]
+
+OpenSim (``pip install opensim``, benchmark only) runs the working IK setup of
+shared/oracles (the study's scaled model, 39 weighted markers) on the walk trial; we time
+its ``InverseKinematicsTool.run()`` alone. addb runs ``addb kinematics`` on the
+rajagopal2016_walk subject folder in a fresh process (interpreter start, imports, reading,
+scaling from the generic model over walk + static, IK of both trials, writing the outputs)
+and we time the whole command. Both marker RMS values are evaluated the same way: our
+forward kinematics, over every observation of the 39 markers OpenSim's setup weights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+SHARED = REPO.parent / "shared"
+ORACLES = SHARED / "oracles"
+SUBJECT = SHARED / "data" / "subjects" / "rajagopal2016_walk"
+
+OPENSIM_SCRIPT = """
+import sys, time, opensim as osim
+osim.Logger.setLevelString("error")
+tool = osim.InverseKinematicsTool(sys.argv[1])
+t0 = time.perf_counter()
+tool.run()
+print(time.perf_counter() - t0)
+"""
+
+
+def weighted_markers() -> set[str]:
+    root = ET.parse(ORACLES / "opensim_ik_setup_walk.xml").getroot()
+    return {
+        e.get("name")
+        for e in root.iter("IKMarkerTask")
+        if e.findtext("apply").strip() == "true" and float(e.findtext("weight")) > 0
+    }
+
+
+def rms(model_file: Path, mot: Path, names: set[str]) -> float:
+    from solver.io.mot import read_coordinates
+    from solver.io.trc import read_trc
+    from solver.model.osim import read_osim
+    from solver.model.skeleton import Skeleton
+
+    sk = Skeleton(read_osim(model_file))
+    rot = [c.name for c in sk.osim.coordinates if c.motion_type == "rotational"]
+    table = read_coordinates(mot, rotational=rot)
+    q = sk.cmap.complete(np.column_stack([table.column(c) for c in sk.coordinate_names]))
+    trc = read_trc(SUBJECT / "trials" / "walk" / "markers.trc")
+    use = [n for n in trc.names if n in names and n in sk.marker_names]
+    frames = np.array([int(np.argmin(np.abs(trc.time - t))) for t in table.time])
+    y = trc.positions[frames][:, [trc.names.index(n) for n in use]]
+    e = np.linalg.norm(sk.marker_positions(q, sk.marker_index(use)) - y, axis=2)
+    return float(np.sqrt(np.nanmean(e**2))), len(use)
+
+
+def run_opensim(work: Path) -> tuple[float, Path]:
+    setup = ET.parse(ORACLES / "opensim_ik_setup_walk.xml")
+    root = setup.getroot()
+    tool = root.find("InverseKinematicsTool")
+    tool.find("model_file").text = str(ORACLES / "opensim_scaled_walk.osim")
+    tool.find("marker_file").text = str(SUBJECT / "trials" / "walk" / "markers.trc")
+    tool.find("results_directory").text = str(work)
+    tool.find("output_motion_file").text = str(work / "opensim_ik.mot")
+    setup.write(work / "setup.xml")
+    (work / "run.py").write_text(OPENSIM_SCRIPT)
+    out = subprocess.run([sys.executable, str(work / "run.py"), str(work / "setup.xml")], capture_output=True, text=True, check=True, cwd=work)
+    return float(out.stdout.strip().splitlines()[-1]), work / "opensim_ik.mot"
+
+
+def run_addb(work: Path) -> tuple[float, Path]:
+    addb = Path(sys.executable).parent / "addb"
+    t0 = time.perf_counter()
+    subprocess.run([str(addb), "kinematics", str(SUBJECT), "--out", str(work / "addb")], check=True, capture_output=True)
+    return time.perf_counter() - t0, work / "addb"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    names = weighted_markers()
+    os_times, ad_times = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for _ in range(args.repeats):  # interleaved, so both see the same machine load
+            t_os, os_mot = run_opensim(work)
+            os_times.append(t_os)
+            t_ad, ad_out = run_addb(work)
+            ad_times.append(t_ad)
+        os_rms, n = rms(ORACLES / "opensim_scaled_walk.osim", os_mot, names)
+        ad_rms, n2 = rms(ad_out / "rajagopal2016_walk_scaled.osim", ad_out / "walk" / "walk_ik.mot", names)
+        shutil.rmtree(work / "addb", ignore_errors=True)
+    best_os, best_ad = min(os_times), min(ad_times)
+    print(f"markers evaluated: {n} (OpenSim) / {n2} (addb), all observations of the walk (238 frames)")
+    print("| | wall time (best of %d) | all runs (s) | marker RMS (cm) |" % args.repeats)
+    print("| --- | ---: | --- | ---: |")
+    print(f"| OpenSim 4.6 InverseKinematicsTool.run(), walk only, study-scaled model | {best_os:.2f} s | {', '.join(f'{t:.2f}' for t in os_times)} | {os_rms * 100:.2f} |")
+    print(f"| `addb kinematics` command: start-up + scaling + IK of walk and static + files | {best_ad:.2f} s | {', '.join(f'{t:.2f}' for t in ad_times)} | {ad_rms * 100:.2f} |")
+    print(f"\nspeed-up: {best_os / best_ad:.1f}x (target >= 3x, aim 10x)")
+
+
+if __name__ == "__main__":
+    main()
