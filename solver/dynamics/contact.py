@@ -50,7 +50,10 @@ class ContactSettings:
     contact_speed
         ... and moves slower than this (m/s).
     force_mismatch_bw
-        Vertical force mismatch (in body weights) that marks a frame as unmeasured.
+        Vertical force mismatch (in body weights) that marks a frame as unmeasured ...
+    mismatch_seconds
+        ... when it lasts at least this long (impact transients, which the filtered
+        kinematics cannot follow, last a few frames and stay measured).
     toe_extension
         The sole segment runs from the foot origin to its toes' origin plus this fraction of
         that distance (reaching the tip of the toes).
@@ -62,6 +65,7 @@ class ContactSettings:
     contact_height: float = 0.03
     contact_speed: float = 0.6
     force_mismatch_bw: float = 0.3
+    mismatch_seconds: float = 0.08
     toe_extension: float = 0.5
 
 
@@ -124,6 +128,16 @@ def _segment_distance(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray
     ab = b2 - a2
     t = np.clip(np.sum((p2 - a2) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-12), 0.0, 1.0)
     return np.linalg.norm(p2 - (a2 + t[:, None] * ab), axis=1)
+
+
+def _long_runs(mask: NDArray[np.bool_], min_len: int) -> NDArray[np.bool_]:
+    """``mask`` keeping only runs of at least ``min_len`` consecutive True frames."""
+    out = np.zeros_like(mask)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        if stop - start >= min_len:
+            out[start:stop] = True
+    return out
 
 
 def assign_contacts(
@@ -195,7 +209,7 @@ def assign_contacts(
         measured = sum((np.nan_to_num(p.force[:, 1]) for p in plates), np.zeros(t))
         required = mass_kg * (com_acc[:, 1] + g)
         mismatch = np.abs(measured - required) / bw
-        bad = mismatch > st.force_mismatch_bw
+        bad = _long_runs(mismatch > st.force_mismatch_bw, int(np.ceil(st.mismatch_seconds / dt)))
         for j in np.flatnonzero(bad & ~proposed):
             reasons[j] = f"measured vertical force differs from m(a+g) by {mismatch[j]:.2f} BW"
         proposed |= bad
