@@ -1,0 +1,88 @@
+"""Contact assignment on the real walk: plates to feet, a foot on two plates, two feet on one
+plate (ambiguous), and the proposals of unmeasured force."""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+
+from solver.dynamics.contact import assign_contacts
+from solver.io.subject import load_subject
+from solver.model.skeleton import Skeleton
+from solver.pipeline import plates_on_frames, subject_kinematics
+from solver.results import PlateData
+from tests.conftest import SHARED_DATA
+
+FEET = ("calcn_r", "calcn_l")
+
+
+@cache
+def walk():
+    sk = subject_kinematics(load_subject(SHARED_DATA / "subjects" / "rajagopal2016_walk"))
+    trial = sk.kinematics.trial("walk")
+    raw = next(t for t in sk.trials if t.name == "walk")
+    return Skeleton(sk.kinematics.model), trial, plates_on_frames(raw.forces, trial.time)
+
+
+def test_each_plate_goes_to_the_foot_standing_on_it() -> None:
+    skel, trial, plates = walk()
+    res = assign_contacts(skel, trial.q, plates, FEET, 85.07, 0.01)
+    names = {p.name: i for i, p in enumerate(plates)}
+    loaded_r = plates[names["r"]].force[:, 1] > 50
+    loaded_l = plates[names["l"]].force[:, 1] > 50
+    # the file's "r" and "l" columns are the right and left foot's forces
+    assert (res.plate_foot[names["r"], loaded_r] == 0).mean() > 0.97
+    assert (res.plate_foot[names["l"], loaded_l] == 1).mean() > 0.97
+    assert not res.ambiguous.any()
+
+
+def test_a_foot_on_two_plates_receives_both() -> None:
+    """Split the right foot's plate into a heel plate and a forefoot plate (each half the
+    force, CoPs 6 cm behind and ahead): both go to the right foot."""
+    skel, trial, plates = walk()
+    r = next(p for p in plates if p.name == "r")
+    rot, pos = skel.body_poses(trial.q)
+    forward = rot[:, skel.body_index("calcn_r"), :, 0]  # the foot's x axis
+    forward[:, 1] = 0.0
+    forward /= np.linalg.norm(forward, axis=1, keepdims=True)
+    heel = PlateData("heel", r.force / 2, r.cop - 0.06 * forward, r.free_moment / 2)
+    fore = PlateData("fore", r.force / 2, r.cop + 0.06 * forward, r.free_moment / 2)
+    res = assign_contacts(skel, trial.q, [heel, fore], FEET, 85.07, 0.01)
+    loaded = r.force[:, 1] > 50
+    assert (res.plate_foot[0, loaded] == 0).mean() > 0.95
+    assert (res.plate_foot[1, loaded] == 0).mean() > 0.95
+    assert res.foot_loaded[0, loaded].all()
+
+
+def test_two_feet_on_one_plate_is_flagged_ambiguous() -> None:
+    """One loaded plate whose CoP sits midway between the two feet: ambiguous exactly when
+    both feet are within ``ambiguous_distance`` of it (the swing foot passing the stance foot)."""
+    from solver.dynamics.contact import ContactSettings, _foot_points, _segment_distance
+
+    skel, trial, _ = walk()
+    st = ContactSettings()
+    pts = [_foot_points(skel, trial.q, f, st.toe_extension) for f in FEET]
+    mids = [0.5 * (heel + tip) for heel, tip, _ in pts]
+    cop = 0.5 * (mids[0] + mids[1])
+    cop[:, 1] = 0.0
+    force = np.zeros_like(cop)
+    force[:, 1] = 700.0
+    res = assign_contacts(skel, trial.q, [PlateData("shared", force, cop, np.zeros_like(force))], FEET, 85.07, 0.01)
+    dist = np.stack([_segment_distance(cop, heel, tip) for heel, tip, _ in pts])
+    both_near = (dist <= st.ambiguous_distance).all(axis=0)
+    assert both_near.any() and (~both_near).any()
+    np.testing.assert_array_equal(res.ambiguous, both_near)
+
+
+def test_a_foot_on_the_floor_without_plate_force_is_proposed() -> None:
+    skel, trial, plates = walk()
+    g = np.linalg.norm(skel.osim.gravity)
+    com_acc = np.gradient(np.gradient(skel.center_of_mass(trial.q), 0.01, axis=0), 0.01, axis=0)
+    res = assign_contacts(skel, trial.q, plates, FEET, 85.07, 0.01, com_acc)
+    left = 1
+    off = res.foot_in_contact[left] & ~res.foot_loaded[left]
+    assert off[:20].all()  # the trial starts with the left foot on the floor
+    assert res.proposed[off].all()
+    assert all("calcn_l in contact with no plate force" == res.reasons[k] for k in np.flatnonzero(off))
+    assert g > 9.8
