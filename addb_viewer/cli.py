@@ -63,14 +63,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AddbError as exc:
         print(f"addb {args.command}: {exc}", file=sys.stderr)
         return 1
-    except Exception as exc:
-        if type(exc).__name__ in ("AnnotationError", "AnnotationFileError"):  # annotations' own errors
-            print(f"addb {args.command}: {exc}", file=sys.stderr)
-            return 1
-        raise
     except FileNotFoundError as exc:
         print(f"addb {args.command}: no such file or folder: {exc.filename}", file=sys.stderr)
         return 1
+    except Exception as exc:
+        from annotations import AnnotationError  # the review record's own errors (no solver base class)
+
+        if isinstance(exc, AnnotationError):
+            print(f"addb {args.command}: {exc}", file=sys.stderr)
+            return 1
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover
