@@ -45,11 +45,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"addb view: {paths.subject_dir.name} at {app.url}  (output {paths.out_dir}; Ctrl-C to stop)", flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    announced = False
     try:
-        if app.ready.wait(timeout=None if args.ready_timeout <= 0 else args.ready_timeout) and app.first_frame_seconds is not None:
-            print(f"addb view: first frame shown {app.first_frame_seconds:.2f} s after start", flush=True)
-        while not stop.wait(0.5):
-            pass
+        while not stop.wait(0.2):  # a signal stops the server at any time, even while processing
+            if not announced and app.ready.is_set():
+                announced = True
+                if app.first_frame_seconds is not None:
+                    print(f"addb view: first frame shown {app.first_frame_seconds:.2f} s after start", flush=True)
     except KeyboardInterrupt:
         pass
     finally:
@@ -64,5 +66,4 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, this machine only)")
     p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")
     p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo)")
-    p.add_argument("--ready-timeout", type=float, default=0, help=argparse.SUPPRESS)
     p.set_defaults(handler=run)

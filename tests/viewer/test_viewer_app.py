@@ -160,3 +160,36 @@ def test_cli_serves_the_demo_and_stops_on_sigterm(demo_out: Path, tmp_path: Path
             proc.kill()
         proc.stdout.close()
     assert (tmp_path / "out.annotations.json").exists() or (demo_out.parent / "out.annotations.json").exists()
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and text in (proc / "cmdline").read_bytes().decode(errors="replace"):
+                pids.append(int(proc.name))
+        except OSError:
+            continue
+    return pids
+
+
+def test_cli_sigterm_while_processing_stops_the_solver_too(tmp_path: Path) -> None:
+    out = tmp_path / "fresh_out"  # not processed: addb view starts the solver
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "addb_viewer.cli", "view", "--out", str(out), "--port", "0"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=tmp_path,
+    )
+    try:
+        jobs = tmp_path / ".fresh_out.jobs"
+        wait_for(lambda: list(jobs.glob("*/job.json")), timeout=60, what="the solver job to start")
+        wait_for(lambda: _processes_mentioning(str(jobs)), timeout=30, what="the solver process")
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 0
+        wait_for(lambda: not _processes_mentioning(str(jobs)), timeout=15, what="the solver process to end")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in _processes_mentioning(str(tmp_path / ".fresh_out.jobs")):  # this test's solver child
+            os.kill(pid, signal.SIGKILL)
