@@ -5,7 +5,7 @@ solved here by Gauss-Newton on a banded system):
 
     min_Q  sum_t sum_m |p_m(q_t) - y_tm|² / s_m²                              markers, every frame
          + sum_{t observed} |F_res(t)|² / s_F² + |M_res(t)|² / s_M²            residuals, measured frames only
-         + sum_t |q_{t+1} - 2 q_t + q_{t-1}|² / (h² s_a)²                       smoothness
+         + sum_t |d_{t+1} - 2 d_t + d_{t-1}|² / (h² s_a,t)²,  d = q - q_start      smooth corrections
 
 where F_res = pdot - m g - F_ext and M_res = kdot_G - sum_i (r_i - c) x f_i - tau_i are the
 net force and the net moment about the centre of mass that the ground would have to add
@@ -57,7 +57,12 @@ class FitSettings:
     moment_sigma
         s_M, N·m per residual moment component.
     accel_sigma
-        s_a, rad/s² (m/s²) per coordinate: a weak smoothness prior.
+        s_a, rad/s² (m/s²) per coordinate: a weak prior on the second differences of the
+        change from the starting (filtered) motion, so corrections stay smooth in time.
+    unobserved_accel_sigma
+        s_a on frames with unmeasured force, much stronger: there no residual term holds
+        the motion, and without it the fit would bend the first unobserved frames to cancel
+        the residual of the last observed ones (a kink, i.e. a spike of acceleration).
     mass_sigma
         Prior deviation of each body's mass factor from 1 (relative).
     rounds
@@ -76,6 +81,7 @@ class FitSettings:
     force_sigma: float = 2.0
     moment_sigma: float = 2.0
     accel_sigma: float = 500.0
+    unobserved_accel_sigma: float = 5.0
     mass_sigma: float = 0.25
     rounds: int = 4
     iterations: int = 12
@@ -143,6 +149,7 @@ class _TrialProblem:
         self.d1, self.d2 = derivative_operators(self.t, data.dt, st.derivative)
         self.seen = np.isfinite(data.observed_markers).all(axis=2)
         self.y = np.nan_to_num(data.observed_markers)
+        self.q_start = np.array(data.q, dtype=float)
         self.mass = sk.total_mass
         self.g = np.asarray(sk.osim.gravity, dtype=float)
         lo, hi = solver_bounds(sk)
@@ -150,6 +157,9 @@ class _TrialProblem:
         self.lo = np.minimum(lo, data.q.min(axis=0))
         self.hi = np.maximum(hi, data.q.max(axis=0))
         self.w_res = np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3)
+        # per interior frame: weight of its second difference (stronger where force is unmeasured)
+        sig = np.where(data.observed[1:-1], st.accel_sigma, st.unobserved_accel_sigma)
+        self.w_smooth = 1.0 / (data.dt**2 * sig)
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -184,7 +194,8 @@ class _TrialProblem:
             hdot, com = self.momentum_rate(qp, vp, ap)
             r = self.residual_wrench(hdot, com)[self.data.observed] * self.w_res
             total += float(np.sum(r**2))
-        smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
+        d = q[:, self.free] - self.q_start[:, self.free]
+        smooth = (d[2:] - 2 * d[1:-1] + d[:-2]) * self.w_smooth[:, None]
         return total + float(np.sum(smooth**2))
 
     # -------------------------------------------------------------- linearization
@@ -253,14 +264,15 @@ class _TrialProblem:
                 prod = np.einsum("kri,krj->kij", j1[both], j2[both])
                 np.add.at(blocks, (s1[both], o2 - o1), prod)
         # smoothness: central second differences
-        ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
-        sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
-        coef = np.array([1.0, -2.0, 1.0]) * ws
+        ws = self.w_smooth[:, None]  # (T-2, 1)
+        dev = q[:, free] - self.q_start[:, free]
+        sd = (dev[2:] - 2 * dev[1:-1] + dev[:-2]) * ws  # (T-2, nf)
+        coef = np.array([1.0, -2.0, 1.0])
         eye = np.eye(nf)
         for a in range(3):
-            np.add.at(grad, np.arange(t - 2) + a, coef[a] * sd)
+            np.add.at(grad, np.arange(t - 2) + a, coef[a] * ws * sd)
             for c in range(a, 3):
-                blocks[np.arange(t - 2) + a, c - a] += coef[a] * coef[c] * eye
+                blocks[np.arange(t - 2) + a, c - a] += (coef[a] * coef[c] * ws[:, 0] ** 2)[:, None, None] * eye
         return _to_banded(blocks, nf), grad.reshape(-1)
 
     # -------------------------------------------------------------- steps
