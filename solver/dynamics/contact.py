@@ -65,7 +65,7 @@ class ContactSettings:
     contact_height: float = 0.03
     contact_speed: float = 0.6
     force_mismatch_bw: float = 0.3
-    mismatch_seconds: float = 0.08
+    mismatch_seconds: float = 0.0
     toe_extension: float = 0.5
 
 

@@ -5,7 +5,7 @@ solved here by Gauss-Newton on a banded system):
 
     min_Q  sum_t sum_m |p_m(q_t) - y_tm|² / s_m²                              markers, every frame
          + sum_{t observed} |F_res(t)|² / s_F² + |M_res(t)|² / s_M²            residuals, measured frames only
-         + sum_t |d_{t+1} - 2 d_t + d_{t-1}|² / (h² s_a,t)²,  d = q - q_start      smooth corrections
+         + sum_t |q_{t+1} - 2 q_t + q_{t-1}|² / (h² s_a)²                       smoothness
 
 where F_res = pdot - m g - F_ext and M_res = kdot_G - sum_i (r_i - c) x f_i - tau_i are the
 net force and the net moment about the centre of mass that the ground would have to add
@@ -57,12 +57,10 @@ class FitSettings:
     moment_sigma
         s_M, N·m per residual moment component.
     accel_sigma
-        s_a, rad/s² (m/s²) per coordinate: a weak prior on the second differences of the
-        change from the starting (filtered) motion, so corrections stay smooth in time.
-    unobserved_accel_sigma
-        s_a on frames with unmeasured force, much stronger: there no residual term holds
-        the motion, and without it the fit would bend the first unobserved frames to cancel
-        the residual of the last observed ones (a kink, i.e. a spike of acceleration).
+        s_a, rad/s² (m/s²) per coordinate: a weak smoothness prior.
+    unobserved_force_sigma, unobserved_moment_sigma
+        s_F and s_M on frames with unmeasured force: a weak pull of the free centre-of-mass
+        accelerations there (the unmeasured force stays free to reach body weight).
     mass_sigma
         Prior deviation of each body's mass factor from 1 (relative).
     rounds
@@ -81,7 +79,8 @@ class FitSettings:
     force_sigma: float = 2.0
     moment_sigma: float = 2.0
     accel_sigma: float = 500.0
-    unobserved_accel_sigma: float = 5.0
+    unobserved_force_sigma: float = 2000.0
+    unobserved_moment_sigma: float = 2000.0
     mass_sigma: float = 0.25
     rounds: int = 4
     iterations: int = 12
@@ -149,17 +148,19 @@ class _TrialProblem:
         self.d1, self.d2 = derivative_operators(self.t, data.dt, st.derivative)
         self.seen = np.isfinite(data.observed_markers).all(axis=2)
         self.y = np.nan_to_num(data.observed_markers)
-        self.q_start = np.array(data.q, dtype=float)
         self.mass = sk.total_mass
         self.g = np.asarray(sk.osim.gravity, dtype=float)
         lo, hi = solver_bounds(sk)
         # the filtered starting motion may overshoot a bound slightly: never pull it back
         self.lo = np.minimum(lo, data.q.min(axis=0))
         self.hi = np.maximum(hi, data.q.max(axis=0))
-        self.w_res = np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3)
-        # per interior frame: weight of its second difference (stronger where force is unmeasured)
-        sig = np.where(data.observed[1:-1], st.accel_sigma, st.unobserved_accel_sigma)
-        self.w_smooth = 1.0 / (data.dt**2 * sig)
+        # residual weights per frame: measured frames as set; unmeasured frames much weaker,
+        # the paper's regularization of the free centre-of-mass accelerations there (it also
+        # keeps the fit from bending the first unmeasured frames to cancel the residual of
+        # the last measured ones, which would spike the accelerations)
+        w_obs = np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3)
+        w_unobs = np.array([1 / st.unobserved_force_sigma] * 3 + [1 / st.unobserved_moment_sigma] * 3)
+        self.w_res = np.where(np.asarray(data.observed, dtype=bool)[:, None], w_obs, w_unobs)  # (T, 6)
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -190,12 +191,11 @@ class _TrialProblem:
         pos = self.sk.marker_positions(q, self.data.markers)
         e = np.where(self.seen[..., None], pos - self.y, 0.0) / st.marker_sigma
         total = float(np.sum(e**2))
-        if self.data.observed.any():
+        if True:  # residual terms on every frame (weights per frame)
             hdot, com = self.momentum_rate(qp, vp, ap)
-            r = self.residual_wrench(hdot, com)[self.data.observed] * self.w_res
+            r = self.residual_wrench(hdot, com) * self.w_res
             total += float(np.sum(r**2))
-        d = q[:, self.free] - self.q_start[:, self.free]
-        smooth = (d[2:] - 2 * d[1:-1] + d[:-2]) * self.w_smooth[:, None]
+        smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
         return total + float(np.sum(smooth**2))
 
     # -------------------------------------------------------------- linearization
@@ -216,7 +216,7 @@ class _TrialProblem:
         grad = np.zeros((t, nf))
         _, _, qp, vp, ap = self.kinematics(q)
         model, data = self.sk.model, self.sk.data
-        obs = self.data.observed
+        obs = np.ones(t, dtype=bool)  # every frame has a residual term (weights differ)
         sm = self.st.marker_sigma
         dq = np.zeros((t, 6, nf))
         dv = np.zeros((t, 6, nf))
@@ -241,9 +241,9 @@ class _TrialProblem:
                 f_ext = self.data.force[k]
                 d_q = hdot_dq.copy()
                 d_q[3:] -= _skew(f_ext) @ jcom
-                dq[k] = (d_q @ cmat) * self.w_res[:, None]
-                dv[k] = (hdot_dv @ cmat) * self.w_res[:, None]
-                da[k] = (hdot_da @ cmat) * self.w_res[:, None]
+                dq[k] = (d_q @ cmat) * self.w_res[k][:, None]
+                dv[k] = (hdot_dv @ cmat) * self.w_res[k][:, None]
+                da[k] = (hdot_da @ cmat) * self.w_res[k][:, None]
         # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k)
         idx = np.flatnonzero(obs)
         for o1 in range(-b, b + 1):
@@ -264,15 +264,14 @@ class _TrialProblem:
                 prod = np.einsum("kri,krj->kij", j1[both], j2[both])
                 np.add.at(blocks, (s1[both], o2 - o1), prod)
         # smoothness: central second differences
-        ws = self.w_smooth[:, None]  # (T-2, 1)
-        dev = q[:, free] - self.q_start[:, free]
-        sd = (dev[2:] - 2 * dev[1:-1] + dev[:-2]) * ws  # (T-2, nf)
-        coef = np.array([1.0, -2.0, 1.0])
+        ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
+        sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
+        coef = np.array([1.0, -2.0, 1.0]) * ws
         eye = np.eye(nf)
         for a in range(3):
-            np.add.at(grad, np.arange(t - 2) + a, coef[a] * ws * sd)
+            np.add.at(grad, np.arange(t - 2) + a, coef[a] * sd)
             for c in range(a, 3):
-                blocks[np.arange(t - 2) + a, c - a] += (coef[a] * coef[c] * ws[:, 0] ** 2)[:, None, None] * eye
+                blocks[np.arange(t - 2) + a, c - a] += coef[a] * coef[c] * eye
         return _to_banded(blocks, nf), grad.reshape(-1)
 
     # -------------------------------------------------------------- steps
