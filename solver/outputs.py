@@ -54,10 +54,13 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
 
 
 @contextmanager
-def staged_output(out_dir: str | Path) -> Iterator[Path]:
+def staged_output(out_dir: str | Path, *, merge: bool = False) -> Iterator[Path]:
     """Yield a temporary folder; on success it replaces ``out_dir`` atomically.
 
-    On an exception the temporary folder is removed and ``out_dir`` is left untouched.
+    With ``merge`` and an existing ``out_dir``, each entry written (a trial folder, the
+    model, subject.json) replaces its namesake inside ``out_dir`` by a rename, and the other
+    entries stay (used to reprocess some trials of a subject). On an exception the
+    temporary folder is removed and ``out_dir`` is left untouched.
     """
     out = Path(out_dir).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -67,6 +70,16 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    if merge and out.is_dir():
+        trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+        for entry in tmp.iterdir():
+            target = out / entry.name
+            if target.exists():
+                os.replace(target, trash / entry.name)
+            os.replace(entry, target)
+        shutil.rmtree(trash, ignore_errors=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+        return
     old = None
     if out.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))

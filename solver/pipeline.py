@@ -50,6 +50,8 @@ class ProcessOptions:
         None: its defaults).
     trials
         Names of the trials to write (all trials are still used for scaling); None: all.
+        With names, an existing output folder keeps its other trials (only the named trial
+        folders, the model and subject.json are replaced).
     """
 
     kinematics: KinematicsOptions = field(default_factory=KinematicsOptions)
@@ -260,7 +262,7 @@ def _process_subject(
     rotational = [c.name for c in model.coordinates if c.motion_type == "rotational"]
     out_path = Path(out_dir).resolve()
     model_file = out_path / f"{subject.name}_scaled.osim"
-    with staged_output(out_dir) as tmp:
+    with staged_output(out_dir, merge=bool(opts.trials)) as tmp:
         write_osim(model, tmp / model_file.name, name=f"{subject.name}_scaled", path_point_scales=kin.body_scales)
         for trial in kin.trials:
             if trial.name not in wanted:

@@ -47,7 +47,9 @@ def residual_metrics(
     -------
     dict with ``marker_rms_m``, ``marker_max_m``, ``linear_residual_rms_N``,
     ``linear_residual_mean_N``, ``angular_residual_rms_Nm``, ``linear_residual_rms_BW``,
-    ``angular_residual_rms_BWh``, ``hicks_linear_ok``, ``hicks_angular_ok``,
+    ``angular_residual_rms_BWh``, ``hicks_linear_threshold_N``, ``hicks_angular_threshold_Nm``
+    (the thresholds in physical units, e.g. to mark frames above them), ``hicks_linear_ok``,
+    ``hicks_angular_ok``,
     ``n_observed_frames``.
     """
     err = np.linalg.norm(modeled - observed_markers, axis=2)
@@ -69,6 +71,8 @@ def residual_metrics(
         "angular_residual_mean_Nm": float(m.mean()) if has else float("nan"),
         "linear_residual_rms_BW": lin_rms / bw,
         "angular_residual_rms_BWh": ang_rms / bwh if bwh else None,
+        "hicks_linear_threshold_N": HICKS_LINEAR_BW * bw,
+        "hicks_angular_threshold_Nm": HICKS_ANGULAR_BWH * bwh if bwh else None,
         "hicks_linear_ok": bool(lin_rms / bw < HICKS_LINEAR_BW) if has else None,
         "hicks_angular_ok": bool(ang_rms / bwh < HICKS_ANGULAR_BWH) if (has and bwh) else None,
     }

@@ -213,3 +213,18 @@ def test_missing_mass_names_the_file_and_key(tmp_path: Path) -> None:
         process_subject(subject, tmp_path / "out")
     assert "_subject.json" in str(err.value)
     assert cli(["process", str(subject), "--out", str(tmp_path / "out")]) == 1
+
+
+def test_reprocessing_one_trial_keeps_the_others(walk_out: Path, tmp_path: Path) -> None:
+    from solver.pipeline import ProcessOptions
+
+    out = tmp_path / "out"
+    shutil.copytree(walk_out, out)
+    static_before = (out / "static" / "results.json").read_bytes()
+    (out / "walk" / "stale.txt").write_text("from the previous run")
+    process_subject(SUBJECTS / "rajagopal2016_walk", out, options=ProcessOptions(trials=("walk",)))
+    assert (out / "static" / "results.json").read_bytes() == static_before  # untouched
+    assert not (out / "walk" / "stale.txt").exists()  # the trial folder was replaced whole
+    r = _results(out, "walk")
+    assert r["hicks_linear_threshold_N"] == pytest.approx(0.05 * r["mass_kg"] * 9.80665)
+    assert not list(tmp_path.glob(".out.*"))
