@@ -152,26 +152,33 @@ def main() -> None:
             qp[:, j] = np.interp(od.time, od.time[known], qp[known, j])
 
         frames = np.flatnonzero(~ud.unobserved)
-        rows = [
-            ("oracle (all forces seen)", evaluate(Skeleton(oracle.dynamics.model), od.q, dt, od, frames)),
-            ("ours (hidden steps unobserved)", evaluate(Skeleton(ours.dynamics.model), ud.q, dt, od, frames)),
-            ("piecewise baseline (segments alone)", evaluate(Skeleton(piecewise.dynamics.model), qp, dt, od, frames)),
+        all_measured = np.flatnonzero(~od.unobserved)
+        methods = [
+            ("oracle (all forces seen)", Skeleton(oracle.dynamics.model), od.q),
+            ("ours (hidden steps unobserved)", Skeleton(ours.dynamics.model), ud.q),
+            ("piecewise baseline (segments alone)", Skeleton(piecewise.dynamics.model), qp),
         ]
+        rows = [(name, evaluate(sk, q, dt, od, frames), evaluate(sk, q, dt, od, all_measured)) for name, sk, q in methods]
     lines = [
         f"Trial {SUBJECT.name}/{TRIAL}: {od.time.size} frames at 100 Hz, {len(steps)} right-foot steps, "
         f"{len(hidden)} hidden (every 3rd), {frames.size} frames evaluated (observed in 'ours'); "
         f"piecewise: {len(segments)} segments.",
         "",
-        "| method | linear residual, mean (N) | linear residual, RMS (N) | marker RMS (cm) |",
+        "Residual with the true plate forces: (a) on the frames observed in 'ours' (hidden steps",
+        "excluded); (b) on every frame with measured force in the unmodified trial, hidden steps",
+        "included (there 'ours' never saw the force it is judged against).",
+        "",
+        "| method | (a) residual mean / RMS (N) | (b) residual mean / RMS (N) | marker RMS (cm) |",
         "| --- | ---: | ---: | ---: |",
     ]
-    for name, r in rows:
-        lines.append(f"| {name} | {r['mean_N']:.1f} | {r['rms_N']:.1f} | {r['marker_cm']:.2f} |")
-    o, u, p = (r for _, r in rows)
+    for name, a, b in rows:
+        lines.append(f"| {name} | {a['mean_N']:.1f} / {a['rms_N']:.1f} | {b['mean_N']:.1f} / {b['rms_N']:.1f} | {a['marker_cm']:.2f} |")
+    (_, oa, ob), (_, ua, ub), (_, pa, pb) = rows
     lines += [
         "",
-        f"ordering oracle < ours < piecewise (mean residual): {o['mean_N'] < u['mean_N'] < p['mean_N']}; "
-        f"ours / oracle = {u['mean_N'] / o['mean_N']:.2f} (must be <= 1.5).",
+        f"(a): ours / oracle = {ua['mean_N'] / oa['mean_N']:.2f} (<= 1.5 required), piecewise / ours = {pa['mean_N'] / ua['mean_N']:.1f}.",
+        f"(b): ordering oracle < ours < piecewise: {ob['mean_N'] < ub['mean_N'] < pb['mean_N']}; "
+        f"ours / oracle = {ub['mean_N'] / ob['mean_N']:.2f}.",
         "Paper (its own data): 12.9 N / 1.5 cm, 18.0 N / 2.4 cm, 3630 N / 7.7 cm.",
         f"Wall time of the whole study: {time.perf_counter() - t_start:.0f} s.",
     ]
