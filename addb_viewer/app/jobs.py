@@ -9,8 +9,9 @@ those lines and calls back; :meth:`SolverJob.cancel` terminates the child. The s
 writes its output folder atomically, so a cancelled or failed run leaves the previous
 result in place.
 
-A reprocess of one trial writes into a scratch folder; :func:`install_trial` then moves
-the new ``<trial>`` folder into the output folder with renames.
+A reprocess of one trial asks the solver for that trial only: the solver stages it and
+then replaces, by renames, that trial's folder, the model and subject.json in the output
+folder (the other trials stay).
 """
 
 from __future__ import annotations
@@ -225,28 +226,6 @@ class SolverJob:
         except OSError:
             return "no log"
         return "last output: " + text[-n:].strip() if text.strip() else "no output"
-
-
-def install_trial(job_out: Path, out_dir: Path, trial: str) -> None:
-    """Move ``job_out/<trial>`` into ``out_dir/<trial>``, replacing the old folder.
-
-    Two renames (old aside, new in) and then the old folder is deleted, so ``out_dir``
-    always holds a complete trial folder except for the instant between the renames.
-
-    Raises
-    ------
-    FileNotFoundError
-        The run did not produce that trial.
-    """
-    new = Path(job_out) / trial
-    if not (new / "trial.npz").is_file():
-        raise FileNotFoundError(str(new / "trial.npz"))
-    target = Path(out_dir) / trial
-    old = Path(out_dir) / f".{trial}.old-{uuid.uuid4().hex[:8]}"
-    if target.exists():
-        os.replace(target, old)
-    os.replace(new, target)
-    shutil.rmtree(old, ignore_errors=True)
 
 
 def new_work_dir(jobs_dir: Path, label: str) -> Path:

@@ -2,9 +2,9 @@
 and the "Record to Rerun" export, with their progress, cancel and results in the panel.
 
 One run at a time. A Reprocess gives the solver every trial's reviewer flags (frames with
-unmeasured force), writes into a scratch folder beside the output folder and, when it
-succeeds, moves the new trial folder into place and reloads the trial at the same
-frame, then shows the before/after table. A failed or cancelled run leaves the previous
+unmeasured force) and its name: the solver replaces only that trial's folder (plus the
+model and subject.json) in the output folder when it succeeds; the app then reloads the
+trial at the same frame and shows the before/after table. A failed or cancelled run leaves the previous
 result on screen and on disk, and says why in the page.
 """
 
@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, install_trial, new_work_dir
+from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError
 
@@ -54,7 +54,7 @@ class Reprocessor:
             self._say("No trial to reprocess.")
             return
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
-        spec = JobSpec(app.paths.subject_dir, work / "out", (name,), self._masks())
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks())
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
     def _masks(self) -> dict[str, np.ndarray]:
@@ -137,7 +137,6 @@ class Reprocessor:
 
     def _install(self, trial: str, before: dict | None, work: Any) -> None:
         app = self.app
-        install_trial(work / "out", app.paths.out_dir, trial)
         showing = app.trial is None or app.trial.trial == trial
         if trial not in app.trials:
             app.trials = sorted([*app.trials, trial])
