@@ -253,7 +253,8 @@ class _TrialProblem:
                   + self.d2[idx, np.clip(s1, 0, t - 1)][:, None, None] * da[idx]
                   + (dq[idx] if o1 == 0 else 0.0))
             j1[~ok1] = 0.0
-            np.add.at(grad, np.clip(s1, 0, t - 1), np.einsum("kri,kr->ki", j1, res[idx]) * ok1[:, None])
+            # idx + o1 is a set of distinct frames: plain fancy-index accumulation is exact
+            grad[s1[ok1]] += np.einsum("kri,kr->ki", j1[ok1], res[idx[ok1]])
             for o2 in range(o1, b + 1):
                 s2 = idx + o2
                 ok2 = (s2 >= 0) & (s2 < t)
@@ -262,14 +263,14 @@ class _TrialProblem:
                       + (dq[idx] if o2 == 0 else 0.0))
                 both = ok1 & ok2
                 prod = np.einsum("kri,krj->kij", j1[both], j2[both])
-                np.add.at(blocks, (s1[both], o2 - o1), prod)
+                blocks[s1[both], o2 - o1] += prod
         # smoothness: central second differences
         ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
         sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
         coef = np.array([1.0, -2.0, 1.0]) * ws
         eye = np.eye(nf)
         for a in range(3):
-            np.add.at(grad, np.arange(t - 2) + a, coef[a] * sd)
+            grad[a : a + t - 2] += coef[a] * sd
             for c in range(a, 3):
                 blocks[np.arange(t - 2) + a, c - a] += coef[a] * coef[c] * eye
         return _to_banded(blocks, nf), grad.reshape(-1)
