@@ -1,0 +1,131 @@
+"""Dataset builder: frame selection, per-foot ground truth at the foot origin, skipped
+trials, kinematic inputs, and splits by subject."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solver.benchmark.dataset import (
+    MIN_TRIAL_FRAMES,
+    BenchmarkError,
+    BenchmarkTrial,
+    Skipped,
+    Split,
+    benchmark_trial,
+    build_dataset,
+    leave_one_subject_out,
+    load_dataset,
+    split_subjects,
+)
+from solver.results import save_processed
+
+from .conftest import processed_trial
+
+
+def test_frames_with_unmeasured_force_are_excluded() -> None:
+    unobserved = np.zeros(40, dtype=bool)
+    unobserved[5:9] = True
+    b = benchmark_trial(processed_trial(40, unobserved=unobserved), inputs="processed")
+    assert isinstance(b, BenchmarkTrial)
+    assert b.frames.tolist() == [k for k in range(40) if not 5 <= k < 9]
+
+
+def test_frames_with_a_load_on_another_body_or_no_body_are_excluded() -> None:
+    trial = processed_trial(40)
+    body = trial.plates[0].body.copy()
+    body[10:13] = trial.body_names.index("pelvis")  # a third contact body
+    body[20:22] = -1  # a loaded plate applied to nobody
+    b = benchmark_trial(processed_trial(40, plate_body={"r": body}), inputs="processed")
+    assert isinstance(b, BenchmarkTrial)
+    excluded = sorted(set(range(40)) - set(b.frames.tolist()))
+    assert excluded == [10, 11, 12, 20, 21]
+
+
+def test_short_trials_and_trials_without_dynamics_are_skipped() -> None:
+    unobserved = np.ones(30, dtype=bool)
+    unobserved[: MIN_TRIAL_FRAMES - 1] = False
+    skipped = benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed")
+    assert isinstance(skipped, Skipped) and "fewer than 12" in skipped.reason
+    unobserved[MIN_TRIAL_FRAMES - 1] = False
+    assert isinstance(benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed"), BenchmarkTrial)
+    t = processed_trial(20)
+    from dataclasses import replace
+
+    no_dyn = replace(t, residual_force=np.full_like(t.residual_force, np.nan))
+    assert isinstance(benchmark_trial(no_dyn), Skipped)
+
+
+def test_ground_truth_wrench_is_moved_to_the_foot_origin() -> None:
+    offset = np.array([0.1, -0.05, 0.02])
+    n = 30
+    left = np.zeros(n, dtype=bool)
+    left[:5] = True
+    t = processed_trial(n, left=left, cop_offset=tuple(offset))
+    b = benchmark_trial(t, inputs="processed")
+    f = t.plates[0].force
+    expected = np.cross(offset, f) + [0.0, 2.0, 0.0]  # (cop - origin) x F + free moment
+    np.testing.assert_allclose(b.grf[:, 0], f)
+    np.testing.assert_allclose(b.grm[:, 0], expected, atol=1e-9)
+    assert b.contact[:5].all() and b.contact[5:, 0].all() and not b.contact[5:, 1].any()
+
+
+def test_input_is_filtered_and_kinematic_input_recovers_the_motion() -> None:
+    t = processed_trial(30)
+    b = benchmark_trial(t)  # kinematic inputs: IK of the (exact) model markers
+    assert b.inputs == "kinematic"
+    np.testing.assert_allclose(b.q_unfiltered, t.q, atol=2e-3)
+    assert b.cutoff_hz == 30.0 and not np.array_equal(b.q, b.q_unfiltered)
+    with pytest.raises(BenchmarkError, match="inputs"):
+        benchmark_trial(t, inputs="video")
+
+
+def test_resampled_to_100_hz() -> None:
+    from dataclasses import replace
+
+    t = processed_trial(40)
+    slow = replace(t, time=t.time * 2.0)  # the same samples at 50 Hz
+    b = benchmark_trial(slow, inputs="processed")
+    assert isinstance(b, BenchmarkTrial)
+    assert b.n_frames == 79 and np.allclose(np.diff(b.time), 0.01)
+
+
+def test_load_dataset_from_output_folders(tmp_path) -> None:
+    for subject in ("a", "b"):
+        t = processed_trial(20, subject=subject)
+        save_processed(tmp_path / subject / t.trial / "trial.npz", t)
+    ds = load_dataset([tmp_path / "a", tmp_path / "b"], inputs="processed")
+    assert ds.subjects == ["a", "b"] and ds.n_frames == 40
+    t = processed_trial(20, subject="a")
+    save_processed(tmp_path / "a_again" / t.trial / "trial.npz", t)
+    with pytest.raises(BenchmarkError, match="also in"):  # one subject processed into two folders
+        load_dataset([tmp_path / "a", tmp_path / "a_again"], inputs="processed")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BenchmarkError, match="no processed trial"):
+        load_dataset([tmp_path / "empty"])
+
+
+def test_seeded_split_puts_no_subject_in_two_splits() -> None:
+    names = [f"s{i:02d}" for i in range(20)]
+    s = split_subjects(names, seed=3)
+    assert len(s.test) == 4 and len(s.dev) == 2 and len(s.train) == 14
+    assert sorted(s.train + s.dev + s.test) == names
+    assert split_subjects(names, seed=3) == s and split_subjects(names, seed=4) != s
+    three = split_subjects(["a", "b", "c"])
+    assert (len(three.train), len(three.dev), len(three.test)) == (1, 1, 1)
+    two = split_subjects(["a", "b"])
+    assert (len(two.train), len(two.dev), len(two.test)) == (1, 0, 1)
+    with pytest.raises(BenchmarkError, match="two splits"):
+        Split(("a",), (), ("a",))
+
+
+def test_leave_one_subject_out_tests_every_subject_once() -> None:
+    folds = leave_one_subject_out(["c", "a", "b", "a"])
+    assert [f.test for f in folds] == [("a",), ("b",), ("c",)]
+    for f in folds:
+        assert f.test[0] not in f.train and len(f.train) == 2
+
+
+def test_dataset_of_subjects() -> None:
+    ds = build_dataset([processed_trial(20, subject="a"), processed_trial(20, subject="b")], inputs="processed")
+    assert ds.of_subjects(["b"]).subjects == ["b"]
