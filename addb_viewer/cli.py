@@ -24,6 +24,7 @@ COMMANDS = (
     "addb_viewer.commands.process",
     "addb_viewer.commands.record",
     "addb_viewer.commands.export",
+    "addb_viewer.commands.benchmark",
 )
 
 

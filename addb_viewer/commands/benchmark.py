@@ -1,0 +1,145 @@
+"""``addb benchmark SUBJECT_DIR... --method analytical|mlp``: the seed paper's benchmark.
+
+Estimating dynamics from motion (Werling et al. 2024, §5) on our own processed subjects:
+prints the paper's table (method x four metrics) with a dataset summary and writes both as
+``benchmark.json`` and ``benchmark.md``. Each argument is a processed output folder or a
+subject folder; a subject folder not processed yet is processed first into its default
+output folder (:mod:`addb_viewer.locations`: ``<subject>/addb_out``, or the user's cache
+for a read-only folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+
+def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:  # noqa: ANN001
+    """(processed output folder, subject folder or None) of a command-line argument."""
+    from addb_viewer.recording.jobs import ensure_processed
+    from solver.errors import SubjectFolderError
+    from solver.results import processed_trials
+
+    p = Path(path)
+    if not p.is_dir():
+        raise SubjectFolderError("not a folder", path=p)
+    if processed_trials(p):
+        return p, None
+    if not (p / "_subject.json").is_file():
+        raise SubjectFolderError("neither a processed output folder nor a subject folder (no _subject.json)", path=p)
+    return ensure_processed(p, progress=progress), p
+
+
+def activity_seconds(pairs: list[tuple[Path, Path | None]]) -> dict[str, float] | None:
+    """Seconds per activity label over the subjects' review records (None: no record)."""
+    from addb_viewer.locations import annotations_path
+    from annotations import AnnotationStore
+    from solver.results import load_processed, processed_trials
+
+    total: dict[str, float] = {}
+    found = False
+    for out, subject in pairs:
+        if subject is None:
+            continue
+        path = annotations_path(subject, out)
+        if not path.exists():
+            continue
+        found = True
+        trials = set(processed_trials(out))
+        with AnnotationStore.open(path, reviewer="addb benchmark") as store:
+            for name in store.trials():
+                review = store.review(name)
+                rate = review.rate_hz or (load_processed(out, name).rate_hz if name in trials else 100.0)
+                for a in review.activities:
+                    total[a.label] = total.get(a.label, 0.0) + (a.stop - a.start) / rate
+    return total if found else None
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that reproduces this run (recorded in the report)."""
+    parts = ["addb", "benchmark", *args.subjects]
+    for m in args.method or ["analytical"]:
+        parts += ["--method", m]
+    for c in args.contact or ["measured"]:
+        parts += ["--contact", c]
+    for t in args.train or []:
+        parts += ["--train", t]
+    if not args.train:
+        parts += ["--split", args.split]
+    parts += ["--seed", str(args.seed), "--inputs", args.inputs, "--epochs", str(args.epochs)]
+    if args.filtering:
+        parts.append("--filtering")
+    parts += ["-o", args.output]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def run(args: argparse.Namespace) -> int:
+    from addb_viewer.progress import ProgressBar, table
+    from solver.benchmark.dataset import load_dataset
+    from solver.benchmark.filtering import filtering_markdown, filtering_study, plot_filtering
+    from solver.benchmark.mlp import MlpOptions
+    from solver.benchmark.report import dataset_summary, summary_lines, table_header, table_rows, write_report
+    from solver.benchmark.run import run_benchmark
+
+    command = _command(args)
+    bar = ProgressBar()
+    pairs = [resolve_output(s, bar) for s in args.subjects]
+    train_pairs = [resolve_output(s, bar) for s in (args.train or [])]
+    print(f"loading {len(pairs)} subject(s) (inverse kinematics of the markers)" if args.inputs == "kinematic" else f"loading {len(pairs)} subject(s)", file=sys.stderr)
+    dataset = load_dataset([o for o, _ in pairs], inputs=args.inputs)
+    train = load_dataset([o for o, _ in train_pairs], inputs=args.inputs) if train_pairs else None
+    methods = tuple(dict.fromkeys(args.method or ["analytical"]))
+    contacts = tuple(dict.fromkeys(args.contact or ["measured"]))
+    result = run_benchmark(
+        dataset,
+        methods=methods,
+        contacts=contacts,
+        split=args.split,
+        seed=args.seed,
+        train=train,
+        mlp_options=MlpOptions(epochs=args.epochs, seed=args.seed),
+        progress=bar,
+    )
+    summary = dataset_summary(dataset, activities=activity_seconds(pairs + train_pairs))
+    print(table(table_rows(result), table_header()))
+    print(f"protocol: {result.protocol}")
+    for row in result.rows:
+        if "train_seconds" in row.notes:
+            print(f"MLP training: {row.notes['train_seconds']:.1f} s over {len(row.notes['folds'])} fold(s)")
+    for line in summary_lines(summary):
+        print(line)
+    js, md = write_report(args.output, result, summary, command=command)
+    if args.filtering:
+        rows = filtering_study(dataset, contact=contacts[0])
+        (Path(args.output) / "filtering_study.md").write_text(filtering_markdown(rows))
+        png = Path(args.output) / "filtering_study.png"
+        plotted = plot_filtering(rows, png, title=f"analytical baseline ({contacts[0]} contact), {dataset.n_frames} frames")
+        print(filtering_markdown(rows), end="")
+        print(f"wrote {Path(args.output) / 'filtering_study.md'}" + (f" and {png}" if plotted else " (install matplotlib for the plot)"))
+    print(f"wrote {js} and {md}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "benchmark",
+        help="the seed paper's benchmark: estimate dynamics from motion (analytical / MLP baselines)",
+        description=(
+            "Score methods that estimate the centre-of-mass acceleration, ground reaction forces and "
+            "moments and joint torques from motion alone (Werling et al. 2024, section 5) on processed "
+            "subjects; prints the table and writes benchmark.json and benchmark.md."
+        ),
+    )
+    p.add_argument("subjects", nargs="+", metavar="SUBJECT_DIR", help="subject folder or processed output folder")
+    p.add_argument("--method", action="append", choices=("analytical", "mlp"), help="method to score (repeatable; default analytical)")
+    p.add_argument("--train", action="append", metavar="SUBJECT_DIR", help="train the MLP on these subjects only (repeatable)")
+    p.add_argument("--split", choices=("loso", "seeded"), default="loso", help="protocol without --train: leave-one-subject-out (default) or one seeded train/dev/test split")
+    p.add_argument("--seed", type=int, default=0, help="seed of the split and of the MLP (default 0)")
+    p.add_argument("--contact", action="append", choices=("measured", "kinematic"), help="analytical baseline's contact rule (repeatable; default measured)")
+    p.add_argument("--inputs", choices=("kinematic", "processed"), default="kinematic", help="input coordinates: IK of the markers (default) or the dynamics-fitted ones")
+    p.add_argument("--epochs", type=int, default=10, help="MLP training epochs (default 10, the paper's)")
+    p.add_argument("--filtering", action="store_true", help="also run the filtering study (error against low-pass cut-off)")
+    p.add_argument("-o", "--output", default="addb_benchmark", help="folder for benchmark.json/.md (default ./addb_benchmark)")
+    p.set_defaults(handler=run)

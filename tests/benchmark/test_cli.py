@@ -1,0 +1,47 @@
+"""``addb benchmark`` on processed output folders of synthetic subjects."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.results import save_processed
+
+from .conftest import motion, processed_trial
+
+
+@pytest.fixture(scope="module")
+def out_dirs(tmp_path_factory: pytest.TempPathFactory) -> list:
+    base = tmp_path_factory.mktemp("bench")
+    dirs = []
+    for i, name in enumerate(("s1", "s2")):
+        t = processed_trial(30, subject=name, q=motion(30, accel=(0.3 * i, 0.0, 0.0)))
+        save_processed(base / name / t.trial / "trial.npz", t)
+        dirs.append(base / name)
+    return dirs
+
+
+def test_benchmark_prints_and_writes_the_table(out_dirs, tmp_path, capsys) -> None:
+    out = tmp_path / "report"
+    argv = ["benchmark", *map(str, out_dirs), "--contact", "measured", "--contact", "kinematic", "-o", str(out), "--filtering"]
+    assert cli(argv) == 0
+    text = capsys.readouterr().out
+    assert "analytical (measured contact)" in text and "GRF error (N/kg)" in text
+    assert "benchmark frames: 60" in text and "activities (annotations): none annotated" in text
+    report = json.loads((out / "benchmark.json").read_text())
+    assert report["command"].startswith("addb benchmark ") and "--filtering" in report["command"]
+    assert [r["method"] for r in report["rows"]] == ["analytical (measured contact)", "analytical (kinematic contact)"]
+    assert (out / "benchmark.md").is_file() and (out / "filtering_study.md").is_file()
+
+
+def test_benchmark_rejects_a_folder_that_is_not_a_subject(tmp_path, capsys) -> None:
+    assert cli(["benchmark", str(tmp_path)]) == 1
+    assert "neither a processed output folder nor a subject folder" in capsys.readouterr().err
+
+
+def test_mlp_needs_training_subjects(out_dirs, tmp_path, capsys) -> None:
+    pytest.importorskip("torch")
+    assert cli(["benchmark", str(out_dirs[0]), "--method", "mlp", "-o", str(tmp_path)]) == 1
+    assert "no training subject" in capsys.readouterr().err
