@@ -23,12 +23,14 @@ from solver.results import save_processed
 from .conftest import processed_trial
 
 
-def test_frames_with_unmeasured_force_are_excluded() -> None:
+def test_frames_with_unmeasured_force_are_excluded_with_a_margin() -> None:
     unobserved = np.zeros(40, dtype=bool)
     unobserved[5:9] = True
-    b = benchmark_trial(processed_trial(40, unobserved=unobserved), inputs="processed")
+    b = benchmark_trial(processed_trial(40, unobserved=unobserved), inputs="processed", margin_frames=0)
     assert isinstance(b, BenchmarkTrial)
     assert b.frames.tolist() == [k for k in range(40) if not 5 <= k < 9]
+    b = benchmark_trial(processed_trial(40, unobserved=unobserved), inputs="processed")  # default margin: 3 frames
+    assert b.frames.tolist() == [k for k in range(40) if not 2 <= k < 12]
 
 
 def test_frames_with_a_load_on_another_body_or_no_body_are_excluded() -> None:
@@ -36,7 +38,7 @@ def test_frames_with_a_load_on_another_body_or_no_body_are_excluded() -> None:
     body = trial.plates[0].body.copy()
     body[10:13] = trial.body_names.index("pelvis")  # a third contact body
     body[20:22] = -1  # a loaded plate applied to nobody
-    b = benchmark_trial(processed_trial(40, plate_body={"r": body}), inputs="processed")
+    b = benchmark_trial(processed_trial(40, plate_body={"r": body}), inputs="processed", margin_frames=0)
     assert isinstance(b, BenchmarkTrial)
     excluded = sorted(set(range(40)) - set(b.frames.tolist()))
     assert excluded == [10, 11, 12, 20, 21]
@@ -45,10 +47,11 @@ def test_frames_with_a_load_on_another_body_or_no_body_are_excluded() -> None:
 def test_short_trials_and_trials_without_dynamics_are_skipped() -> None:
     unobserved = np.ones(30, dtype=bool)
     unobserved[: MIN_TRIAL_FRAMES - 1] = False
-    skipped = benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed")
+    skipped = benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed", margin_frames=0)
     assert isinstance(skipped, Skipped) and "fewer than 12" in skipped.reason
     unobserved[MIN_TRIAL_FRAMES - 1] = False
-    assert isinstance(benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed"), BenchmarkTrial)
+    kept = benchmark_trial(processed_trial(30, unobserved=unobserved), inputs="processed", margin_frames=0)
+    assert isinstance(kept, BenchmarkTrial) and kept.frames.size == MIN_TRIAL_FRAMES
     t = processed_trial(20)
     from dataclasses import replace
 
