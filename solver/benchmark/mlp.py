@@ -320,7 +320,7 @@ def train_mlp(
     x, y = _stack(train, spec, opts)
     if len(x) == 0:
         raise BenchmarkError("no training frame for the MLP baseline")
-    xd, yd = _stack(dev, spec, opts)
+    xd, yd = _stack(dev, spec, opts) if dev else (np.zeros((0, x.shape[1])), np.zeros((0, y.shape[1])))
     x_mean, x_std, y_mean, y_std = x.mean(axis=0), _std(x), y.mean(axis=0), _std(y)
     if opts.threads:
         torch.set_num_threads(opts.threads)
