@@ -45,3 +45,18 @@ def test_mlp_needs_training_subjects(out_dirs, tmp_path, capsys) -> None:
     pytest.importorskip("torch")
     assert cli(["benchmark", str(out_dirs[0]), "--method", "mlp", "-o", str(tmp_path)]) == 1
     assert "no training subject" in capsys.readouterr().err
+
+
+def test_activity_durations_come_from_the_review_record(out_dirs, tmp_path) -> None:
+    from addb_viewer.commands.benchmark import activity_seconds
+    from annotations import AnnotationStore
+
+    subject = tmp_path / "subject"
+    subject.mkdir()
+    assert activity_seconds([(out_dirs[0], subject)]) is None  # no review record yet
+    with AnnotationStore.open(subject, reviewer="test") as store:
+        store.set_trial_info("walk", n_frames=30, rate_hz=100.0)
+        store.add_activity("walk", 0, 20, "overground_walking")
+        store.add_activity("walk", 20, 30, "overground_running")
+    secs = activity_seconds([(out_dirs[0], subject), (out_dirs[1], None)])
+    assert secs == {"overground_walking": 0.2, "overground_running": 0.1}
