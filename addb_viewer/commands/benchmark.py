@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 
-def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:  # noqa: ANN001
+def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
     """(processed output folder, subject folder or None) of a command-line argument."""
     from addb_viewer.recording.jobs import ensure_processed
     from solver.errors import SubjectFolderError
@@ -80,7 +80,13 @@ def run(args: argparse.Namespace) -> int:
     from solver.benchmark.dataset import load_dataset
     from solver.benchmark.filtering import filtering_markdown, filtering_study, plot_filtering
     from solver.benchmark.mlp import MlpOptions
-    from solver.benchmark.report import dataset_summary, summary_lines, table_header, table_rows, write_report
+    from solver.benchmark.report import (
+        dataset_summary,
+        summary_lines,
+        table_header,
+        table_rows,
+        write_report,
+    )
     from solver.benchmark.run import run_benchmark
 
     command = _command(args)

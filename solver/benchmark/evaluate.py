@@ -14,7 +14,14 @@ import numpy as np
 
 from solver.benchmark.analytical import Prediction
 from solver.benchmark.dataset import BenchmarkTrial, torque_columns
-from solver.benchmark.metrics import FrameErrors, com_acc_errors, grf_errors, grm_errors, summarize, torque_errors
+from solver.benchmark.metrics import (
+    FrameErrors,
+    com_acc_errors,
+    grf_errors,
+    grm_errors,
+    summarize,
+    torque_errors,
+)
 
 Method = Callable[[BenchmarkTrial], Prediction]
 

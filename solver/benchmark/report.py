@@ -117,11 +117,15 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
     hicks = summary["hicks_pass_rate"]
     acts = summary["activities_s"]
     lines = [
-        f"subjects: {len(summary['subjects'])} ({', '.join(summary['subjects'])}); trials: {len(summary['trials'])}; "
-        f"inputs: {', '.join(summary['inputs'])}",
+        (
+            f"subjects: {len(summary['subjects'])} ({', '.join(summary['subjects'])}); trials: {len(summary['trials'])}; "
+            f"inputs: {', '.join(summary['inputs'])}"
+        ),
         f"benchmark frames: {summary['frames']} ({summary['hours'] * 3600:.1f} s = {summary['hours']:.4f} h at 100 Hz)",
-        f"contact: single support {100 * p['single_support']:.1f} %, double support {100 * p['double_support']:.1f} %, "
-        f"flight {100 * p['flight']:.1f} %",
+        (
+            f"contact: single support {100 * p['single_support']:.1f} %, double support {100 * p['double_support']:.1f} %, "
+            f"flight {100 * p['flight']:.1f} %"
+        ),
         "Hicks pass rate (both thresholds): " + ("unknown" if hicks is None else f"{100 * hicks:.0f} % of trials"),
         "activities (annotations): "
         + ("none annotated" if not acts else ", ".join(f"{k} {v:.1f} s" for k, v in sorted(acts.items()))),

@@ -23,7 +23,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from solver.benchmark.analytical import analytical_baseline
-from solver.benchmark.dataset import BenchmarkError, Dataset, Split, leave_one_subject_out, split_subjects
+from solver.benchmark.dataset import (
+    BenchmarkError,
+    Dataset,
+    Split,
+    leave_one_subject_out,
+    split_subjects,
+)
 from solver.benchmark.evaluate import MethodResult, evaluate
 from solver.benchmark.metrics import FrameErrors, summarize
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, train_mlp
@@ -99,7 +105,7 @@ def _mlp_row(dataset: Dataset, folds: Sequence[Split], train: Dataset | None, op
             raise BenchmarkError(f"{fold.name}: no training subject for the MLP (give more subjects or --train)")
         spec = FeatureSpec.common(list(tr) + list(dv) + list(te))
         model = train_mlp(
-            tr, dv, spec=spec, options=options, progress=lambda m, f, i=i: say(f"{fold.name}: {m}", (i + f) / len(folds))
+            tr, dv, spec=spec, options=options, progress=lambda m, f, i=i, name=fold.name: say(f"{name}: {m}", (i + f) / len(folds))
         )
         errors, pt = evaluate(model.predict, te)
         parts.append(errors)
