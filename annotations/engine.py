@@ -367,7 +367,7 @@ class JournaledStore:
             return Edit(edit_id, op.seq, name, trial, prov, item_id, len(puts), tuple(conflicts))
 
     def _record_history(self, history: str, step: _History) -> None:
-        if step.trial is None:
+        if step.trial is None or history == "none":  # bookkeeping, not a reviewer's edit
             return
         if history == "edit":
             if step.applied:

@@ -431,6 +431,9 @@ class AnnotationStore(JournaledStore):
     ) -> Edit:
         """Record the trial's number of frames and frame rate (Hz), used by :meth:`mask`.
 
+        Bookkeeping, not a review decision: it is durable like every edit but does not go on
+        the undo stack (an Undo right after opening a trial undoes the reviewer's last edit).
+
         Raises
         ------
         AnnotationError
@@ -455,7 +458,7 @@ class AnnotationStore(JournaledStore):
                         f"frame {last} is annotated but n_frames is {n}", where=trial
                     )
         return self._commit(
-            "trial_info", trial, "manual", lambda prov: {("info", trial): (n, rate)}
+            "trial_info", trial, "manual", lambda prov: {("info", trial): (n, rate)}, history="none"
         )
 
     def add_activity(

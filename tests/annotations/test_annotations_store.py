@@ -247,3 +247,15 @@ def test_error_to_dict_for_the_ui(subject: Path) -> None:
     d = info.value.to_dict()
     assert d["type"] == "AnnotationError" and d["where"] == "walk" and "n_frames" in d["message"]
     store.close()
+
+
+def test_trial_info_is_not_undone(tmp_path) -> None:
+    """Recording a trial's length is bookkeeping: Undo skips it and undoes the last flag."""
+    from annotations import AnnotationStore
+
+    with AnnotationStore.open(tmp_path, reviewer="ana") as store:
+        store.set_unmeasured("walk", [3, 4])
+        store.set_trial_info("walk", n_frames=100, rate_hz=100.0)
+        store.undo()
+        assert store.flag("walk", 3) is None
+        assert store.review("walk").n_frames == 100
