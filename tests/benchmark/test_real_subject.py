@@ -8,7 +8,7 @@ import shutil
 import pytest
 
 from addb_viewer.cli import main as cli
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA, writable_copy
 
 pytestmark = pytest.mark.slow
 
@@ -16,7 +16,7 @@ pytestmark = pytest.mark.slow
 def test_walk_subject_is_processed_and_scored(tmp_path, capsys) -> None:
     # a writable copy: the shared folder must stay untouched (and root may write anywhere)
     subject = tmp_path / "rajagopal2016_walk"
-    shutil.copytree(SHARED_DATA / "subjects" / "rajagopal2016_walk", subject, ignore=shutil.ignore_patterns("addb_out*"))
+    writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", subject, ignore=shutil.ignore_patterns("addb_out*"))
     out = tmp_path / "report"
     assert cli(["benchmark", str(subject), "--contact", "measured", "--contact", "kinematic", "-o", str(out)]) == 0
     assert (subject / "addb_out" / "walk" / "trial.npz").is_file()

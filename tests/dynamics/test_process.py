@@ -18,7 +18,7 @@ from solver.errors import DynamicsError, SubjectFolderError
 from solver.io.mot import read_table
 from solver.pipeline import process_subject
 from solver.results import load_processed
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA, writable_copy
 
 REPO = Path(__file__).resolve().parents[2]
 SUBJECTS = SHARED_DATA / "subjects"
@@ -140,7 +140,7 @@ def test_reviewer_flags_override_proposals(tmp_path: Path) -> None:
     res = process_subject(SUBJECTS / "rajagopal2016_walk", tmp_path / "out", unmeasured={"walk": flags})
     td = res.dynamics.trial("walk")
     np.testing.assert_array_equal(td.unobserved, flags[: td.unobserved.size])
-    assert set(r for r in td.reasons if r) == {"flagged by the reviewer"}
+    assert {r for r in td.reasons if r} == {"flagged by the reviewer"}
 
 
 def test_camargo_steps_off_the_plates_are_proposed_and_fit(tmp_path: Path) -> None:
@@ -158,11 +158,7 @@ def test_camargo_steps_off_the_plates_are_proposed_and_fit(tmp_path: Path) -> No
 
 
 def _copy_subject(tmp_path: Path) -> Path:
-    dst = tmp_path / "subject"
-    shutil.copytree(SUBJECTS / "rajagopal2016_walk", dst)
-    for p in dst.rglob("*"):
-        p.chmod(0o644 if p.is_file() else 0o755)
-    return dst
+    return writable_copy(SUBJECTS / "rajagopal2016_walk", tmp_path / "subject")
 
 
 def _damage_grf(subject: Path, fn) -> None:
