@@ -25,6 +25,7 @@ COMMANDS = (
     "addb_viewer.commands.record",
     "addb_viewer.commands.export",
     "addb_viewer.commands.benchmark",
+    "addb_viewer.commands.diagnose",
 )
 
 

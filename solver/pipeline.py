@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from solver import single_threaded_blas
+from solver.diagnose.extensions import apply_extensions, extend_subject, extension_masks
 from solver.errors import KinematicsError
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
@@ -70,8 +71,9 @@ class SubjectKinematics:
 
 
 def load_trials(subject: Subject) -> tuple[Trial, ...]:
-    """Read every trial of ``subject`` (markers and, when present, forces)."""
-    return tuple(load_trial(t) for t in subject.trials)
+    """Read every trial of ``subject`` (markers and, when present, forces), with the
+    corrections saved by ``addb diagnose --apply`` (:mod:`solver.diagnose.extensions`)."""
+    return apply_extensions(subject, tuple(load_trial(t) for t in subject.trials))
 
 
 def subject_kinematics(
@@ -238,6 +240,7 @@ def _process_subject(
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
+    subject = extend_subject(subject)  # mass and model saved by `addb diagnose --apply`
     sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f))
     t_kin = time.perf_counter()
     dyn = None
@@ -251,6 +254,7 @@ def _process_subject(
             foot_bodies=subject.foot_body_names,
             height_m=subject.height_m,
             unmeasured=unmeasured,
+            known_unmeasured=extension_masks(subject) or None,
             options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),
         )

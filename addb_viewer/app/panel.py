@@ -1,4 +1,4 @@
-"""The review app's controls: playback, flags, proposals, reprocess, display, export.
+"""The review app's controls: playback, flags, proposals, reprocess, diagnosis, display, export.
 
 Only builds the viser GUI elements and keeps their handles; the behaviour is attached
 by :class:`~addb_viewer.app.server.ReviewApp`. The controls are shared by every browser
@@ -71,6 +71,7 @@ class ReviewPanel:
     progress: viser.GuiProgressBarHandle
     job_status: viser.GuiMarkdownHandle
     comparison: viser.GuiMarkdownHandle
+    diagnosis: viser.GuiMarkdownHandle
     show_labels: viser.GuiCheckboxHandle
     show_markers: viser.GuiCheckboxHandle
     show_bones: viser.GuiCheckboxHandle
@@ -118,6 +119,8 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["cancel"] = gui.add_button("Cancel", disabled=True, color="red")
         h["job_status"] = gui.add_markdown("")
         h["comparison"] = gui.add_markdown("")
+    with gui.add_folder("Diagnosis", expand_by_default=False):
+        h["diagnosis"] = gui.add_markdown("")
     h["plots_folder"] = gui.add_folder("Plots")
     with gui.add_folder("Display", expand_by_default=False):
         h["show_labels"] = gui.add_checkbox("Marker names", initial_value=False)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
 from addb_viewer.app.meshes import body_mesh
 from addb_viewer.app.panel import ReviewPanel, build_panel
@@ -193,7 +194,7 @@ class ReviewApp:
             raise TrialLoadError(f"trial {name!r} is not processed", path=self.paths.out_dir)
         try:
             trial = load_processed(self.paths.out_dir, name)
-        except Exception as exc:  # noqa: BLE001 - any damage: numpy, zip, JSON, schema
+        except Exception as exc:
             raise TrialLoadError(
                 f"cannot read the processed trial ({type(exc).__name__}: {exc}); press Reprocess to recompute it",
                 path=self.paths.trial_dir(name) / "trial.npz",
@@ -216,6 +217,7 @@ class ReviewApp:
             if view is not None:
                 self.plots.update(flagged=view.flagged, proposed=view.pending)
             self._sync_controls(name)
+            self.panel.diagnosis.content = diagnosis_markdown(self.paths.out_dir, self.paths.subject_dir, name)
             self._aim_camera(trial)
             self.render(self.playback.frame, force_plots=True)
         self.clear_error()

@@ -208,6 +208,7 @@ def run_dynamics(
     unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
     options: DynamicsOptions | None = None,
     progress: Progress | None = None,
+    known_unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
 ) -> DynamicsResult | None:
     """Run the dynamics stage on the trials that have force data.
 
@@ -230,6 +231,10 @@ def run_dynamics(
         Stage options.
     progress
         Called with (message, fraction).
+    known_unmeasured
+        Trial name -> ``(T,)`` bool mask at the marker rate of frames known to be
+        unmeasured whatever the reviewer or the proposals say (saved by ``addb diagnose
+        --apply``); joined to the reviewer's flags or to the automatic proposals.
 
     Returns
     -------
@@ -281,6 +286,11 @@ def run_dynamics(
             reasons = ["flagged by the reviewer" if u else "" for u in unobserved]
         else:
             unobserved = contact.proposed | contact.ambiguous | stray
+        if known_unmeasured is not None and name in known_unmeasured:
+            known = _resample_mask(known_unmeasured[name], kin.time, time)
+            for k in np.flatnonzero(known & ~unobserved):
+                reasons[k] = "unmeasured force found by addb diagnose (saved extension)"
+            unobserved = unobserved | known
         prepared.append(_Prepared(name, time, q, obs, kin.marker_names, plates, contact, unobserved, reasons))
     t_pre = _time.perf_counter()
 

@@ -1,0 +1,105 @@
+"""The trial's diagnosis in the review app: what ``addb diagnose`` found, and what is applied.
+
+Reads two files and turns them into the markdown of the panel's "Diagnosis" folder:
+
+* ``OUT/<trial>/diagnosis.json`` (written by ``addb diagnose``, schema ``addb.diagnosis``):
+  the chosen cause (or that none stands out), its estimate, the best-ranked candidates,
+  and the metrics before and after the extension;
+* ``<subject>/addb_extensions.json`` (written by ``addb diagnose --apply``): the
+  extensions the processing applies to this trial (and to the whole subject).
+
+A missing file shows a hint instead; a damaged one shows what is wrong with it. Nothing
+here raises: the review goes on whatever these files hold.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from solver.diagnose.report import candidate_line, metric_row
+
+DIAGNOSIS_FILE = "diagnosis.json"
+
+#: Candidates listed under the chosen cause.
+SHOWN_CANDIDATES = 4
+
+
+def _read_json(path: Path) -> tuple[Any, str | None]:
+    try:
+        return json.loads(path.read_text(encoding="utf-8")), None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"`{path.name}` cannot be read ({type(exc).__name__}: {exc})"
+
+
+def _applied(subject_dir: Path, trial: str) -> list[str]:
+    """One line per saved extension that acts on ``trial`` (or on the whole subject)."""
+    from solver.diagnose.extensions import extensions_path, read_extensions
+    from solver.errors import SubjectFolderError
+
+    if not extensions_path(subject_dir).is_file():
+        return []
+    try:
+        exts = read_extensions(subject_dir)
+    except SubjectFolderError as exc:
+        return [f"the extensions file is damaged: {exc}"]
+    lines = []
+    for e in exts:
+        if e.get("trial") not in (None, trial):
+            continue
+        detail = {k: v for k, v in e.items() if k not in ("cause", "trial", "time_s", "lab_shift_m", "source", "created", "frames", "n_frames")}
+        scope = "this trial" if e.get("trial") else "every trial"
+        lines.append(f"`{e['cause']}` ({scope}): {json.dumps(detail)[:160]}")
+    return lines
+
+
+def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str) -> str:
+    """Markdown of the "Diagnosis" folder for ``trial``.
+
+    Parameters
+    ----------
+    out_dir
+        The subject's processed output folder.
+    subject_dir
+        The subject folder (its ``addb_extensions.json``).
+    trial
+        Trial name.
+
+    Returns
+    -------
+    str
+        Never raises for missing or damaged files (they are described instead).
+    """
+    path = Path(out_dir) / trial / DIAGNOSIS_FILE
+    blocks: list[str] = []
+    if not path.is_file():
+        blocks.append(f"Not diagnosed yet: run `addb diagnose {Path(subject_dir).name} --trial {trial}`.")
+    else:
+        report, problem = _read_json(path)
+        if problem is not None or not isinstance(report, dict) or report.get("schema") != "addb.diagnosis":
+            blocks.append(problem or f"`{path.name}` is not an addb diagnosis")
+        else:
+            blocks += _report_blocks(report)
+    applied = _applied(Path(subject_dir), trial)
+    if applied:
+        blocks.append("**Applied by `addb diagnose --apply`** (used by the next processing):")
+        blocks.append("\n".join(f"- {a}" for a in applied))
+    return "\n\n".join(blocks)
+
+
+def _report_blocks(report: dict[str, Any]) -> list[str]:
+    chosen = report.get("chosen")
+    blocks = [f"**Chosen cause: `{chosen}`**" if chosen else "**No cause stands out.**", str(report.get("reason", ""))]
+    candidates = report.get("candidates") or []
+    if candidates:
+        blocks.append("Candidates (held-out evidence):")
+        blocks.append("```\n" + "\n".join(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]) + "\n```")
+    if chosen:
+        held = report.get("held_out") or {}
+        rows = [metric_row("before", report.get("baseline")), metric_row("after (refit)", report.get("after"))]
+        if held:
+            rows += [metric_row("held-out before", held.get("before")), metric_row("held-out after", held.get("after"))]
+        blocks.append("Before and after the extension:")
+        blocks.append("```\n" + "\n".join(r.strip() for r in rows) + "\n```")
+    return blocks

@@ -1,0 +1,115 @@
+"""``addb diagnose SUBJECT_DIR --trial NAME [--json] [--apply]``: why a trial's residuals remain.
+
+The subject is processed first when the trial has no output yet (with the reviewer's
+flags from the subject's review record, as the app does). The reviewer's flags of
+unmeasured force (the review record, or ``--annotations``) are the frames the diagnosis
+knows to be unmeasured; every other frame is evaluated. Writes ``OUT/<trial>/diagnosis.json``
+(read by the review app) and prints a report, or the JSON object with ``--json``.
+``--apply`` saves the chosen extension in ``<subject>/addb_extensions.json`` so that the
+next ``addb process`` uses it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def reviewer_masks(annotations: Path, subject_dir: str | Path) -> dict:
+    """Unmeasured-force masks (marker rate) of every trial in a review record."""
+    from annotations import AnnotationStore
+    from solver.io.subject import load_subject, load_trial
+
+    subject = load_subject(subject_dir)
+    masks = {}
+    with AnnotationStore.open(annotations, reviewer="addb diagnose") as store:
+        names = set(store.trials())
+        for trial in subject.trials:
+            if trial.name in names:
+                n = load_trial(trial).markers.n_frames
+                masks[trial.name] = store.mask(trial.name, n, kind="unmeasured_force")
+    return masks
+
+
+def run(args: argparse.Namespace) -> int:
+    from addb_viewer.locations import annotations_path, default_output_dir
+    from addb_viewer.progress import ProgressBar
+    from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+    from solver.diagnose.extensions import save_extension
+    from solver.diagnose.report import to_json, to_text
+    from solver.errors import DiagnosisError, SubjectFolderError
+    from solver.io.subject import load_subject, load_trial
+    from solver.results import processed_trials
+
+    subject = Path(args.subject)
+    if not subject.is_dir():
+        raise SubjectFolderError("no such subject folder", path=subject)
+    info = load_subject(subject)
+    names = [t.name for t in info.trials]
+    if args.trial not in names:
+        raise SubjectFolderError(f"no trial {args.trial!r}; the subject's trials are {', '.join(names)}", path=subject)
+    if info.disable_dynamics or load_trial(info.trial(args.trial)).forces is None:
+        raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
+    out = Path(args.out) if args.out else default_output_dir(subject)
+    record = Path(args.annotations) if args.annotations else annotations_path(subject, out)
+    masks = reviewer_masks(record, subject) if record.is_file() else {}
+    progress = ProgressBar(sys.stderr)
+    if args.trial not in processed_trials(out):
+        from solver.pipeline import process_subject
+
+        process_subject(subject, out, unmeasured=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
+    diag = diagnose_trial(
+        subject,
+        args.trial,
+        out,
+        flags=masks.get(args.trial),
+        options=DiagnoseOptions(refit=not args.no_refit),
+        progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
+    )
+    report = to_json(diag)
+    target = out / args.trial / "diagnosis.json"
+    tmp = target.with_name(target.name + ".tmp")
+    tmp.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    tmp.replace(target)  # atomic: the review app never reads half a file
+    applied = None
+    if args.apply:
+        if diag.extension is None:
+            print("addb diagnose: no cause stands out; nothing to apply", file=sys.stderr)
+        else:
+            applied = save_extension(subject, diag.extension)
+            report["applied"] = str(applied)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(to_text(diag))
+        print(f"\nwrote {out / args.trial / 'diagnosis.json'}")
+        if applied is not None:
+            print(f"saved the extension in {applied}; the next `addb process` of this subject uses it")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "diagnose",
+        help="explain a trial's remaining residuals: test candidate causes, name one, measure the gain",
+        description=(
+            "Show where a processed trial's residual forces and moments concentrate, fit each "
+            "candidate cause (unmeasured force, body mass, force/motion time offset, plate force "
+            "offset and gain, plate position, segment mass distribution, marker offset) on "
+            "training frames and score it on held-out frames, name the cause that stands out (or "
+            "none), refit with it and report the gain. The subject is processed first if needed."
+        ),
+    )
+    p.add_argument("subject", help="AddBiomechanics subject folder")
+    p.add_argument("--trial", required=True, help="trial name")
+    p.add_argument("--json", action="store_true", help="print the diagnosis as one JSON object")
+    p.add_argument("--apply", action="store_true", help="save the chosen extension for the next `addb process`")
+    p.add_argument(
+        "--out",
+        help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
+    )
+    p.add_argument("--annotations", help="review record with the reviewer's flags (default: the subject's)")
+    p.add_argument("--no-refit", action="store_true", help="skip the refit (fixed-kinematics figures only)")
+    p.set_defaults(handler=run)

@@ -1,0 +1,566 @@
+"""Candidate causes: each a model extension whose parameters are fitted by least squares.
+
+Every candidate *alternative* (a cause, plus the plate or marker it concerns) exposes the
+same small interface, used by :mod:`.selection` for cross-validation:
+
+* ``solve(mask)`` -> parameter vector fitted on the frames in ``mask``;
+* ``frame_costs(theta)`` -> ``(T,)`` cost of each frame under the extension;
+* ``ref_costs`` -> ``(T,)`` cost of each frame under the reference (same channels);
+* ``n_params`` and ``physical(theta)`` -> the parameters in their units.
+
+Costs are in the currency of :mod:`.profile` (squared residuals over the dynamics fit's
+standard deviations, translation profiled out). The causes:
+
+=========================  ====================================================  ===============
+cause                      extension (what changes in the reference)             parameters
+=========================  ====================================================  ===============
+unmeasured_force           frames U leave the residual terms (the paper's free   frames of U
+                           centre-of-mass accelerations there)
+body_mass                  inertial wrench scaled to the stated mass + dm        dm, kg
+force_time_offset          plates read at t + delay (1-D search, 1 ms grid)      delay, s
+plate_force_offset         plate p's force minus a constant vector acting at     plate, (3,) N
+                           its centre of pressure (its centre when unloaded)
+plate_force_gain           plate p's wrench divided by its gain                  plate, gain
+plate_position_offset      plate p's centre of pressure minus a horizontal       plate, (3,) m
+                           shift (y stays: the plate surface is levelled)        (y = 0)
+segment_mass_distribution  mass moved between body groups (trunk with head and   kg per group
+                           arms, pelvis, legs), total mass kept
+marker_offset              a landmark (``fixed``) marker moved on its body       marker, (3,) m
+                           (its own error channel, in its body frame)            body frame
+=========================  ====================================================  ===============
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.diagnose.data import DiagnosisData
+from solver.diagnose.profile import ROWS, Profile, Sigmas
+from solver.dynamics.preprocess import cop_from_wrench
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+CAUSES = (
+    "unmeasured_force",
+    "body_mass",
+    "force_time_offset",
+    "plate_force_offset",
+    "plate_force_gain",
+    "plate_position_offset",
+    "segment_mass_distribution",
+    "marker_offset",
+)
+
+#: Prior standard deviation of a body group's mass change, relative to its mass.
+SEGMENT_PRIOR = 0.1
+
+#: Delays searched by ``force_time_offset``, s (forces late is positive).
+DELAY_GRID = np.round(np.arange(-0.120, 0.1205, 0.001), 4)
+
+
+@dataclass
+class Context:
+    """What every candidate of one trial shares.
+
+    Attributes
+    ----------
+    data
+        The prepared trial.
+    sigmas
+        Channel standard deviations.
+    evaluated
+        ``(T,)`` frames whose residual terms count (not flagged, not in U).
+    profile
+        Translation profile over ``evaluated``.
+    ref_rows
+        ``(T, 9)`` profiled reference rows.
+    unmeasured
+        ``(T,)`` the frames U of ``unmeasured_force`` (see :func:`unmeasured_frames`).
+    """
+
+    data: DiagnosisData
+    sigmas: Sigmas
+    evaluated: BoolArray
+    profile: Profile
+    ref_rows: FloatArray
+    unmeasured: BoolArray
+    unmeasured_reasons: list[str] = field(default_factory=list)
+
+    @property
+    def ref_costs(self) -> FloatArray:
+        """``(T,)`` reference cost of each frame."""
+        return np.sum(self.ref_rows**2, axis=1)
+
+
+class LinearAlternative:
+    """An alternative whose rows are affine in its parameters: rows = rho0 + G theta.
+
+    Parameters
+    ----------
+    cause, choice
+        Cause name and the plate or marker (None when the cause has no choice).
+    rho0
+        ``(T, R)`` reference rows of the channels the cause acts on (profiled).
+    g
+        ``(T, R, k)`` change of those rows per unit parameter (profiled).
+    physical
+        theta -> dict of parameters in their units.
+    names
+        Names of the k parameters (for the uncertainty report).
+    basis
+        Optional ``(k, j)`` basis: theta = basis @ beta (e.g. total mass kept).
+    prior
+        Optional ``(m, k)`` rows added to every fit (a ridge prior in cost units).
+    """
+
+    def __init__(
+        self,
+        cause: str,
+        choice: str | None,
+        rho0: FloatArray,
+        g: FloatArray,
+        physical: Callable[[FloatArray], dict[str, Any]],
+        names: tuple[str, ...],
+        basis: FloatArray | None = None,
+        prior: FloatArray | None = None,
+    ) -> None:
+        self.cause, self.choice = cause, choice
+        self.rho0, self.g = rho0, g if basis is None else np.einsum("trk,kj->trj", g, basis)
+        self.basis = basis
+        self.prior = None if prior is None else (prior if basis is None else prior @ basis)
+        self._physical = physical
+        self.names = names
+        self.n_params = self.g.shape[2]
+        self.ref_costs = np.sum(rho0**2, axis=1)
+
+    def solve(self, mask: BoolArray) -> FloatArray:
+        """Least-squares parameters on the frames in ``mask``."""
+        g = self.g[mask].reshape(-1, self.n_params)
+        r = self.rho0[mask].reshape(-1)
+        if not g.size or not np.any(g):
+            return np.zeros(self.n_params)
+        if self.prior is not None:
+            g = np.vstack([g, self.prior * np.sqrt(mask.mean())])
+            r = np.concatenate([r, np.zeros(self.prior.shape[0])])
+        beta, *_ = np.linalg.lstsq(g, -r, rcond=None)
+        return beta
+
+    def frame_costs(self, theta: FloatArray) -> FloatArray:
+        """``(T,)`` cost of each frame with parameters ``theta``."""
+        return np.sum((self.rho0 + self.g @ theta) ** 2, axis=1)
+
+    def rows(self, theta: FloatArray) -> FloatArray:
+        """``(T, R)`` the cause's profiled rows with parameters ``theta``."""
+        return self.rho0 + self.g @ theta
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        """Parameters in their units."""
+        full = theta if self.basis is None else self.basis @ theta
+        return self._physical(full)
+
+    def vector(self, theta: FloatArray) -> FloatArray:
+        """The reported parameter vector (for the spread across folds)."""
+        out = self.physical(theta)
+        return np.atleast_1d(np.asarray(out["value"], dtype=float))
+
+
+class GridAlternative:
+    """A 1-parameter alternative searched on a grid (``force_time_offset``).
+
+    Parameters
+    ----------
+    cause
+        Cause name.
+    grid
+        ``(J,)`` parameter values.
+    costs
+        ``(T, J)`` cost of each frame at each grid value.
+    ref_costs
+        ``(T,)`` reference cost of each frame.
+    physical
+        value -> dict of parameters in their units.
+    """
+
+    n_params = 1
+    choice = None
+    names = ("delay_s",)
+
+    def __init__(
+        self,
+        cause: str,
+        grid: FloatArray,
+        costs: FloatArray,
+        ref_costs: FloatArray,
+        physical: Callable[[float], dict[str, Any]],
+        rows_at: Callable[[float], FloatArray],
+    ) -> None:
+        self.cause, self.grid, self.costs, self.ref_costs = cause, grid, costs, ref_costs
+        self._physical = physical
+        self.rows_at = rows_at
+
+    def rows(self, theta: FloatArray) -> FloatArray:
+        """``(T, R)`` profiled rows at the parameter value ``theta[0]``."""
+        return self.rows_at(float(theta[0]))
+
+    def solve(self, mask: BoolArray) -> FloatArray:
+        """Grid minimum of the summed cost, refined by a parabola through its neighbours."""
+        total = self.costs[mask].sum(axis=0)
+        j = int(np.argmin(total))
+        if 0 < j < self.grid.size - 1:
+            c0, c1, c2 = total[j - 1], total[j], total[j + 1]
+            den = c0 - 2 * c1 + c2
+            step = 0.5 * (c0 - c2) / den if den > 0 else 0.0
+            return np.array([self.grid[j] + np.clip(step, -1, 1) * (self.grid[1] - self.grid[0])])
+        return np.array([self.grid[j]])
+
+    def frame_costs(self, theta: FloatArray) -> FloatArray:
+        """Per-frame costs interpolated linearly between grid values."""
+        x = float(np.clip(theta[0], self.grid[0], self.grid[-1]))
+        j = int(np.clip(np.searchsorted(self.grid, x) - 1, 0, self.grid.size - 2))
+        w = (x - self.grid[j]) / (self.grid[j + 1] - self.grid[j])
+        return (1 - w) * self.costs[:, j] + w * self.costs[:, j + 1]
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        """Parameters in their units."""
+        return self._physical(float(theta[0]))
+
+    def vector(self, theta: FloatArray) -> FloatArray:
+        """The reported parameter vector."""
+        return np.atleast_1d(np.asarray(self.physical(theta)["value"], dtype=float))
+
+
+class FixedAlternative:
+    """An alternative without fitted global parameters (``unmeasured_force``): its frames'
+    own free wrenches; ``n_params`` counts them (6 per frame)."""
+
+    choice = None
+    names = ()
+
+    def __init__(self, cause: str, costs: FloatArray, ref_costs: FloatArray, n_params: int, params: dict[str, Any], rows: FloatArray) -> None:
+        self.cause, self._costs, self.ref_costs, self.n_params = cause, costs, ref_costs, n_params
+        self._params = params
+        self._rows = rows
+
+    def rows(self, theta: FloatArray) -> FloatArray:
+        """``(T, R)`` profiled rows with U out of the residual terms."""
+        return self._rows
+
+    def solve(self, mask: BoolArray) -> FloatArray:
+        """Nothing to fit globally."""
+        return np.zeros(0)
+
+    def frame_costs(self, theta: FloatArray) -> FloatArray:
+        """``(T,)`` cost of each frame with U's residual terms removed."""
+        return self._costs
+
+    def physical(self, theta: FloatArray) -> dict[str, Any]:
+        """The frames of U and the unmeasured force on them."""
+        return dict(self._params)
+
+    def vector(self, theta: FloatArray) -> FloatArray:
+        """No vector parameter."""
+        return np.zeros(0)
+
+
+Alternative = LinearAlternative | GridAlternative | FixedAlternative
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    """``(T, 3)`` -> ``(T, 3, 3)`` cross-product matrices."""
+    z = np.zeros(v.shape[0])
+    return np.stack(
+        [np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1), np.stack([-v[:, 1], v[:, 0], z], 1)], axis=1
+    )
+
+
+def _residual_rows(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
+    """Columns of a change -> ``(T, R, k)`` unprofiled rows (marker rows zero).
+
+    ``wrench`` ``(T, 6, k)`` is the change of the root residual; ``idle`` ``(P, T, 3, k)``
+    the change of the idle plate readings (N), if any.
+    """
+    t, _, k = wrench.shape
+    rows = np.zeros((t, ctx.profile.n_rows, k))
+    w = ctx.evaluated[:, None, None]
+    rows[:, 3:6] = np.where(w, wrench[:, :3] / ctx.sigmas.force, 0.0)
+    rows[:, 6:9] = np.where(w, wrench[:, 3:] / ctx.sigmas.moment, 0.0)
+    if idle is not None:
+        rows[:, ROWS:] = np.transpose(idle, (1, 0, 2, 3)).reshape(t, -1, k) / ctx.sigmas.force
+    return rows
+
+
+def _profiled(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
+    return ctx.profile.project(_residual_rows(ctx, wrench, idle))
+
+
+def _plate_idle(ctx: Context, plate: int, cols: FloatArray) -> FloatArray:
+    """``(P, T, 3, k)`` idle-row change: ``cols`` ``(T, 3, k)`` for ``plate``, zero for the others."""
+    t, _, k = cols.shape
+    out = np.zeros((len(ctx.data.plates.names), t, 3, k))
+    out[plate] = cols
+    return out
+
+
+def plate_points(data: DiagnosisData) -> FloatArray:
+    """``(P, T, 3)`` where each plate's force acts: its centre of pressure where loaded, its
+    centre (median loaded centre of pressure) elsewhere, m."""
+    f, m_o, _ = data.plates.on(data.time)
+    out = np.empty_like(f)
+    for i in range(f.shape[0]):
+        loaded_cop = data.plates.centre[i]
+        plane = float(loaded_cop[1])
+        cop, _ = cop_from_wrench(f[i], m_o[i], plane, 0.02 * data.bw)
+        bad = ~np.isfinite(cop).all(axis=1)
+        cop[bad] = data.plates.centre[i]
+        out[i] = cop
+    return out
+
+
+# --------------------------------------------------------------------------- causes
+
+
+def body_mass(ctx: Context) -> list[Alternative]:
+    """``body_mass``: the mass is the stated mass + dm (inertial wrench linear in dm)."""
+    d = ctx.data
+    col = (d.inertial / d.fitted_mass)[:, :, None]
+    g = _profiled(ctx, col)
+    stated = d.stated_mass
+
+    def physical(theta: FloatArray) -> dict[str, Any]:
+        dm = float(theta[0])
+        return {"value": dm, "mass_change_kg": dm, "stated_mass_kg": stated, "mass_kg": stated + dm}
+
+    return [LinearAlternative("body_mass", None, ctx.ref_rows, g, physical, ("mass_change_kg",))]
+
+
+def plate_force_offset(ctx: Context) -> list[Alternative]:
+    """``plate_force_offset``: plate p reads F + offset; the offset acts at its CoP (centre when unloaded)."""
+    d = ctx.data
+    points = plate_points(d)
+    idle = d.plates.on(d.time)[2]
+    out: list[Alternative] = []
+    eye = np.broadcast_to(np.eye(3), (d.n_frames, 3, 3))
+    for i, name in enumerate(d.plates.names):
+        # residual change for an offset o: force +o, moment +(c - p) x o (not where idle);
+        # idle readings change by -o
+        wrench = np.concatenate([eye, _skew(points[i] - d.pelvis)], axis=1)  # (T, 6, 3)
+        wrench = np.where(idle[i][:, None, None], 0.0, wrench)
+        g = _profiled(ctx, wrench, _plate_idle(ctx, i, np.where(idle[i][:, None, None], -eye, 0.0)))
+
+        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
+            return {"value": theta.tolist(), "plate": name, "offset_N": [float(v) for v in theta]}
+
+        out.append(LinearAlternative("plate_force_offset", name, ctx.ref_rows, g, physical, ("offset_x_N", "offset_y_N", "offset_z_N")))
+    return out
+
+
+def plate_force_gain(ctx: Context) -> list[Alternative]:
+    """``plate_force_gain``: plate p's wrench is its true wrench times the gain.
+
+    Linear in k = 1 - 1/gain: the corrected wrench is (1 - k) W_p, so the residual changes
+    by k W_p.
+    """
+    d = ctx.data
+    per, _, idle_force = d.external()
+    out: list[Alternative] = []
+    for i, name in enumerate(d.plates.names):
+        g = _profiled(ctx, per[i][:, :, None], _plate_idle(ctx, i, -idle_force[i][:, :, None]))
+
+        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
+            gain = 1.0 / (1.0 - float(theta[0])) if theta[0] < 0.99 else float("inf")
+            return {"value": gain, "plate": name, "gain": gain}
+
+        out.append(LinearAlternative("plate_force_gain", name, ctx.ref_rows, g, physical, ("gain",)))
+    return out
+
+
+def plate_position_offset(ctx: Context) -> list[Alternative]:
+    """``plate_position_offset``: plate p's CoP is shifted by s (horizontal); the residual
+    moment changes by s x F_p."""
+    d = ctx.data
+    per = d.external()[0]
+    out: list[Alternative] = []
+    for i, name in enumerate(d.plates.names):
+        f = per[i][:, :3]
+        cols = -_skew(f)[:, :, [0, 2]]  # s x F = -F x s, for s = (sx, 0, sz)
+        wrench = np.concatenate([np.zeros((d.n_frames, 3, 2)), cols], axis=1)
+        g = _profiled(ctx, wrench)
+
+        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
+            s = [float(theta[0]), 0.0, float(theta[1])]
+            return {"value": s, "plate": name, "shift_m": s}
+
+        out.append(LinearAlternative("plate_position_offset", name, ctx.ref_rows, g, physical, ("shift_x_m", "shift_z_m")))
+    return out
+
+
+def segment_mass_distribution(ctx: Context) -> list[Alternative]:
+    """``segment_mass_distribution``: each body group's mass changes by a factor, the
+    total kept; parameters are the kg each group gains."""
+    d = ctx.data
+    groups = [g for g in d.groups if d.group_mass[g] > 0]
+    if len(groups) < 2:
+        return []
+    masses = np.array([d.group_mass[g] for g in groups])
+    # theta_g = kg gained by group g; wrench change = sum_g theta_g I_g / m_g
+    cols = np.stack([d.groups[g] / d.group_mass[g] for g in groups], axis=2)  # (T, 6, G)
+    g = _profiled(ctx, cols)
+    # total mass kept: sum theta = 0 -> basis of the null space of ones
+    ones = np.ones((1, len(groups)))
+    _, _, vt = np.linalg.svd(ones)
+    basis = vt[1:].T  # (G, G-1)
+
+    def physical(theta: FloatArray) -> dict[str, Any]:
+        moved = {grp: float(v) for grp, v in zip(groups, theta)}
+        return {"value": [float(v) for v in theta], "mass_change_kg": moved, "group_mass_kg": dict(zip(groups, masses.tolist()))}
+
+    names = tuple(f"{grp}_kg" for grp in groups)
+    # ridge prior: each group's change has a standard deviation of SEGMENT_PRIOR of its mass,
+    # weighted as if every frame observed it (so that it keeps its strength on long trials)
+    prior = np.diag(1.0 / (SEGMENT_PRIOR * masses)) * np.sqrt(d.n_frames)
+    return [LinearAlternative("segment_mass_distribution", None, ctx.ref_rows, g, physical, names, basis, prior)]
+
+
+def force_time_offset(ctx: Context) -> list[Alternative]:
+    """``force_time_offset``: forces are ``delay`` s late (the plates read at t + delay)."""
+    d = ctx.data
+    grid = DELAY_GRID
+    def raw(tau: float) -> FloatArray:
+        _, total, idle_force = d.external(tau)
+        return ctx.profile.raw_rows(d.inertial * (d.stated_mass / d.fitted_mass) - total, idle_force)
+
+    rows = np.stack([raw(float(tau)) for tau in grid], axis=2)
+    costs = np.sum(ctx.profile.project(rows) ** 2, axis=1)
+
+    def physical(tau: float) -> dict[str, Any]:
+        return {"value": tau, "delay_s": tau}
+
+    return [GridAlternative("force_time_offset", grid, costs, ctx.ref_costs, physical, lambda tau: ctx.profile.project(raw(tau)))]
+
+
+def marker_offset(ctx: Context) -> list[Alternative]:
+    """``marker_offset``: a landmark marker sits s (body frame) from where the model puts it.
+
+    Channel: the marker's error minus the frame's mean error, in its body frame, over the
+    marker sigma. The reported shift adds the offset the kinematics stage already fitted
+    (so it is the whole misplacement relative to the generic model's landmark).
+    """
+    d = ctx.data
+    mk = d.markers
+    mean_err, _ = mk.mean_error()
+    out: list[Alternative] = []
+    s = ctx.sigmas.marker
+    for j, name in enumerate(mk.names):
+        if not mk.fixed[j] or mk.bodies[j] == "ground":
+            continue
+        seen = mk.seen[:, j]
+        if seen.sum() < 10:
+            continue
+        dev = np.where(seen[:, None], mk.error[:, j] - mean_err, 0.0)
+        u = np.einsum("tji,tj->ti", mk.rotation[:, j], dev) / s  # body frame
+        g = np.where(seen[:, None, None], np.broadcast_to(np.eye(3), (d.n_frames, 3, 3)), 0.0) / s
+        fitted = mk.fitted_offset[j]
+
+        # the model marker moves by R s: error + R s -> in body frame u + s / sigma
+        def physical(theta: FloatArray, name: str = name, fitted: FloatArray = fitted, body: str = mk.bodies[j]) -> dict[str, Any]:
+            total = fitted + theta
+            return {
+                "value": [float(v) for v in total],
+                "marker": name,
+                "body": body,
+                "shift_m": [float(v) for v in total],
+                "residual_shift_m": [float(v) for v in theta],
+                "fitted_offset_m": [float(v) for v in fitted],
+            }
+
+        out.append(LinearAlternative("marker_offset", name, u, g, physical, ("shift_x_m", "shift_y_m", "shift_z_m")))
+    return out
+
+
+def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
+    """``unmeasured_force``: the frames U leave the residual terms.
+
+    ``full`` is the profile with U evaluated (the reference of this cause); the extension's
+    profile is ``ctx.profile`` (U not evaluated).
+    """
+    d = ctx.data
+    u = ctx.unmeasured
+    if not u.any():
+        return []
+    residual = d.residual()
+    ref = np.sum(full.project(full.raw_rows(residual, d.external()[2])) ** 2, axis=1)
+    ext = ctx.ref_costs
+    runs = _runs(u)
+    params = {
+        "value": [],
+        "frames": [[int(a), int(b)] for a, b in runs],
+        "times_s": [[float(d.time[a]), float(d.time[b - 1])] for a, b in runs],
+        "n_frames": int(u.sum()),
+        "mean_force_N": [np.round(residual[a:b, :3].mean(axis=0), 1).tolist() for a, b in runs],
+        "reasons": sorted({r for r in ctx.unmeasured_reasons if r}),
+    }
+    return [FixedAlternative("unmeasured_force", ext, ref, 6 * int(u.sum()), params, ctx.ref_rows)]
+
+
+def _runs(mask: BoolArray) -> list[tuple[int, int]]:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+#: ``unmeasured_force`` frames: the residual force (a missing support force) exceeds
+#: SUPPORT_BW body weights while a foot is in kinematic contact with no plate force under
+#: it, for at least SUPPORT_FRAMES frames; or exceeds LARGE_BW for LARGE_SECONDS anyway
+#: (another unmeasured contact: sustained, unlike the transients of a time offset between
+#: forces and motion at each foot strike). Runs grow by PAD_FRAMES on each side.
+SUPPORT_BW = 0.25
+SUPPORT_FRAMES = 3
+LARGE_BW = 0.4
+LARGE_SECONDS = 0.2
+PAD_FRAMES = 3
+
+
+def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
+    """The frames U of ``unmeasured_force`` and the reason of each frame ("" outside U).
+
+    Uses the residual at the *fitted* mass (so that a wrong stated mass does not count as
+    a missing force) and the kinematic contact of :func:`solver.dynamics.contact.assign_contacts`.
+    """
+    t = data.n_frames
+    support = np.linalg.norm(data.residual(mass=data.fitted_mass)[:, :3], axis=1) / data.bw
+    reasons = [""] * t
+    mask = np.zeros(t, dtype=bool)
+    off_plate = np.zeros(t, dtype=bool)
+    feet_off: list[list[str]] = [[] for _ in range(t)]
+    if data.foot_contact is not None and data.foot_loaded is not None:
+        for k, foot in enumerate(data.feet):
+            off = data.foot_contact[k] & ~data.foot_loaded[k]
+            off_plate |= off
+            for j in np.flatnonzero(off):
+                feet_off[j].append(foot)
+    for a, b in _runs((support > SUPPORT_BW) & off_plate):
+        if b - a >= SUPPORT_FRAMES:
+            mask[a:b] = True
+            for j in range(a, b):
+                reasons[j] = f"{' and '.join(feet_off[j])} in contact with no plate force, {support[j]:.2f} BW missing"
+    long = int(np.ceil(LARGE_SECONDS / data.dt))
+    for a, b in _runs(support > LARGE_BW):
+        if b - a >= long:
+            for j in range(a, b):
+                if not mask[j]:
+                    reasons[j] = f"{support[j]:.2f} BW of support force missing"
+            mask[a:b] = True
+    for a, b in _runs(mask):
+        for j in list(range(max(a - PAD_FRAMES, 0), a)) + list(range(b, min(b + PAD_FRAMES, t))):
+            mask[j] = True
+            reasons[j] = reasons[j] or "next to unmeasured frames"
+    mask &= ~data.flagged
+    return mask, [r if m else "" for r, m in zip(reasons, mask)]

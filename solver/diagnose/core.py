@@ -1,0 +1,521 @@
+"""The diagnosis of one processed trial, end to end.
+
+1. :mod:`.data` prepares the trial (reference: processed motion, stated mass, raw plates,
+   reviewer flags); :mod:`.analysis` reports where the residuals concentrate.
+2. :func:`unmeasured_frames` finds frames that look unmeasured; every candidate of
+   :mod:`.candidates` is cross-validated (:mod:`.selection`) and the best alternative per
+   cause is ranked; :func:`.selection.choose` names a cause or none.
+3. The choice uses the processed motion (the dynamics fit made it consistent with the
+   forces, so the residuals it leaves are small and clean). The dynamics fit also absorbs
+   part of any force error into that motion (about a third of a centre-of-pressure shift,
+   for example), so the parameters of the causes acting on the forces are estimated a
+   second time on the motion the markers alone decide (:func:`.data.marker_kinematics`),
+   which carries none of it: those are the reported estimates (the fitted-motion ones are
+   kept as ``parameters_fitted_motion``).
+4. For the chosen cause, the extension is applied and the trial refitted (:mod:`.refit`):
+   "after" metrics in the pipeline's terms. Held-out metrics before and after come from
+   the cross-validated, fixed-kinematics evaluation (each frame scored with parameters
+   fitted without it).
+"""
+
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.diagnose import candidates as C
+from solver.diagnose.analysis import analyse
+from solver.diagnose.data import DiagnosisData, load_offsets, marker_kinematics, prepare
+from solver.diagnose.extensions import correct_forces, extend_subject, extension_masks, join_masks
+from solver.diagnose.profile import Profile, Sigmas
+from solver.diagnose.selection import (
+    ChoiceRule,
+    Evaluation,
+    best_per_cause,
+    choose,
+    cross_validate,
+    make_blocks,
+    make_folds,
+)
+from solver.errors import DiagnosisError
+from solver.io.subject import Subject, Trial, load_subject, load_trial
+from solver.model.osim import read_osim
+from solver.results import ProcessedTrial, load_processed
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Progress = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """Options of :func:`diagnose_trial`.
+
+    Attributes
+    ----------
+    folds
+        Cross-validation folds K.
+    block_seconds
+        Length of the contiguous blocks dealt to the folds, s.
+    rule
+        When a cause is named.
+    refit
+        Refit the trial with the chosen extension (off: fixed-kinematics figures only).
+    causes
+        Causes to test.
+    """
+
+    folds: int = 5
+    block_seconds: float = 0.2
+    rule: ChoiceRule = field(default_factory=ChoiceRule)
+    refit: bool = True
+    causes: tuple[str, ...] = C.CAUSES
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose_trial` (see :func:`solver.diagnose.report.to_json`).
+
+    Attributes
+    ----------
+    subject, trial
+        Names.
+    baseline
+        The trial's results.json metrics.
+    analysis
+        Where the residuals concentrate (:func:`solver.diagnose.analysis.analyse`).
+    evaluations
+        Every cross-validated alternative.
+    ranked
+        The best alternative per cause, best score first.
+    chosen
+        The chosen evaluation, or None.
+    reason
+        One sentence on the choice.
+    parameters
+        The chosen cause's parameters after the refit's refinement (or its first estimate).
+    after
+        Metrics of the refitted trial (results.json keys), or None.
+    held_out
+        ``{"before": {...}, "after": {...}}`` held-out figures of the chosen cause.
+    extension
+        The entry ``--apply`` saves (:mod:`solver.diagnose.extensions`), or None.
+    settings
+        Sigmas, folds and thresholds used.
+    seconds
+        Wall time by step.
+    """
+
+    subject: str
+    trial: str
+    baseline: dict[str, Any]
+    analysis: dict[str, Any]
+    evaluations: list[Evaluation]
+    ranked: list[Evaluation]
+    chosen: Evaluation | None
+    reason: str
+    parameters: dict[str, Any] | None = None
+    after: dict[str, Any] | None = None
+    held_out: dict[str, Any] | None = None
+    extension: dict[str, Any] | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    data: DiagnosisData | None = field(default=None, repr=False)
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+def build_context(
+    data: DiagnosisData, sigmas: Sigmas | None = None, unmeasured: tuple[BoolArray, list[str]] | None = None
+) -> tuple[C.Context, Profile]:
+    """The shared context of the candidates and the profile with U evaluated.
+
+    ``unmeasured`` gives the frames U and their reasons (default: found on ``data``).
+    """
+    s = sigmas or Sigmas.of(data)
+    u, reasons = C.unmeasured_frames(data) if unmeasured is None else unmeasured
+    evaluated = ~data.flagged & ~u
+    prof = Profile(data, evaluated, s)
+    ref = prof.project(prof.raw_rows(data.residual(), data.external()[2]))
+    full = prof if not u.any() else Profile(data, ~data.flagged, s)
+    return C.Context(data, s, evaluated, prof, ref, u, reasons), full
+
+
+def alternatives(ctx: C.Context, full: Profile, causes: tuple[str, ...]) -> list[C.Alternative]:
+    """Every alternative of the requested causes."""
+    makers = {
+        "unmeasured_force": lambda: C.unmeasured_force(ctx, full),
+        "body_mass": lambda: C.body_mass(ctx),
+        "force_time_offset": lambda: C.force_time_offset(ctx),
+        "plate_force_offset": lambda: C.plate_force_offset(ctx),
+        "plate_force_gain": lambda: C.plate_force_gain(ctx),
+        "plate_position_offset": lambda: C.plate_position_offset(ctx),
+        "segment_mass_distribution": lambda: C.segment_mass_distribution(ctx),
+        "marker_offset": lambda: C.marker_offset(ctx),
+    }
+    out: list[C.Alternative] = []
+    for cause in causes:
+        out.extend(makers[cause]())
+    return out
+
+
+def evaluate(
+    data: DiagnosisData, options: DiagnoseOptions, unmeasured: tuple[BoolArray, list[str]] | None = None
+) -> tuple[C.Context, list[C.Alternative], list[Evaluation], np.ndarray]:
+    """Cross-validate every alternative; returns the context, alternatives, evaluations, folds.
+
+    ``unmeasured``: the frames U and their reasons (default: found on ``data``).
+    """
+    ctx, full = build_context(data, unmeasured=unmeasured)
+    alts = alternatives(ctx, full, options.causes)
+    folds = make_folds(data.n_frames, data.dt, options.folds, options.block_seconds)
+    return ctx, alts, [cross_validate(a, folds) for a in alts], folds
+
+
+def _alt_of(alts: list[C.Alternative], ev: Evaluation) -> C.Alternative:
+    return next(a for a in alts if a.cause == ev.cause and a.choice == ev.choice)
+
+
+# --------------------------------------------------------------------------- held-out figures
+
+
+def _figures(ctx: C.Context, rows: FloatArray, frames: BoolArray, evaluated: BoolArray, marker: tuple[int, FloatArray] | None) -> dict[str, float]:
+    """Marker RMS (m), linear (N) and angular (N·m) residual RMS from profiled rows."""
+    d, s = ctx.data, ctx.sigmas
+    mk = d.markers
+    mean_err, count = mk.mean_error()
+    shifted = rows[:, :3] * (s.marker / np.sqrt(np.maximum(count, 1)))[:, None]
+    err = mk.error - mean_err[:, None] + shifted[:, None]
+    if marker is not None:
+        j, lab = marker
+        err[:, j] = err[:, j] + lab
+    e = np.linalg.norm(err[frames], axis=2)
+    res = frames & evaluated
+    f = rows[res, 3:6] * s.force
+    m = rows[res, 6:9] * s.moment
+    return {
+        "marker_rms_m": float(np.sqrt(np.nanmean(e**2))) if np.isfinite(e).any() else float("nan"),
+        "linear_residual_rms_N": float(np.sqrt(np.mean(np.sum(f**2, axis=1)))) if res.any() else float("nan"),
+        "angular_residual_rms_Nm": float(np.sqrt(np.mean(np.sum(m**2, axis=1)))) if res.any() else float("nan"),
+        "frames": int(frames.sum()),
+    }
+
+
+def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray) -> dict[str, Any]:
+    """Before/after figures on held-out frames: every frame scored after a fit without its fold.
+
+    Before: the reference (processed motion, stated mass, translation re-optimized). After:
+    the extension with the parameters of the fold the frame was held out of.
+    """
+    d = ctx.data
+    t = d.n_frames
+    after_rows = np.array(ctx.ref_rows)
+    lab = np.zeros((t, 3))
+    j = None
+    for f in range(int(folds.max()) + 1):
+        test = folds == f
+        theta = alt.solve(~test)
+        if alt.cause == "marker_offset":
+            j = d.markers.names.index(alt.choice)
+            lab[test] = np.einsum("tij,j->ti", d.markers.rotation[test, j], theta)
+        else:
+            after_rows[test] = alt.rows(theta)[test]
+    everything = np.ones(t, dtype=bool)
+    before_eval = ~d.flagged if alt.cause == "unmeasured_force" else ctx.evaluated
+    before_rows = ctx.ref_rows
+    if alt.cause == "unmeasured_force":
+        prof = Profile(d, ~d.flagged, ctx.sigmas)
+        before_rows = prof.project(prof.raw_rows(d.residual(), d.external()[2]))
+    marker = None if j is None else (j, lab)
+    return {
+        "before": _figures(ctx, before_rows, everything, before_eval, None),
+        "after": _figures(ctx, after_rows, everything, ctx.evaluated, marker),
+        "note": "fixed kinematics, translation re-optimized; after: parameters fitted without the frame's fold",
+    }
+
+
+# --------------------------------------------------------------------------- extensions
+
+
+def _marker_frame(time: FloatArray, marker_time: FloatArray) -> np.ndarray:
+    """Nearest marker frame of each time."""
+    idx = np.clip(np.searchsorted(marker_time, time), 1, max(marker_time.size - 1, 1))
+    left = idx - 1
+    return np.where(np.abs(marker_time[left] - time) <= np.abs(marker_time[np.minimum(idx, marker_time.size - 1)] - time), left, idx)
+
+
+def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray) -> dict[str, Any]:
+    """The :mod:`.extensions` entry of an evaluation (what ``--apply`` saves)."""
+    p = ev.parameters
+    trial = data.trial.trial
+    if ev.cause == "body_mass":
+        return {"cause": "body_mass", "trial": None, "mass_change_kg": p["mass_change_kg"]}
+    if ev.cause == "force_time_offset":
+        return {"cause": "force_time_offset", "trial": trial, "delay_s": p["delay_s"]}
+    if ev.cause == "plate_force_offset":
+        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "offset_N": p["offset_N"]}
+    if ev.cause == "plate_force_gain":
+        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "gain": p["gain"]}
+    if ev.cause == "plate_position_offset":
+        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "shift_m": p["shift_m"]}
+    if ev.cause == "segment_mass_distribution":
+        fractions = {g: p["mass_change_kg"][g] / p["group_mass_kg"][g] for g in p["mass_change_kg"]}
+        return {"cause": ev.cause, "trial": None, "mass_change_kg": p["mass_change_kg"], "fraction": fractions}
+    if ev.cause == "marker_offset":
+        j = data.markers.names.index(p["marker"])
+        lab = np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["shift_m"]))
+        return {
+            "cause": ev.cause,
+            "trial": trial,
+            "marker": p["marker"],
+            "body": p["body"],
+            "shift_m": p["shift_m"],
+            "time_s": data.time.tolist(),
+            "lab_shift_m": np.round(lab, 6).tolist(),
+        }
+    if ev.cause == "unmeasured_force":
+        frames = []
+        for a, b in p["frames"]:
+            idx = _marker_frame(data.time[a:b], marker_time)
+            frames.append([int(idx.min()), int(idx.max()) + 1])
+        return {"cause": ev.cause, "trial": trial, "n_frames": int(marker_time.size), "frames": frames, "times_s": p["times_s"]}
+    raise ValueError(f"unknown cause {ev.cause!r}")
+
+
+# --------------------------------------------------------------------------- main entry
+
+
+@dataclass(frozen=True)
+class TrialInputs:
+    """What :func:`diagnose_processed` needs besides the processed trial.
+
+    Attributes
+    ----------
+    subject
+        The subject (mass, model, foot bodies), with saved extensions applied.
+    raw
+        The raw trial with saved extensions applied.
+    flags
+        ``(T_markers,)`` reviewer flags at the marker rate (saved unmeasured-force
+        extensions included), or None.
+    marker_offsets
+        Fitted marker offsets (``OUT/subject.json``).
+    """
+
+    subject: Subject
+    raw: Trial
+    flags: BoolArray | None
+    marker_offsets: dict[str, list[float]]
+
+
+def load_inputs(subject_dir: str | Path, trial: str, out_dir: str | Path, flags: BoolArray | None = None) -> TrialInputs:
+    """Load the subject, the raw trial (saved extensions applied) and the flags."""
+    from solver.diagnose.extensions import apply_extensions
+
+    subject = load_subject(subject_dir)
+    raw = apply_extensions(subject, (load_trial(subject.trial(trial)),))[0]
+    masks = None if flags is None else {trial: np.asarray(flags, dtype=bool)}
+    masks = join_masks(masks, extension_masks(subject))
+    return TrialInputs(extend_subject(subject), raw, None if masks is None else masks.get(trial), load_offsets(out_dir))
+
+
+def frame_flags(flags: BoolArray | None, marker_time: FloatArray, time: FloatArray) -> BoolArray:
+    """Reviewer flags at the marker rate -> the processed frames (nearest marker frame)."""
+    if flags is None:
+        return np.zeros(time.size, dtype=bool)
+    flags = np.asarray(flags, dtype=bool)
+    n = min(flags.size, marker_time.size)
+    idx = _marker_frame(time, marker_time[:n])
+    return flags[:n][np.clip(idx, 0, n - 1)]
+
+
+def diagnose_processed(
+    processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseOptions | None = None, progress: Progress | None = None
+) -> Diagnosis:
+    """Diagnose a processed trial (see the module docstring).
+
+    Parameters
+    ----------
+    processed
+        The processed trial (``load_processed``).
+    inputs
+        Subject, raw trial, reviewer flags and fitted marker offsets (:func:`load_inputs`).
+    options
+        Folds, thresholds, refit.
+    progress
+        Called with (message, fraction).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    from solver import single_threaded_blas
+
+    with single_threaded_blas():
+        return _diagnose(processed, inputs, options or DiagnoseOptions(), progress or (lambda m, f: None))
+
+
+def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseOptions, say: Progress) -> Diagnosis:
+    if not processed.has_dynamics or inputs.raw.forces is None:
+        raise DiagnosisError(f"trial {processed.trial} has no dynamics to diagnose (no force plates)", path=processed.model_path)
+    t0 = _time.perf_counter()
+    subject = inputs.subject
+    marker_time = np.asarray(inputs.raw.markers.time)
+    generic = read_osim(subject.model_path)
+    model = read_osim(processed.model_path)
+    say("preparing", 0.05)
+
+    def prep(trial: ProcessedTrial) -> DiagnosisData:
+        return prepare(
+            trial,
+            inputs.raw.forces,
+            stated_mass=subject.mass_kg,
+            flagged=frame_flags(inputs.flags, marker_time, processed.time),
+            generic_model=generic,
+            marker_offsets=inputs.marker_offsets,
+            feet=subject.foot_body_names,
+            model=model,
+        )
+
+    data = prep(processed)
+    data_ik = prep(marker_kinematics(processed, model))
+    t1 = _time.perf_counter()
+    say("testing candidate causes", 0.15)
+    ctx, alts, evaluations, folds = evaluate(data, options)
+    ranked = best_per_cause(evaluations)
+    chosen, reason = choose(ranked, options.rule, make_blocks(data.n_frames, data.dt, options.block_seconds))
+    # parameters from the marker-only motion (not pulled toward the forces by the fit)
+    # (same frames U as the fitted motion: the marker-only motion is noisier, and its own
+    # residual would call far more frames unmeasured)
+    _, _, evaluations_ik, _ = evaluate(data_ik, options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
+    for ev in evaluations:
+        twin = next((e for e in evaluations_ik if e.cause == ev.cause and e.choice == ev.choice), None)
+        if twin is not None and ev.cause in MARKER_MOTION_ESTIMATES:
+            ev.parameters_fitted_motion, ev.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
+            ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
+    t2 = _time.perf_counter()
+    result = Diagnosis(
+        subject=processed.subject,
+        trial=processed.trial,
+        baseline=dict(processed.metrics),
+        analysis=analyse(data),
+        evaluations=evaluations,
+        ranked=ranked,
+        chosen=chosen,
+        reason=reason,
+        settings={
+            "sigmas": vars(ctx.sigmas),
+            "folds": int(folds.max()) + 1,
+            "block_seconds": options.block_seconds,
+            "rule": {k: getattr(options.rule, k) for k in options.rule.__dataclass_fields__},
+            "stated_mass_kg": data.stated_mass,
+            "fitted_mass_kg": data.fitted_mass,
+            "frames": data.n_frames,
+            "frames_flagged": int(data.flagged.sum()),
+            "frames_unmeasured_candidates": int(ctx.unmeasured.sum()),
+        },
+        data=data,
+    )
+    result.seconds = {"prepare": t1 - t0, "candidates": t2 - t1}
+    if chosen is not None:
+        result.held_out = held_out_figures(ctx, _alt_of(alts, chosen), folds)
+        result.parameters = dict(chosen.parameters)
+        result.extension = extension_entry(chosen, data, marker_time)
+        if options.refit:
+            say(f"refitting with {chosen.cause}", 0.3)
+            refit_result(result, inputs, marker_time)
+    result.seconds["total"] = _time.perf_counter() - t0
+    say("done", 1.0)
+    return result
+
+
+#: Causes whose parameters are estimated on the marker-only motion (see :func:`_diagnose`):
+#: every cause acting on the forces. ``segment_mass_distribution`` and ``unmeasured_force``
+#: keep the fitted motion (the marker-only motion's moment noise dominates the former).
+MARKER_MOTION_ESTIMATES = (
+    "body_mass",
+    "force_time_offset",
+    "plate_force_offset",
+    "plate_force_gain",
+    "plate_position_offset",
+    "marker_offset",
+)
+
+
+def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray) -> None:
+    """Refit the trial with the chosen extension and fill ``after`` (results.json keys)."""
+    from solver.diagnose.refit import redistribute, refit_trial
+
+    data = result.data
+    assert data is not None and result.chosen is not None
+    ev = result.chosen
+    p = ev.parameters
+    trial = data.trial
+    model = read_osim(trial.model_path)
+    forces = inputs.raw.forces
+    mass = data.stated_mass
+    observed = None
+    unmeasured = np.array(data.flagged)
+    if ev.cause == "body_mass":
+        mass += p["mass_change_kg"]
+    elif ev.cause == "segment_mass_distribution":
+        model = redistribute(model, p["mass_change_kg"])
+    elif ev.cause == "marker_offset":
+        j = data.markers.names.index(p["marker"])
+        observed = np.array(trial.observed)
+        # the model marker already carries the kinematics stage's offset: move the
+        # observation by the rest
+        observed[:, j] += np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["residual_shift_m"]))
+    elif ev.cause == "unmeasured_force":
+        for a, b in p["frames"]:
+            unmeasured[a:b] = True
+    else:
+        forces = correct_forces(forces, extension_entry(ev, data, marker_time))
+    refit = refit_trial(trial, model, forces, mass_kg=mass, feet=data.feet, unmeasured=unmeasured, observed=observed)
+    result.after = refit.metrics
+    result.seconds["refit"] = refit.seconds
+
+
+def diagnose_trial(
+    subject_dir: str | Path,
+    trial: str,
+    out_dir: str | Path,
+    *,
+    flags: BoolArray | None = None,
+    options: DiagnoseOptions | None = None,
+    progress: Progress | None = None,
+) -> Diagnosis:
+    """Diagnose one processed trial of a subject.
+
+    Parameters
+    ----------
+    subject_dir
+        AddBiomechanics subject folder (raw files, stated mass, saved extensions).
+    trial
+        Trial name.
+    out_dir
+        The subject's processed output folder (``OUT/<trial>/trial.npz``).
+    flags
+        ``(T_markers,)`` reviewer flags of unmeasured force at the marker rate (None: none).
+    options
+        Folds, thresholds, refit.
+    progress
+        Called with (message, fraction).
+
+    Raises
+    ------
+    FileNotFoundError
+        The trial is not processed in ``out_dir``.
+    DiagnosisError
+        The trial has no dynamics (no force plates).
+    """
+    inputs = load_inputs(subject_dir, trial, out_dir, flags)
+    processed = load_processed(out_dir, trial)
+    return diagnose_processed(processed, inputs, options, progress)

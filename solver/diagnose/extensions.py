@@ -1,0 +1,307 @@
+"""Model extensions saved by ``addb diagnose --apply`` and applied by the next ``addb process``.
+
+The file ``addb_extensions.json`` beside the subject's ``_subject.json`` lists extensions
+in the order they were applied; each corrects the raw recordings (or the subject) the way
+its cause says they are wrong, so applying them in order composes (two time offsets add,
+two gains multiply)::
+
+    {"schema": "addb.extensions", "version": 1, "extensions": [
+        {"cause": "force_time_offset", "trial": "walk", "delay_s": 0.038},
+        {"cause": "plate_force_offset", "trial": "walk", "plate": "l", "offset_N": [20.1, 39.8, -17.5]},
+        {"cause": "plate_force_gain", "trial": "walk", "plate": "r", "gain": 1.05},
+        {"cause": "plate_position_offset", "trial": "walk", "plate": "r", "shift_m": [0.03, 0.0, 0.0]},
+        {"cause": "marker_offset", "trial": "walk", "marker": "R.Knee", "body": "femur_r",
+         "shift_m": [0.0, 0.02, 0.0], "time_s": [...], "lab_shift_m": [[...], ...]},
+        {"cause": "body_mass", "trial": null, "mass_change_kg": 4.9},
+        {"cause": "segment_mass_distribution", "trial": null, "mass_change_kg": {"trunk": -2.0, "legs": 2.0},
+         "model": "addb_extensions.osim"},
+        {"cause": "unmeasured_force", "trial": "walk", "n_frames": 238, "frames": [[0, 47], [196, 238]],
+         "times_s": [[0.0, 0.46], [1.96, 2.37]]}
+    ]}
+
+(each entry also records ``source`` and ``created``). Corrections:
+
+* ``force_time_offset``: the force samples move to ``time - delay_s`` (forces were late);
+* ``plate_force_offset``: the plate's force minus ``offset_N`` (centre of pressure and free
+  moment as recorded);
+* ``plate_force_gain``: the plate's force and free moment divided by ``gain``;
+* ``plate_position_offset``: the plate's centre of pressure minus ``shift_m``;
+* ``marker_offset``: the marker's recorded positions minus ``lab_shift_m`` (its body-fixed
+  ``shift_m`` rotated by its body's orientation in the diagnosed trial, one row per time in
+  ``time_s``, interpolated onto the marker frames);
+* ``body_mass``: the subject's mass plus ``mass_change_kg``;
+* ``segment_mass_distribution``: the subject's model is replaced by ``model`` (the generic
+  model with the groups' masses changed, written by ``--apply`` beside this file);
+* ``unmeasured_force``: the marker frames in ``frames`` (half-open ranges of a trial of
+  ``n_frames`` marker frames; ``times_s`` for reading) are unmeasured: they join the
+  trial's unmeasured-force mask, or replace the automatic proposals when the reviewer
+  gave no mask for the trial.
+
+:func:`apply_extensions` (the trials), :func:`extend_subject` (mass, model) and
+:func:`extension_masks` (unmeasured frames) are pure functions of their inputs and the
+file; the pipeline calls all three.
+"""
+
+from __future__ import annotations
+
+import json
+import time as _time
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.errors import SubjectFolderError
+from solver.io.subject import Subject, Trial
+from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
+
+FILE_NAME = "addb_extensions.json"
+MODEL_NAME = "addb_extensions.osim"
+SCHEMA = "addb.extensions"
+VERSION = 1
+
+BoolArray = NDArray[np.bool_]
+
+
+def extensions_path(subject_dir: str | Path) -> Path:
+    """``<subject_dir>/addb_extensions.json``."""
+    return Path(subject_dir) / FILE_NAME
+
+
+def read_extensions(subject_dir: str | Path) -> list[dict[str, Any]]:
+    """The saved extensions of a subject folder, in order ([] when there is no file).
+
+    Raises
+    ------
+    SubjectFolderError
+        The file is not valid JSON or not of this schema.
+    """
+    path = extensions_path(subject_dir)
+    if not path.is_file():
+        return []
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SubjectFolderError(f"not a valid extensions file: {exc}", path=path) from None
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA or data.get("version") != VERSION:
+        raise SubjectFolderError(f"expected {SCHEMA} version {VERSION}", path=path)
+    exts = data.get("extensions", [])
+    if not isinstance(exts, list) or not all(isinstance(e, dict) and "cause" in e for e in exts):
+        raise SubjectFolderError("'extensions' must be a list of objects with a 'cause'", path=path)
+    return exts
+
+
+def append_extension(subject_dir: str | Path, extension: Mapping[str, Any], *, source: str = "addb diagnose") -> Path:
+    """Append one extension to the subject's file (created when missing); returns its path.
+
+    Raises
+    ------
+    SubjectFolderError
+        The subject folder cannot be written.
+    """
+    path = extensions_path(subject_dir)
+    exts = read_extensions(subject_dir)
+    entry = dict(extension)
+    entry.setdefault("source", source)
+    entry.setdefault("created", _time.strftime("%Y-%m-%dT%H:%M:%SZ", _time.gmtime()))
+    exts.append(entry)
+    text = json.dumps({"schema": SCHEMA, "version": VERSION, "extensions": exts}, indent=1)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text + "\n", encoding="utf-8")
+        tmp.replace(path)
+    except OSError as exc:
+        raise SubjectFolderError(f"cannot write the extensions file ({exc.strerror})", path=path) from None
+    return path
+
+
+# --------------------------------------------------------------------------- trials
+
+
+def _map_plates(forces: ForceRecording, plate: str, fn: Any) -> ForceRecording:
+    names = [p.name for p in forces.plates]
+    if plate not in names:
+        raise SubjectFolderError(f"extension names plate {plate!r}; the recording has {', '.join(names)}", path=forces.source or None)
+    return ForceRecording(forces.time, forces.rate_hz, tuple(fn(p) if p.name == plate else p for p in forces.plates), forces.source)
+
+
+def correct_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """The recording with one force extension's correction applied (others: unchanged)."""
+    cause = ext["cause"]
+    if cause == "force_time_offset":
+        return ForceRecording(np.asarray(forces.time) - float(ext["delay_s"]), forces.rate_hz, forces.plates, forces.source)
+    if cause == "plate_force_offset":
+        off = np.asarray(ext["offset_N"], dtype=float)
+        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force - off, p.cop, p.free_moment, p.corners))
+    if cause == "plate_force_gain":
+        g = float(ext["gain"])
+        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force / g, p.cop, p.free_moment / g, p.corners))
+    if cause == "plate_position_offset":
+        s = np.asarray(ext["shift_m"], dtype=float)
+        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force, p.cop - s, p.free_moment, p.corners))
+    return forces
+
+
+def correct_markers(markers: MarkerTrajectories, ext: Mapping[str, Any]) -> MarkerTrajectories:
+    """The markers with a ``marker_offset`` correction applied (others: unchanged)."""
+    if ext["cause"] != "marker_offset" or ext["marker"] not in markers.names:
+        return markers
+    j = markers.names.index(ext["marker"])
+    t_ext = np.asarray(ext["time_s"], dtype=float)
+    shift = np.asarray(ext["lab_shift_m"], dtype=float).reshape(-1, 3)
+    lab = np.stack([np.interp(markers.time, t_ext, shift[:, a]) for a in range(3)], axis=1)
+    pos = np.array(markers.positions)
+    pos[:, j] -= lab
+    return MarkerTrajectories(markers.names, pos, markers.time, markers.rate_hz, markers.source)
+
+
+def apply_extensions(subject: Subject, trials: Sequence[Trial]) -> tuple[Trial, ...]:
+    """The subject's loaded raw trials with its saved extensions applied, in file order.
+
+    Parameters
+    ----------
+    subject
+        The subject (its folder holds ``addb_extensions.json``, or nothing to apply).
+    trials
+        Its loaded trials (:func:`solver.io.subject.load_trial`).
+
+    Returns
+    -------
+    tuple of Trial
+        The same trials, with corrected forces and markers where an extension names them.
+
+    Raises
+    ------
+    SubjectFolderError
+        A damaged extensions file, or an extension naming a plate the trial lacks.
+    """
+    exts = read_extensions(subject.path)
+    if not exts:
+        return tuple(trials)
+    out = []
+    for trial in trials:
+        markers, forces = trial.markers, trial.forces
+        for ext in exts:
+            if ext.get("trial") != trial.name:
+                continue
+            markers = correct_markers(markers, ext)
+            if forces is not None:
+                forces = correct_forces(forces, ext)
+        out.append(Trial(trial.name, markers, forces))
+    return tuple(out)
+
+
+def unmeasured_mask(ext: Mapping[str, Any]) -> BoolArray:
+    """``(n_frames,)`` marker frames of an ``unmeasured_force`` extension."""
+    mask = np.zeros(int(ext["n_frames"]), dtype=bool)
+    for a, b in ext.get("frames", []):
+        mask[int(a) : int(b)] = True
+    return mask
+
+
+def extend_subject(subject: Subject) -> Subject:
+    """The subject with the mass and model of its saved extensions.
+
+    Returns
+    -------
+    Subject
+        ``mass_kg`` plus every ``body_mass`` change, ``model_path`` the last
+        ``segment_mass_distribution`` model.
+    """
+    mass = subject.mass_kg
+    model_path = subject.model_path
+    for ext in read_extensions(subject.path):
+        if ext["cause"] == "body_mass":
+            mass += float(ext["mass_change_kg"])
+        elif ext["cause"] == "segment_mass_distribution" and ext.get("model"):
+            model_path = subject.path / str(ext["model"])
+    return replace(subject, mass_kg=mass, model_path=model_path)
+
+
+def extension_masks(subject: Subject) -> dict[str, BoolArray]:
+    """Trial -> ``(T,)`` marker frames that saved ``unmeasured_force`` extensions mark as
+    unmeasured (several extensions of one trial are OR-ed); {} when there are none.
+
+    The dynamics stage joins them to the reviewer's flags, or to its automatic proposals
+    when the reviewer gave none, so a later step off the plates is still proposed.
+    """
+    masks: dict[str, BoolArray] = {}
+    for ext in read_extensions(subject.path):
+        if ext["cause"] != "unmeasured_force":
+            continue
+        name, extra = str(ext["trial"]), unmeasured_mask(ext)
+        old = masks.get(name)
+        if old is None:
+            masks[name] = extra
+        else:
+            n = max(old.size, extra.size)
+            merged = np.zeros(n, dtype=bool)
+            merged[: old.size] |= old
+            merged[: extra.size] |= extra
+            masks[name] = merged
+    return masks
+
+
+def join_masks(masks: dict[str, BoolArray] | None, extra: Mapping[str, BoolArray]) -> dict[str, BoolArray] | None:
+    """``masks`` with ``extra`` OR-ed in (trial by trial, to the shorter length)."""
+    if not extra:
+        return masks
+    out = dict(masks or {})
+    for name, e in extra.items():
+        if name in out:
+            old = np.asarray(out[name], dtype=bool).copy()
+            n = min(old.size, e.size)
+            old[:n] |= e[:n]
+            out[name] = old
+        else:
+            out[name] = np.asarray(e, dtype=bool)
+    return out
+
+
+def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
+    """Save a diagnosis' extension entry for the next processing of the subject.
+
+    ``segment_mass_distribution`` also writes ``addb_extensions.osim``: the subject's
+    current model (the generic one, or the last saved redistribution) with each body
+    group's mass changed by the entry's ``fraction`` of that group's mass.
+
+    Returns
+    -------
+    Path
+        The extensions file.
+
+    Raises
+    ------
+    SubjectFolderError
+        The subject folder is not writable.
+    """
+    import os
+    import stat
+
+    folder = Path(subject_dir)
+    # (mode bits too: os.access says yes to root even for a folder marked read-only)
+    if not os.access(folder, os.W_OK) or not stat.S_IMODE(folder.stat().st_mode) & 0o222:
+        raise SubjectFolderError(
+            "the subject folder is read-only; copy the subject to a folder you can write to and apply there", path=folder
+        )
+    entry = dict(entry)
+    if entry["cause"] == "segment_mass_distribution":
+        from solver.diagnose.refit import redistribute
+        from solver.io.subject import load_subject
+        from solver.model.osim import read_osim
+        from solver.model.osim_writer import write_osim
+
+        subject = extend_subject(load_subject(folder))
+        model = read_osim(subject.model_path)
+        group_mass: dict[str, float] = {}
+        from solver.diagnose.data import body_group
+
+        for b in model.bodies:
+            group_mass[body_group(b.name)] = group_mass.get(body_group(b.name), 0.0) + b.mass
+        change = {g: float(f) * group_mass.get(g, 0.0) for g, f in entry.get("fraction", {}).items()}
+        write_osim(redistribute(model, change), folder / MODEL_NAME)
+        entry["model"] = MODEL_NAME
+    return append_extension(folder, entry)

@@ -1,0 +1,171 @@
+"""Refit a processed trial with an extension: the dynamics stage again, from its own motion.
+
+The refit runs :func:`solver.dynamics.stage.run_dynamics` on the trial alone, starting
+from the processed coordinates (instead of inverse kinematics) with the processed
+(scaled, mass-fitted) model, on the extension-corrected raw forces and markers, and with
+fewer Gauss-Newton rounds than the pipeline (it starts near the optimum). It gives the
+metrics "after" the extension, in the pipeline's own terms (results.json keys), and a
+:class:`~solver.results.ProcessedTrial` the diagnosis can look at again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.diagnose.data import body_group
+from solver.dynamics.fit import FitSettings
+from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
+from solver.io.types import ForceRecording, MarkerTrajectories
+from solver.kinematics.result import KinematicsResult, TrialKinematics
+from solver.model.osim import Body, OsimModel
+from solver.model.skeleton import Skeleton
+from solver.results import ProcessedTrial
+
+BoolArray = NDArray[np.bool_]
+
+#: Rounds and iterations of the refit's dynamics fit (the pipeline's: 4 and 12).
+REFIT_ROUNDS = 3
+REFIT_ITERATIONS = 12
+
+
+@dataclass(frozen=True)
+class Refit:
+    """Result of :func:`refit_trial`.
+
+    Attributes
+    ----------
+    trial
+        The refitted trial (dynamics fields, model path of the original).
+    metrics
+        Its results.json-style metrics (:func:`solver.dynamics.metrics.residual_metrics`).
+    model
+        The refitted (mass-fitted) model.
+    seconds
+        Wall time, s.
+    """
+
+    trial: ProcessedTrial
+    metrics: dict[str, Any]
+    model: OsimModel
+    seconds: float
+
+
+def redistribute(model: OsimModel, change_kg: Mapping[str, float]) -> OsimModel:
+    """``model`` with each body group's mass (and inertia) changed by ``change_kg[group]`` kg,
+    shared among its bodies in proportion to their masses."""
+    group_mass: dict[str, float] = {}
+    for b in model.bodies:
+        group_mass[body_group(b.name)] = group_mass.get(body_group(b.name), 0.0) + b.mass
+    bodies = []
+    for b in model.bodies:
+        g = body_group(b.name)
+        f = 1.0 + float(change_kg.get(g, 0.0)) / group_mass[g] if group_mass[g] > 0 else 1.0
+        f = max(f, 0.05)
+        bodies.append(Body(b.name, b.mass * f, b.com, tuple(map(tuple, np.array(b.inertia) * f)), b.meshes))
+    return replace(model, bodies=tuple(bodies))
+
+
+def refit_trial(
+    trial: ProcessedTrial,
+    model: OsimModel,
+    forces: ForceRecording,
+    *,
+    mass_kg: float,
+    feet: tuple[str, ...],
+    unmeasured: BoolArray,
+    observed: np.ndarray | None = None,
+    settings: Mapping[str, Any] | None = None,
+) -> Refit:
+    """Run the dynamics stage again on one processed trial.
+
+    Parameters
+    ----------
+    trial
+        The processed trial (its coordinates start the fit).
+    model
+        The model to fit with (the processed model, possibly with changed body masses).
+    forces
+        The raw force recording with the extension's corrections.
+    mass_kg
+        Stated mass for the stage's thresholds.
+    feet
+        Foot bodies.
+    unmeasured
+        ``(T,)`` frames with unmeasured force on the trial's frames (they replace proposals).
+    observed
+        ``(T, M, 3)`` observed markers to fit (default: the trial's).
+    settings
+        The trial's processing settings (cut-off, filter order, fit weights).
+    """
+    import time
+
+    t0 = time.perf_counter()
+    st = dict(settings or trial.settings or {})
+    fit = dict(st.get("fit", {}) or {})
+    fit_fields = {k: v for k, v in fit.items() if k in FitSettings.__dataclass_fields__}
+    fit_fields.update(rounds=REFIT_ROUNDS, iterations=REFIT_ITERATIONS)
+    opts = DynamicsOptions(
+        rate_hz=float(st.get("rate_hz", trial.rate_hz)),
+        cutoff_hz=float(st.get("cutoff_hz", 30.0)),
+        filter_order=int(st.get("filter_order", 3)),
+        alpha=float(st.get("alpha", 1e-6)),
+        fit=FitSettings(**fit_fields),
+    )
+    obs = trial.observed if observed is None else observed
+    sk = Skeleton(model)
+    kin = KinematicsResult(
+        model=model,
+        body_scales={},
+        marker_offsets={},
+        trials=(TrialKinematics(trial.trial, trial.time, trial.coordinate_names, trial.q, trial.marker_names, obs, sk.marker_positions(trial.q, sk.marker_index(list(trial.marker_names)))),),
+    )
+    markers = MarkerTrajectories(trial.marker_names, obs, trial.time, trial.rate_hz)
+    dyn = run_dynamics(
+        kin,
+        [(trial.trial, markers, forces)],
+        mass_kg=mass_kg,
+        foot_bodies=feet,
+        height_m=trial.height_m,
+        unmeasured={trial.trial: np.asarray(unmeasured, dtype=bool)},
+        options=opts,
+    )
+    if dyn is None:  # pragma: no cover - the trial had forces when it was processed
+        raise ValueError(f"trial {trial.trial} has no force data to refit")
+    td = dyn.trial(trial.trial)
+    after = processed_from_dynamics(trial, td, dyn)
+    return Refit(after, dict(td.metrics, mass_kg=dyn.mass_kg), dyn.model, time.perf_counter() - t0)
+
+
+def processed_from_dynamics(template: ProcessedTrial, td: TrialDynamics, dyn: DynamicsResult) -> ProcessedTrial:
+    """A :class:`ProcessedTrial` from a dynamics result, other fields from ``template``."""
+    from solver.pipeline import rotations_to_wxyz
+
+    sk = Skeleton(dyn.model)
+    rot, pos = sk.body_poses(td.q)
+    return replace(
+        template,
+        time=td.time,
+        q=td.q,
+        qd=td.qd,
+        qdd=td.qdd,
+        observed=td.observed_markers,
+        modeled=sk.marker_positions(td.q, sk.marker_index(list(td.marker_names))),
+        body_position=pos,
+        body_wxyz=rotations_to_wxyz(rot),
+        plates=td.plates,
+        mass_kg=dyn.mass_kg,
+        com=td.com,
+        com_acc=td.com_acc,
+        residual_force=td.residual_force,
+        residual_moment=td.residual_moment,
+        tau=td.tau,
+        unobserved=td.unobserved,
+        proposed=td.contact.proposed,
+        proposal_reasons=tuple(td.contact.reasons),
+        metrics=dict(td.metrics),
+    )

@@ -1,0 +1,229 @@
+"""The diagnosis as JSON (``addb diagnose --json``, ``OUT/<trial>/diagnosis.json``) and as text.
+
+JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null)::
+
+    subject, trial
+    baseline      the trial's results.json metrics (marker_rms_m, linear_residual_rms_N,
+                  angular_residual_rms_Nm, *_BW, *_BWh, hicks_linear_ok, hicks_angular_ok, ...)
+    analysis      where the residuals concentrate (:mod:`solver.diagnose.analysis`)
+    candidates    one object per cause, best score first:
+                    cause, choice (plate / marker / null), parameters (physical units),
+                    uncertainty (jackknife standard error over the folds, same keys),
+                    score (held-out gain - k log T, cost units), gain (held-out relative
+                    gain: fraction of the reference cost of the cause's channels removed
+                    on held-out frames), held_out_gain (cost units), folds_improved,
+                    n_params, parameters_fitted_motion (estimate on the processed motion),
+                    alternatives (plate/marker causes: every plate or marker with its
+                    parameters, score and gain)
+    chosen        cause name or null
+    reason        one sentence
+    chosen_parameters   parameters of the chosen cause (null when none)
+    after         metrics of the trial refitted with the chosen extension (baseline keys;
+                  null when none)
+    held_out      {"before": {...}, "after": {...}}: marker RMS (m), linear (N) and angular
+                  (N·m) residual RMS on held-out frames (fixed kinematics)
+    extension     the entry ``--apply`` saves (:mod:`solver.diagnose.extensions`)
+    settings, seconds
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from solver.diagnose.core import Diagnosis
+from solver.diagnose.selection import Evaluation
+
+SCHEMA = "addb.diagnosis"
+VERSION = 1
+
+#: The main parameter of each cause (the key its uncertainty is reported under).
+MAIN_PARAMETER = {
+    "body_mass": "mass_change_kg",
+    "force_time_offset": "delay_s",
+    "plate_force_offset": "offset_N",
+    "plate_force_gain": "gain",
+    "plate_position_offset": "shift_m",
+    "segment_mass_distribution": "mass_change_kg",
+    "marker_offset": "shift_m",
+    "unmeasured_force": "frames",
+}
+
+
+def clean(obj: Any) -> Any:
+    """A JSON-ready copy: numpy scalars and arrays to Python, NaN and inf to None."""
+    if isinstance(obj, dict):
+        return {str(k): clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return clean(obj.tolist())
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        x = float(obj)
+        return x if math.isfinite(x) else None
+    return obj
+
+
+def _params(p: dict[str, Any] | None) -> dict[str, Any] | None:
+    return None if p is None else {k: v for k, v in p.items() if k != "value"}
+
+
+def _uncertainty(ev: Evaluation) -> dict[str, Any] | None:
+    if ev.uncertainty is None:
+        return None
+    key = MAIN_PARAMETER[ev.cause]
+    unc = ev.uncertainty
+    if ev.cause == "segment_mass_distribution":
+        unc = dict(zip(ev.parameters["mass_change_kg"], unc))
+    return {key: unc}
+
+
+def candidate_json(ev: Evaluation, alternatives: list[Evaluation]) -> dict[str, Any]:
+    """One entry of ``candidates``."""
+    out = {
+        "cause": ev.cause,
+        "choice": ev.choice,
+        "parameters": _params(ev.parameters),
+        "uncertainty": _uncertainty(ev),
+        "score": ev.score,
+        "gain": ev.relative_gain,
+        "held_out_gain": ev.gain,
+        "folds_improved": ev.folds_improved,
+        "n_params": ev.n_params,
+        "parameters_fitted_motion": _params(ev.parameters_fitted_motion),
+    }
+    if len(alternatives) > 1:
+        out["alternatives"] = [
+            {"choice": a.choice, "parameters": _params(a.parameters), "uncertainty": _uncertainty(a), "score": a.score, "gain": a.relative_gain}
+            for a in sorted(alternatives, key=lambda e: e.score, reverse=True)
+        ]
+    return out
+
+
+def to_json(diag: Diagnosis) -> dict[str, Any]:
+    """The JSON object of the module docstring."""
+    by_cause: dict[str, list[Evaluation]] = {}
+    for ev in diag.evaluations:
+        by_cause.setdefault(ev.cause, []).append(ev)
+    return clean(
+        {
+            "schema": SCHEMA,
+            "version": VERSION,
+            "subject": diag.subject,
+            "trial": diag.trial,
+            "baseline": diag.baseline,
+            "analysis": diag.analysis,
+            "candidates": [candidate_json(ev, by_cause[ev.cause]) for ev in diag.ranked],
+            "chosen": None if diag.chosen is None else diag.chosen.cause,
+            "reason": diag.reason,
+            "chosen_parameters": _params(diag.parameters),
+            "after": diag.after,
+            "held_out": diag.held_out,
+            "extension": diag.extension,
+            "settings": diag.settings,
+            "seconds": diag.seconds,
+        }
+    )
+
+
+# --------------------------------------------------------------------------- text
+
+
+def _fmt_params(cause: str, p: dict[str, Any] | None, unc: dict[str, Any] | None = None) -> str:
+    if not p:
+        return ""
+    u = (unc or {}).get(MAIN_PARAMETER.get(cause, ""), None)
+
+    def pm(x: Any, scale: float, unit: str, digits: int) -> str:
+        return "" if x is None else f" ± {np.round(np.asarray(x) * scale, digits).tolist()} {unit}"
+
+    if cause == "body_mass":
+        return f"mass change {p['mass_change_kg']:+.2f} kg{pm(u, 1, 'kg', 2)} (stated {p['stated_mass_kg']:.2f} kg -> {p['mass_kg']:.2f} kg)"
+    if cause == "force_time_offset":
+        return f"forces late by {1000 * p['delay_s']:+.1f} ms{pm(u, 1000, 'ms', 1)}"
+    if cause == "plate_force_offset":
+        return f"plate {p['plate']}: offset {np.round(p['offset_N'], 1).tolist()} N{pm(u, 1, 'N', 1)}"
+    if cause == "plate_force_gain":
+        return f"plate {p['plate']}: gain {p['gain']:.4f}{pm(u, 1, '', 4)}"
+    if cause == "plate_position_offset":
+        return f"plate {p['plate']}: centre of pressure shifted by {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm{pm(u, 100, 'cm', 2)}"
+    if cause == "segment_mass_distribution":
+        return "mass moved: " + ", ".join(f"{g} {v:+.2f} kg" for g, v in p["mass_change_kg"].items())
+    if cause == "marker_offset":
+        return (
+            f"marker {p['marker']} on {p['body']}: {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm from the model's landmark "
+            f"(body frame; {np.round(np.asarray(p['residual_shift_m']) * 100, 2).tolist()} cm beyond what the kinematics fit placed){pm(u, 100, 'cm', 2)}"
+        )
+    if cause == "unmeasured_force":
+        spans = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in p["times_s"])
+        return f"{p['n_frames']} frames ({spans}) look unmeasured"
+    return str(p)
+
+
+def candidate_line(c: dict[str, Any]) -> str:
+    """One text line of a ``candidates`` entry of the JSON object."""
+    return (
+        f"{c['cause']:<26s} score {c['score']:10.0f}  gain {100 * (c['gain'] or 0.0):5.1f}%  "
+        f"folds {100 * (c['folds_improved'] or 0.0):3.0f}%  {_fmt_params(c['cause'], c['parameters'], c['uncertainty'])}"
+    )
+
+
+def metric_row(name: str, m: dict[str, Any] | None) -> str:
+    """One text line of metrics (results.json keys, or the held-out figures)."""
+    if not m:
+        return f"  {name:<22s} -"
+    lin, ang = m.get("linear_residual_rms_N"), m.get("angular_residual_rms_Nm")
+    hicks = ""
+    if "hicks_linear_ok" in m:
+        hicks = f"  Hicks lin {'ok' if m.get('hicks_linear_ok') else 'no'}, ang {'ok' if m.get('hicks_angular_ok') else ('no' if m.get('hicks_angular_ok') is not None else '-')}"
+    mk = m.get("marker_rms_m")
+
+    def num(x: Any, scale: float, width: int, digits: int) -> str:
+        return f"{'-':>{width}s}" if x is None or not math.isfinite(float(x)) else f"{scale * float(x):{width}.{digits}f}"
+
+    return f"  {name:<22s} markers {num(mk, 100, 5, 2)} cm  linear {num(lin, 1, 7, 1)} N  angular {num(ang, 1, 7, 1)} N·m{hicks}"
+
+
+def to_text(diag: Diagnosis) -> str:
+    """A human-readable report."""
+    a = diag.analysis
+    ot = a["over_time"]
+    lines = [
+        f"Diagnosis of {diag.subject} / {diag.trial}",
+        "",
+        "What is wrong",
+        f"  frames evaluated {a['frames_evaluated']} (flagged by the reviewer: {a['frames_flagged']})",
+        f"  residual force RMS {ot['linear_rms_N']:.1f} N (peak {ot['linear_peak_N']:.1f} N at {ot['linear_peak_time_s']:.2f} s), "
+        f"moment RMS {ot['angular_rms_Nm']:.1f} N·m (peak {ot['angular_peak_Nm']:.1f} N·m at {ot['angular_peak_time_s']:.2f} s)",
+    ]
+    if ot["hot_spots_s"]:
+        lines.append("  residual force above twice its RMS: " + ", ".join(f"{s:.2f}-{e:.2f} s" for s, e in ot["hot_spots_s"][:8]))
+    for name, ph in a["by_phase"].items():
+        lines.append(f"  {name:<24s} {ph['frames']:4d} frames  force {ph['linear_rms_N']:6.1f} N  moment {ph['angular_rms_Nm']:6.1f} N·m  share {100 * ph['share']:4.0f}%")
+    fx, mx = a["by_axis"]["force_rms_N"], a["by_axis"]["moment_rms_Nm"]
+    lines.append(
+        "  by axis: force x/y/z " + "/".join(f"{fx[k]:.1f}" for k in "xyz") + " N, moment x/y/z " + "/".join(f"{mx[k]:.1f}" for k in "xyz") + " N·m"
+    )
+    corr = [(k, v["linear"]) for k, v in a["correlations"].items() if v["linear"] is not None]
+    corr.sort(key=lambda kv: -abs(kv[1]))
+    if corr:
+        lines.append("  residual force correlates with: " + ", ".join(f"{k} {v:+.2f}" for k, v in corr[:4]))
+    lines += ["", "Candidate causes (held-out evidence; score = held-out gain - k log T)"]
+    for ev in diag.ranked:
+        lines.append("  " + candidate_line(candidate_json(ev, [])))
+    lines += ["", diag.reason]
+    if diag.chosen is not None:
+        lines.append(f"Estimate: {_fmt_params(diag.chosen.cause, _params(diag.parameters), _uncertainty(diag.chosen))}")
+        lines += ["", "Gain of the extension"]
+        lines.append(metric_row("before (processed)", diag.baseline))
+        lines.append(metric_row("after (refit)", diag.after))
+        if diag.held_out:
+            lines.append(metric_row("held-out before", diag.held_out["before"]))
+            lines.append(metric_row("held-out after", diag.held_out["after"]))
+    return "\n".join(lines)

@@ -1,0 +1,309 @@
+"""Cross-validation, scores and the choice of a cause.
+
+Frames are cut into contiguous blocks of ``block_seconds`` assigned to ``folds`` folds in
+turn (block b -> fold b mod K). Each alternative is fitted K times on the other folds and
+scored on the held-out one, so every frame is scored once by parameters that did not see
+it. For an alternative with k parameters:
+
+    held-out gain   G = sum over held-out frames of (reference cost - extension cost)
+    score           S = G - k log(T)          (a BIC-like charge per parameter, T frames)
+    relative gain   g = G / (reference cost of the channels the cause acts on)
+
+``unmeasured_force`` has no global parameters (each frame of U gets its own free wrench,
+6 per frame): its gain is the same in and out of sample and the charge is 6 |U| log(T).
+The estimate reported is the fit on all frames; its uncertainty is the jackknife
+standard error over the K fold fits, which (unlike a least-squares covariance with white
+noise) respects the strong correlation of residuals between neighbouring frames.
+
+A cause is chosen when its best alternative (plate or marker) passes :class:`ChoiceRule`;
+otherwise no cause stands out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.diagnose.candidates import Alternative, FixedAlternative
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+BoolArray = NDArray[np.bool_]
+
+
+def make_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 0.2) -> IntArray:
+    """``(T,)`` fold index of each frame: contiguous blocks dealt to the folds in turn.
+
+    Parameters
+    ----------
+    n_frames
+        T.
+    dt
+        Frame interval, s.
+    folds
+        K; fewer when the trial has fewer than 2 K blocks.
+    block_seconds
+        Block length, s.
+    """
+    block = max(int(round(block_seconds / dt)), 1)
+    n_blocks = int(np.ceil(n_frames / block))
+    k = int(max(2, min(folds, n_blocks // 2)))
+    return ((np.arange(n_frames) // block) % k).astype(np.intp)
+
+
+@dataclass
+class Evaluation:
+    """The cross-validated evaluation of one alternative.
+
+    Attributes
+    ----------
+    cause, choice
+        Cause name and plate/marker (None when the cause has no choice).
+    parameters
+        Fit on all frames, in their units (``value`` is the reported vector).
+    uncertainty
+        Jackknife standard error of ``value`` over the folds (same shape), or None.
+    n_params
+        Parameters charged.
+    gain
+        Held-out gain G (cost units).
+    reference
+        Held-out reference cost of the cause's channels.
+    fold_gains
+        ``(K,)`` G per fold.
+    score
+        S = G - n_params log T.
+    """
+
+    cause: str
+    choice: str | None
+    parameters: dict[str, Any]
+    uncertainty: Any
+    n_params: int
+    gain: float
+    reference: float
+    fold_gains: FloatArray
+    score: float
+    held_out_costs: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    reference_costs: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    parameters_fitted_motion: dict[str, Any] | None = None
+    uncertainty_fitted_motion: Any = None
+
+    def block_gains(self, blocks: IntArray) -> FloatArray:
+        """``(B,)`` held-out gain of each block of frames (``blocks`` ``(T,)`` block index)."""
+        return np.bincount(blocks, weights=self.reference_costs - self.held_out_costs, minlength=int(blocks.max()) + 1)
+
+    @property
+    def relative_gain(self) -> float:
+        """G over the reference cost of the cause's channels (0 when that is 0)."""
+        return float(self.gain / self.reference) if self.reference > 0 else 0.0
+
+    @property
+    def folds_improved(self) -> float:
+        """Fraction of the folds the extension changes whose held-out cost went down."""
+        changed = self.fold_gains != 0
+        return float(np.mean(self.fold_gains[changed] > 0)) if changed.any() else 0.0
+
+
+def cross_validate(alt: Alternative, folds: IntArray) -> Evaluation:
+    """Fit ``alt`` on K-1 folds, score on the held-out one, for every fold."""
+    t = folds.size
+    k = int(folds.max()) + 1
+    ref = alt.ref_costs
+    held = np.empty(t)
+    thetas = []
+    fold_gains = np.empty(k)
+    for f in range(k):
+        test = folds == f
+        theta = alt.solve(~test)
+        thetas.append(theta)
+        costs = alt.frame_costs(theta)
+        held[test] = costs[test]
+        fold_gains[f] = float(np.sum(ref[test] - costs[test]))
+    theta_all = alt.solve(np.ones(t, dtype=bool))
+    params = alt.physical(theta_all)
+    unc = None
+    if alt.n_params and not isinstance(alt, FixedAlternative):
+        vecs = np.array([alt.vector(th) for th in thetas])
+        jack = np.sqrt((k - 1) / k * np.sum((vecs - vecs.mean(axis=0)) ** 2, axis=0))
+        unc = jack.tolist() if jack.size > 1 else float(jack[0])
+    gain = float(np.sum(ref - held))
+    score = gain - alt.n_params * np.log(t)
+    return Evaluation(alt.cause, alt.choice, params, unc, alt.n_params, gain, float(np.sum(ref)), fold_gains, float(score), held, ref)
+
+
+@dataclass(frozen=True)
+class ChoiceRule:
+    """When a cause is named (all must hold for the best-scoring alternative).
+
+    Attributes
+    ----------
+    min_relative_gain
+        Its held-out gain removes at least this fraction of the reference cost of its channels.
+    min_folds_improved
+        At least this fraction of the folds improve on held-out frames.
+    runner_up_ratio, paired_t, paired_fraction
+        It stands out from the best alternative of any *other* cause when that one's score
+        is at most ``runner_up_ratio`` of its score, or when, block by block of held-out
+        frames, it does better with a paired t statistic of at least ``paired_t`` in at
+        least ``paired_fraction`` of the blocks.
+    min_effect
+        Cause -> smallest effect worth naming (in the units of :func:`effect_size`).
+    max_effect
+        Cause -> largest plausible effect: a larger estimate (a segment gaining three times
+        its mass, a 50 % gain error) means the cause is fitting something else, and it is
+        no contender.
+    """
+
+    min_relative_gain: float = 0.10
+    min_folds_improved: float = 0.8
+    runner_up_ratio: float = 0.6
+    paired_t: float = 2.0
+    paired_fraction: float = 0.6
+    min_effect: dict[str, float] = field(
+        default_factory=lambda: {
+            "body_mass": 1.5,  # kg
+            "force_time_offset": 0.005,  # s
+            "plate_force_offset": 10.0,  # N
+            "plate_force_gain": 0.015,  # relative
+            "plate_position_offset": 0.005,  # m
+            "segment_mass_distribution": 1.0,  # kg moved
+            "marker_offset": 0.005,  # m (residual part)
+            "unmeasured_force": 3.0,  # frames
+        }
+    )
+    max_effect: dict[str, float] = field(
+        default_factory=lambda: {
+            "body_mass": 30.0,  # kg
+            "force_time_offset": 0.1,  # s (the search grid ends at 0.12 s)
+            "plate_force_offset": 300.0,  # N
+            "plate_force_gain": 0.3,  # relative
+            "plate_position_offset": 0.1,  # m
+            "segment_mass_distribution": 15.0,  # kg moved
+            "marker_offset": 0.1,  # m
+        }
+    )
+
+
+def effect_size(ev: Evaluation) -> float:
+    """The magnitude compared with :attr:`ChoiceRule.min_effect` (units per cause)."""
+    p = ev.parameters
+    if ev.cause == "body_mass":
+        return abs(p["mass_change_kg"])
+    if ev.cause == "force_time_offset":
+        return abs(p["delay_s"])
+    if ev.cause == "plate_force_offset":
+        return float(np.linalg.norm(p["offset_N"]))
+    if ev.cause == "plate_force_gain":
+        return abs(p["gain"] - 1.0)
+    if ev.cause == "plate_position_offset":
+        return float(np.linalg.norm(p["shift_m"]))
+    if ev.cause == "segment_mass_distribution":
+        return float(np.sum(np.abs(list(p["mass_change_kg"].values()))) / 2)
+    if ev.cause == "marker_offset":
+        return float(np.linalg.norm(p["residual_shift_m"]))
+    if ev.cause == "unmeasured_force":
+        return float(p["n_frames"])
+    return 0.0
+
+
+def best_per_cause(evaluations: list[Evaluation]) -> list[Evaluation]:
+    """The best-scoring alternative of each cause, best first."""
+    best: dict[str, Evaluation] = {}
+    for ev in evaluations:
+        if ev.cause not in best or ev.score > best[ev.cause].score:
+            best[ev.cause] = ev
+    return sorted(best.values(), key=lambda e: e.score, reverse=True)
+
+
+def make_blocks(n_frames: int, dt: float, block_seconds: float = 0.2) -> IntArray:
+    """``(T,)`` index of the contiguous block of ``block_seconds`` each frame belongs to."""
+    return (np.arange(n_frames) // max(int(round(block_seconds / dt)), 1)).astype(np.intp)
+
+
+def paired_blocks(best: Evaluation, other: Evaluation, blocks: IntArray) -> tuple[float, float]:
+    """Paired comparison of two alternatives over blocks of frames.
+
+    Returns
+    -------
+    t, fraction
+        t statistic of the per-block difference of held-out gains (best minus other; blocks
+        are treated as independent, which frames are not) and the fraction of the blocks
+        where ``best`` does better, among those where they differ.
+    """
+    d = best.block_gains(blocks) - other.block_gains(blocks)
+    differ = d != 0
+    if differ.sum() < 3:
+        return 0.0, 0.0
+    sd = float(np.std(d, ddof=1))
+    t = float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else float("inf")
+    return t, float(np.mean(d[differ] > 0))
+
+
+def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: IntArray | None = None) -> tuple[Evaluation | None, str]:
+    """The chosen cause (or None) and a sentence saying why.
+
+    The contenders are the causes whose estimate is worth naming and plausible
+    (:attr:`ChoiceRule.min_effect`, :attr:`ChoiceRule.max_effect`);
+    the best-scoring contender is chosen when it passes the rule's checks against the
+    runner-up contender.
+
+    Parameters
+    ----------
+    ranked
+        Best alternative per cause, best score first (:func:`best_per_cause`).
+    rule
+        Thresholds.
+    blocks
+        ``(T,)`` block index of each frame (:func:`make_blocks`) for the paired comparison
+        with the runner-up; None: the score ratio alone decides.
+    """
+    rule = rule or ChoiceRule()
+    if not ranked:
+        return None, "no candidate cause could be evaluated on this trial"
+    # a cause whose estimate is negligible (a 1 ms delay, a 0.3 kg mass change) is no
+    # contender: it neither gets named nor stands in the way of one that matters
+    contenders = [
+        e for e in ranked if rule.min_effect.get(e.cause, 0.0) <= effect_size(e) <= rule.max_effect.get(e.cause, np.inf)
+    ]
+    if not contenders:
+        best = ranked[0]
+        return None, (
+            f"No cause stands out: every candidate's estimate is negligible or implausible "
+            f"(the best, {best.cause}, {effect_size(best):.3g}; worth naming from {rule.min_effect.get(best.cause, 0.0):g} "
+            f"to {rule.max_effect.get(best.cause, np.inf):g})."
+        )
+    best = contenders[0]
+    second = contenders[1] if len(contenders) > 1 else None
+    t_pair, frac_pair = paired_blocks(best, second, blocks) if (second is not None and blocks is not None) else (0.0, 0.0)
+    clear = second is None or second.score <= rule.runner_up_ratio * best.score or (
+        t_pair >= rule.paired_t and frac_pair >= rule.paired_fraction
+    )
+    checks = [
+        (best.score > 0, f"its score ({best.score:.0f}) is not positive"),
+        (
+            best.relative_gain >= rule.min_relative_gain,
+            f"it removes only {100 * best.relative_gain:.0f}% of the held-out cost (needs {100 * rule.min_relative_gain:.0f}%)",
+        ),
+        (
+            best.folds_improved >= rule.min_folds_improved,
+            f"it improves only {100 * best.folds_improved:.0f}% of the held-out folds",
+        ),
+        (
+            clear,
+            f"{second.cause if second else ''} explains the residuals nearly as well "
+            f"(score {second.score if second else 0:.0f} vs {best.score:.0f}; better in {100 * frac_pair:.0f}% of the "
+            f"blocks of frames, t = {t_pair:.1f})",
+        ),
+    ]
+    failed = [msg for ok, msg in checks if not ok]
+    if failed:
+        return None, f"No cause stands out: the best candidate, {best.cause}, is not chosen because " + "; ".join(failed) + "."
+    return best, (
+        f"{best.cause} stands out: it removes {100 * best.relative_gain:.0f}% of the held-out cost of its channels "
+        f"in {100 * best.folds_improved:.0f}% of the folds, with a score of {best.score:.0f} against {second.score if second else 0:.0f} "
+        f"for the runner-up ({second.cause if second else 'none'})."
+    )

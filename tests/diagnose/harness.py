@@ -1,0 +1,96 @@
+"""Running ``addb diagnose`` the public way, on neutral subject copies and hidden effects.
+
+A *neutral base* is a copy of a real subject whose own findings have been applied with
+``addb diagnose --apply`` until no cause stands out (at most ``max_rounds`` rounds, each a
+processing run): natural unmeasured frames, a marker the lab placed off its landmark, ...
+Hidden effects are then added to copies of that base, so that the hidden effect is the one
+thing left to find, and parameters are compared with the base's own estimates.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from addb_viewer.cli import main as cli
+from solver.results import ProcessedTrial, load_processed
+from tests.conftest import SHARED_DATA
+from tests.diagnose.effects import Hidden, copy_subject, hide
+
+SUBJECTS = SHARED_DATA / "subjects"
+
+#: (subject folder, trial) of the real trials used.
+TRIALS = {
+    "walk": ("rajagopal2016_walk", "walk"),
+    "run": ("rajagopal2016_run", "run"),
+    "DJ1": ("opencap_uhlrich2023", "DJ1"),
+    "walking1": ("opencap_uhlrich2023", "walking1"),
+}
+
+
+def diagnose_json(subject: Path, trial: str, *extra: str) -> dict[str, Any]:
+    """``addb diagnose SUBJECT --trial TRIAL --json [extra]`` -> the parsed JSON object."""
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = cli(["diagnose", str(subject), "--trial", trial, "--json", *extra])
+    if code != 0:
+        raise RuntimeError(f"addb diagnose exited with {code}")
+    return json.loads(buf.getvalue())
+
+
+@dataclass
+class Base:
+    """A neutral base subject: its folder, trial, final report and processed trial."""
+
+    subject: Path
+    trial: str
+    report: dict[str, Any]
+    applied: list[dict[str, Any]]
+
+    @property
+    def processed(self) -> ProcessedTrial:
+        """The processed trial of the base (its default output folder)."""
+        return load_processed(self.subject / "addb_out", self.trial)
+
+
+def neutral_base(key: str, dst: Path, max_rounds: int = 3) -> Base:
+    """Copy a real trial's subject (that trial and any static trial) and apply its own
+    findings until none stands out."""
+    folder, trial = TRIALS[key]
+    src = SUBJECTS / folder
+    keep = tuple(t.name for t in (src / "trials").iterdir() if t.name == trial or not (t / "grf.mot").exists())
+    subject = copy_subject(src, dst, keep)
+    applied = []
+    report: dict[str, Any] = {}
+    for _ in range(max_rounds):
+        shutil.rmtree(subject / "addb_out", ignore_errors=True)
+        report = diagnose_json(subject, trial, "--apply")
+        if report["chosen"] is None:
+            break
+        applied.append(report["extension"])
+    else:
+        shutil.rmtree(subject / "addb_out", ignore_errors=True)
+        report = diagnose_json(subject, trial)
+    return Base(subject, trial, report, applied)
+
+
+def draw(cause: str, index: int, keys: tuple[str, ...] = ("walk", "run")) -> tuple[str, int]:
+    """(trial key, seed) of draw ``index`` of ``cause``: the draws of the benchmark
+    (``tests/benchmarks/bench_diagnose.py``) alternate between the trials; the tests run
+    its first draws, so their outcome is in ``docs/diagnose/RESULTS.md`` too."""
+    from tests.diagnose.effects import CAUSES
+
+    return keys[index % len(keys)], 1000 * (CAUSES.index(cause) + 1) + index
+
+
+def hidden_run(base: Base, cause: str, seed: int, dst: Path) -> tuple[Hidden, dict[str, Any]]:
+    """Hide ``cause`` (magnitudes from ``seed``) in a copy of ``base`` and diagnose it."""
+    processed = base.processed
+    subject = copy_subject(base.subject, dst)
+    hidden = hide(cause, subject, base.trial, seed, processed)
+    return hidden, diagnose_json(subject, base.trial)

@@ -1,0 +1,128 @@
+"""A trial that is consistent by construction, for the diagnosis' no-false-alarm test.
+
+From a processed real trial: its motion ``q`` and scaled model with the generic model's
+mass distribution at the fitted mass (so that the pipeline, which starts from that
+distribution, can reproduce it); markers are the model markers plus noise (white,
+``marker_noise`` m per coordinate (optical motion capture: well under 1 mm), and a smooth soft-tissue drift of ``tissue`` m RMS per
+marker, low-passed at 2 Hz); forces are the real plate wrenches corrected on every
+measured frame so that the root residual is zero (the correction is shared among the
+loaded plates in proportion to their vertical load), resampled to 1000 Hz, plus white
+noise of ``force_noise`` N and 0.1 x that in N·m. The frames the real trial had as
+unmeasured keep their real forces and are flagged by the reviewer.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+from solver.dynamics.preprocess import moment_about_origin
+from solver.io.mot import write_forces
+from solver.io.trc import write_trc
+from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
+from solver.model.osim import Body, read_osim
+from solver.model.skeleton import Skeleton
+from solver.results import ProcessedTrial
+
+FORCE_RATE = 1000.0
+
+
+def generic_distribution(model_path: str | Path, generic_path: str | Path):
+    """The scaled model at ``model_path`` with the generic model's mass shares (same total)."""
+    model = read_osim(model_path)
+    generic = read_osim(generic_path)
+    share = {b.name: b.mass for b in generic.bodies}
+    g_total = sum(share.values())
+    total = sum(b.mass for b in model.bodies)
+    bodies = []
+    for b in model.bodies:
+        m = share[b.name] / g_total * total
+        k = m / b.mass if b.mass > 0 else 0.0
+        bodies.append(Body(b.name, m, b.com, tuple(map(tuple, np.array(b.inertia) * k)), b.meshes))
+    return replace(model, bodies=tuple(bodies))
+
+
+def consistent_subject(
+    processed: ProcessedTrial,
+    source_subject: Path,
+    dst: Path,
+    *,
+    seed: int = 0,
+    marker_noise: float = 0.0005,
+    tissue: float = 0.003,
+    force_noise: float = 3.0,
+) -> Path:
+    """Write a subject folder with one consistent trial (see the module docstring).
+
+    Returns
+    -------
+    Path
+        The subject folder (with ``annotations.json`` flagging the unmeasured frames).
+    """
+    rng = np.random.default_rng(seed)
+    model = generic_distribution(processed.model_path, source_subject / "unscaled_generic.osim")
+    sk = Skeleton(model)
+    time = processed.time
+    dt = float(np.median(np.diff(time)))
+    idr = sk.inverse_dynamics(processed.q, processed.qd, processed.qdd)
+    pelvis = processed.body_position[:, processed.body_names.index(sk.root_body)]
+    inertial_f = idr.root_force
+    inertial_mo = idr.root_moment + np.cross(pelvis, idr.root_force)  # about the ground origin
+
+    # plates: real wrenches (about the origin), corrected so that the residual is zero
+    forces = np.stack([np.nan_to_num(p.force) for p in processed.plates])  # (P, T, 3)
+    moments = np.stack([moment_about_origin(np.nan_to_num(p.force), p.cop, np.nan_to_num(p.free_moment)) for p in processed.plates])
+    loads = np.maximum(forces[:, :, 1], 0.0)
+    share = loads / np.maximum(loads.sum(axis=0), 1e-9)
+    fix = (~processed.unobserved) & (loads.sum(axis=0) > 20.0)
+    d_f = inertial_f - forces.sum(axis=0)
+    d_m = inertial_mo - moments.sum(axis=0)
+    forces = forces + np.where(fix[None, :, None], share[..., None] * d_f[None], 0.0)
+    moments = moments + np.where(fix[None, :, None], share[..., None] * d_m[None], 0.0)
+
+    t_f = np.arange(time[0], time[-1] + 1e-9, 1.0 / FORCE_RATE)
+    plates = []
+    for i, p in enumerate(processed.plates):
+        f = np.stack([np.interp(t_f, time, forces[i, :, a]) for a in range(3)], axis=1)
+        m = np.stack([np.interp(t_f, time, moments[i, :, a]) for a in range(3)], axis=1)
+        f += rng.normal(0.0, force_noise, f.shape)
+        m += rng.normal(0.0, 0.1 * force_noise, m.shape)
+        loaded = np.nan_to_num(p.force[:, 1]) > 20.0
+        centre = np.nanmedian(p.cop[loaded], axis=0) if loaded.any() else np.zeros(3)
+        cop_frames = np.where(np.isfinite(p.cop), p.cop, centre)
+        cop = np.stack([np.interp(t_f, time, cop_frames[:, a]) for a in range(3)], axis=1)
+        free = m - np.cross(cop, f)
+        plates.append(ForcePlate(p.name, f, cop, free))
+
+    # markers: model markers + white noise + smooth soft-tissue drift
+    names = list(processed.marker_names)
+    pos = sk.marker_positions(processed.q, sk.marker_index(names))
+    sos = butter(2, 2.0 / (0.5 / dt), output="sos")
+    drift = sosfiltfilt(sos, rng.normal(size=pos.shape), axis=0)
+    drift *= tissue / np.sqrt(np.mean(drift**2, axis=0, keepdims=True))
+    pos = pos + drift + rng.normal(0.0, marker_noise, pos.shape)
+    pos[~np.isfinite(processed.observed)] = np.nan
+
+    dst.mkdir(parents=True)
+    shutil.copy2(source_subject / "unscaled_generic.osim", dst / "unscaled_generic.osim")
+    (dst / "unscaled_generic.osim").chmod(0o644)
+    raw = json.loads((source_subject / "_subject.json").read_text())
+    raw["massKg"] = float(sum(b.mass for b in model.bodies))
+    raw.pop("trialRanges", None)
+    raw.pop("segmentedTrials", None)
+    (dst / "_subject.json").write_text(json.dumps(raw, indent=2))
+    folder = dst / "trials" / processed.trial
+    folder.mkdir(parents=True)
+    write_trc(folder / "markers.trc", MarkerTrajectories(tuple(names), pos, time, 1.0 / dt))
+    write_forces(folder / "grf.mot", ForceRecording(t_f, FORCE_RATE, tuple(plates)))
+    if processed.unobserved.any():
+        from annotations import AnnotationStore
+
+        with AnnotationStore.open(dst / "annotations.json", reviewer="synthetic") as store:
+            store.set_unmeasured(processed.trial, np.flatnonzero(processed.unobserved).tolist(), source="imported")
+    return dst

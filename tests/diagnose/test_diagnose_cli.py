@@ -1,0 +1,116 @@
+"""``addb diagnose`` end to end on the real walk: the JSON object, the real finding of the
+unmodified trial, ``--apply`` feeding the next processing, the review app's panel, and
+clear errors for bad input."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.diagnose.candidates import CAUSES
+from solver.diagnose.extensions import read_extensions
+from solver.results import load_processed
+from tests.conftest import SHARED_DATA
+from tests.diagnose.effects import copy_subject, hide_body_mass
+from tests.diagnose.harness import diagnose_json
+
+pytestmark = pytest.mark.slow
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    """A writable copy of the walk subject, processed and diagnosed once."""
+    subject = copy_subject(WALK, tmp_path_factory.mktemp("cli") / "walk")
+    return subject, diagnose_json(subject, "walk")
+
+
+def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
+    subject, report = walk
+    results = json.loads((subject / "addb_out" / "walk" / "results.json").read_text())
+    for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
+        assert report["baseline"][key] == pytest.approx(results[key])
+    assert sorted(c["cause"] for c in report["candidates"]) == sorted(CAUSES)
+    for c in report["candidates"]:
+        assert set(c) >= {"cause", "parameters", "uncertainty", "score", "gain"}
+    scores = [c["score"] for c in report["candidates"]]
+    assert scores == sorted(scores, reverse=True)
+    assert report["chosen"] in CAUSES
+    assert set(report["after"]) >= {"marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm", "hicks_linear_ok"}
+    saved = json.loads((subject / "addb_out" / "walk" / "diagnosis.json").read_text())
+    assert saved["chosen"] == report["chosen"]
+
+
+def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict]) -> None:
+    """The walk has no reviewer flags: its real steps off the plates are the finding, and
+    they are the frames the pipeline's contact analysis proposed on its own."""
+    subject, report = walk
+    assert report["chosen"] == "unmeasured_force", report["reason"]
+    processed = load_processed(subject / "addb_out", "walk")
+    found = np.zeros(processed.n_frames, dtype=bool)
+    for a, b in report["chosen_parameters"]["frames"]:
+        found[a:b] = True
+    proposed = processed.proposed
+    assert proposed.any()
+    assert (found & proposed).sum() >= 0.8 * proposed.sum()
+    assert (found & ~proposed).sum() <= 0.2 * found.sum()
+    held = report["held_out"]
+    assert held["after"]["linear_residual_rms_N"] < 0.5 * held["before"]["linear_residual_rms_N"]
+
+
+def test_apply_feeds_the_next_processing_and_the_review_app(tmp_path: Path) -> None:
+    """A hidden mass error is named, --apply saves it, the next processing uses it: the
+    diagnosis of the reprocessed subject no longer names it, and the review app shows both."""
+    subject = copy_subject(WALK, tmp_path / "walk")
+    hidden = hide_body_mass(subject, "walk", np.random.default_rng(21))
+    # the unmeasured frames of the walk first (a real finding; otherwise it is named first)
+    assert diagnose_json(subject, "walk", "--apply")["chosen"] == "unmeasured_force"
+    cli(["process", str(subject), "--out", str(subject / "addb_out")])
+    report = diagnose_json(subject, "walk", "--apply")
+    assert report["chosen"] == "body_mass", report["reason"]
+    assert report["chosen_parameters"]["mass_change_kg"] == pytest.approx(hidden.truth["mass_change_kg"], abs=1.5)
+    assert [e["cause"] for e in read_extensions(subject)] == ["unmeasured_force", "body_mass"]
+    cli(["process", str(subject), "--out", str(subject / "addb_out")])
+    after = diagnose_json(subject, "walk")
+    assert after["chosen"] != "body_mass"
+    mass = next(c for c in after["candidates"] if c["cause"] == "body_mass")
+    assert abs(mass["parameters"]["mass_change_kg"]) < 1.0
+
+    from addb_viewer.app.paths import ReviewPaths
+    from addb_viewer.app.server import ReviewApp
+
+    app = ReviewApp(ReviewPaths.for_subject(subject, subject / "addb_out"), reviewer="t", port=0, background=False)
+    try:
+        text = app.panel.diagnosis.content
+        assert (f"`{after['chosen']}`" in text) if after["chosen"] else ("No cause stands out" in text)
+        assert "`body_mass` (every trial)" in text and "`unmeasured_force` (this trial)" in text
+    finally:
+        app.stop()
+
+
+def _run(*argv: str) -> tuple[int, str]:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = cli(["diagnose", *argv])
+    return code, err.getvalue()
+
+
+def test_bad_input_gives_clear_errors(walk: tuple[Path, dict]) -> None:
+    subject, _ = walk
+    code, err = _run(str(subject), "--trial", "nope")
+    assert code == 1 and "no trial 'nope'" in err and "walk" in err
+    code, err = _run(str(subject), "--trial", "static")
+    assert code == 1 and "no force plates" in err
+    (subject / "addb_extensions.json").write_text("{not json")
+    try:
+        code, err = _run(str(subject), "--trial", "walk")
+        assert code == 1 and "addb_extensions.json" in err
+    finally:
+        (subject / "addb_extensions.json").unlink()

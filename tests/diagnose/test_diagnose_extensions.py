@@ -1,0 +1,111 @@
+"""Saved extensions: each correction undoes its hidden effect exactly on real recordings,
+unmeasured frames join the masks, and a damaged file is refused with its name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from solver.diagnose.extensions import (
+    append_extension,
+    correct_forces,
+    correct_markers,
+    extend_subject,
+    extension_masks,
+    join_masks,
+    read_extensions,
+)
+from solver.errors import SubjectFolderError
+from solver.io.mot import read_forces
+from solver.io.subject import load_subject
+from tests.conftest import SHARED_DATA
+from tests.diagnose.effects import (
+    copy_subject,
+    hide_body_mass,
+    hide_plate_gain,
+    hide_plate_offset,
+    hide_plate_shift,
+    hide_time_offset,
+)
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+
+
+@pytest.fixture
+def walk(tmp_path: Path) -> Path:
+    return copy_subject(WALK, tmp_path / "walk")
+
+
+def _plates(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    rec = read_forces(path)
+    return {p.name: (np.asarray(p.force), np.asarray(p.cop), np.asarray(p.free_moment)) for p in rec.plates}
+
+
+@pytest.mark.parametrize(
+    ("hide", "entry"),
+    [
+        (hide_time_offset, lambda h: {"cause": "force_time_offset", "trial": "walk", **h.truth}),
+        (hide_plate_gain, lambda h: {"cause": "plate_force_gain", "trial": "walk", "plate": h.choice, **h.truth}),
+        (hide_plate_shift, lambda h: {"cause": "plate_position_offset", "trial": "walk", "plate": h.choice, **h.truth}),
+    ],
+)
+def test_force_corrections_undo_the_hidden_effect(walk: Path, hide, entry) -> None:
+    original = read_forces(WALK / "trials" / "walk" / "grf.mot")
+    hidden = hide(walk, "walk", np.random.default_rng(7))
+    corrected = correct_forces(read_forces(walk / "trials" / "walk" / "grf.mot"), entry(hidden))
+    np.testing.assert_allclose(corrected.time, original.time, atol=1e-6)
+    for a, b in zip(corrected.plates, original.plates):
+        np.testing.assert_allclose(np.nan_to_num(a.force), np.nan_to_num(b.force), atol=1e-3)
+        np.testing.assert_allclose(np.nan_to_num(a.cop), np.nan_to_num(b.cop), atol=1e-5)
+        np.testing.assert_allclose(np.nan_to_num(a.free_moment), np.nan_to_num(b.free_moment), atol=1e-3)
+
+
+def test_plate_offset_correction_restores_the_loaded_force(walk: Path) -> None:
+    original = _plates(WALK / "trials" / "walk" / "grf.mot")
+    hidden = hide_plate_offset(walk, "walk", np.random.default_rng(3))
+    entry = {"cause": "plate_force_offset", "trial": "walk", "plate": hidden.choice, **hidden.truth}
+    corrected = correct_forces(read_forces(walk / "trials" / "walk" / "grf.mot"), entry)
+    got = {p.name: np.asarray(p.force) for p in corrected.plates}
+    np.testing.assert_allclose(np.nan_to_num(got[hidden.choice]), np.nan_to_num(original[hidden.choice][0]), atol=1e-3)
+
+
+def test_marker_correction_subtracts_the_lab_shift(walk: Path) -> None:
+    from solver.io.trc import read_trc
+
+    mk = read_trc(walk / "trials" / "walk" / "markers.trc")
+    shift = np.tile([0.01, -0.02, 0.005], (mk.time.size, 1))
+    entry = {"cause": "marker_offset", "trial": "walk", "marker": mk.names[3], "time_s": mk.time.tolist(), "lab_shift_m": shift.tolist()}
+    out = correct_markers(mk, entry)
+    np.testing.assert_allclose(out.positions[:, 3], mk.positions[:, 3] - shift)
+    np.testing.assert_array_equal(np.delete(out.positions, 3, axis=1), np.delete(mk.positions, 3, axis=1))
+
+
+def test_mass_and_masks_of_saved_extensions(walk: Path) -> None:
+    hidden = hide_body_mass(walk, "walk", np.random.default_rng(5))
+    stated = load_subject(walk).mass_kg
+    append_extension(walk, {"cause": "body_mass", "trial": None, **hidden.truth})
+    append_extension(walk, {"cause": "unmeasured_force", "trial": "walk", "n_frames": 10, "frames": [[2, 4]]})
+    append_extension(walk, {"cause": "unmeasured_force", "trial": "walk", "n_frames": 10, "frames": [[7, 8]]})
+    assert [e["cause"] for e in read_extensions(walk)] == ["body_mass", "unmeasured_force", "unmeasured_force"]
+    assert extend_subject(load_subject(walk)).mass_kg == pytest.approx(stated + hidden.truth["mass_change_kg"])
+    masks = extension_masks(load_subject(walk))
+    np.testing.assert_array_equal(np.flatnonzero(masks["walk"]), [2, 3, 7])
+    reviewer = {"walk": np.eye(1, 10, 0, dtype=bool)[0]}
+    np.testing.assert_array_equal(np.flatnonzero(join_masks(reviewer, masks)["walk"]), [0, 2, 3, 7])
+
+
+def test_damaged_extensions_file_is_named(walk: Path) -> None:
+    (walk / "addb_extensions.json").write_text('{"schema": "addb.extensions", "version": 1, "extensions": [')
+    with pytest.raises(SubjectFolderError, match="addb_extensions.json"):
+        read_extensions(walk)
+    (walk / "addb_extensions.json").write_text('{"schema": "something else", "version": 1, "extensions": []}')
+    with pytest.raises(SubjectFolderError, match="addb.extensions version 1"):
+        read_extensions(walk)
+
+
+def test_extension_naming_an_unknown_plate_is_refused(walk: Path) -> None:
+    rec = read_forces(walk / "trials" / "walk" / "grf.mot")
+    with pytest.raises(SubjectFolderError, match="plate 'nope'"):
+        correct_forces(rec, {"cause": "plate_force_gain", "plate": "nope", "gain": 1.1})
