@@ -1,0 +1,82 @@
+"""Hidden-effect tests: a cause hidden in a real trial's raw files is named by the public
+``addb diagnose``, its parameter is recovered, and the extension gains on held-out frames.
+
+Each real trial is first made a *neutral base* (its own findings applied until none stands
+out, :func:`tests.diagnose.harness.neutral_base`); the effect is then hidden in a copy
+with a seeded random magnitude in the issue's ranges (:mod:`tests.diagnose.effects`), and
+the parameter is compared with the base's own estimate of the same cause.
+
+Causes whose detection is not yet reliable (see ``docs/diagnose/RESULTS.md``) are marked
+``xfail`` with their measured detection rate, so the gap stays visible.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.diagnose.effects import TOLERANCE, check
+from tests.diagnose.harness import Base, draw, hidden_run, neutral_base
+
+pytestmark = pytest.mark.slow
+
+#: Causes named reliably in the benchmark: their first DRAWS draws are tested.
+RELIABLE = ("body_mass", "plate_force_offset", "plate_force_gain", "unmeasured_force")
+#: Causes not yet named reliably (detection rates in docs/diagnose/RESULTS.md): their first
+#: draw is run as an expected failure, so that the gap stays visible and an improvement shows.
+UNRELIABLE = {
+    "force_time_offset": "often confused with a centre-of-pressure shift once the motion absorbs the force transients",
+    "plate_position_offset": "often confused with a force delay or too weak to stand out",
+    "segment_mass_distribution": "rarely separated from the trial's own residual pattern",
+    "marker_offset": "the kinematics stage absorbs most of a landmark shift into its fitted offset",
+}
+#: The first draws of each cause in the benchmark (walk, run, walk).
+DRAWS = 3
+
+
+def _cases() -> list:
+    out = []
+    for cause in RELIABLE:
+        for index in range(DRAWS):
+            key, seed = draw(cause, index)
+            out.append(pytest.param(cause, key, seed, id=f"{cause}-{key}-{seed}"))
+    for cause, why in UNRELIABLE.items():
+        key, seed = draw(cause, 0)
+        out.append(pytest.param(cause, key, seed, marks=pytest.mark.xfail(reason=why, strict=False), id=f"{cause}-{key}-{seed}"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def bases(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Base]:
+    """Neutral bases of the walk and the run, built on first use."""
+    root = tmp_path_factory.mktemp("bases")
+    cache: dict[str, Base] = {}
+
+    class Lazy(dict):
+        def __missing__(self, key: str) -> Base:
+            cache[key] = neutral_base(key, root / key)
+            self[key] = cache[key]
+            return cache[key]
+
+    return Lazy()
+
+
+@pytest.mark.parametrize(("cause", "key", "seed"), _cases())
+def test_hidden_cause_is_named_and_recovered(cause: str, key: str, seed: int, bases: dict[str, Base], tmp_path: Path) -> None:
+    base = bases[key]
+    hidden, report = hidden_run(base, cause, seed, tmp_path / "subject")
+    result = check(hidden, report, base.report)
+    assert report["chosen"] == cause, report["reason"]
+    assert result["detected"], f"chose {report['chosen_parameters']} instead of {hidden.choice}"
+    assert result["error"] <= TOLERANCE[cause], (hidden.truth, report["chosen_parameters"])
+    chosen = next(c for c in report["candidates"] if c["cause"] == cause)
+    assert chosen["gain"] > 0 and chosen["held_out_gain"] > 0  # cross-validated: on held-out frames
+    before, after = report["held_out"]["before"], report["held_out"]["after"]
+    # the residual on held-out frames goes down with the extension (markers for a marker offset)
+    if cause == "marker_offset":
+        assert after["marker_rms_m"] < before["marker_rms_m"]
+    else:
+        assert after["linear_residual_rms_N"] ** 2 + after["angular_residual_rms_Nm"] ** 2 < (
+            before["linear_residual_rms_N"] ** 2 + before["angular_residual_rms_Nm"] ** 2
+        )
