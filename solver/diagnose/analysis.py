@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.diagnose.data import DiagnosisData
+from solver.dynamics.preprocess import true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -52,11 +53,6 @@ def phases(data: DiagnosisData) -> list[str]:
     return out
 
 
-def _runs(mask: BoolArray) -> list[tuple[int, int]]:
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
-
-
 def analyse(data: DiagnosisData) -> dict[str, Any]:
     """The concentration report of the module docstring (a JSON-ready dict)."""
     trial = data.trial
@@ -74,7 +70,7 @@ def analyse(data: DiagnosisData) -> dict[str, Any]:
         "linear_peak_time_s": float(time[ev][np.argmax(fn[ev])]) if ev.any() else None,
         "angular_peak_Nm": float(mn[ev].max()) if ev.any() else float("nan"),
         "angular_peak_time_s": float(time[ev][np.argmax(mn[ev])]) if ev.any() else None,
-        "hot_spots_s": [[float(time[a]), float(time[b - 1])] for a, b in _runs(hot)],
+        "hot_spots_s": [[float(time[a]), float(time[b - 1])] for a, b in true_runs(hot)],
     }
     ph = np.array(phases(data))
     by_phase = {}

@@ -40,8 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.diagnose.data import DiagnosisData
-from solver.diagnose.profile import ROWS, Profile, Sigmas
-from solver.dynamics.preprocess import cop_from_wrench
+from solver.diagnose.profile import ROWS, Profile, Sigmas, skew
+from solver.dynamics.preprocess import cop_from_wrench, true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -274,14 +274,6 @@ Alternative = LinearAlternative | GridAlternative | FixedAlternative
 # --------------------------------------------------------------------------- helpers
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    """``(T, 3)`` -> ``(T, 3, 3)`` cross-product matrices."""
-    z = np.zeros(v.shape[0])
-    return np.stack(
-        [np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1), np.stack([-v[:, 1], v[:, 0], z], 1)], axis=1
-    )
-
-
 def _residual_rows(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
     """Columns of a change -> ``(T, R, k)`` unprofiled rows (marker rows zero).
 
@@ -352,7 +344,7 @@ def plate_force_offset(ctx: Context) -> list[Alternative]:
     for i, name in enumerate(d.plates.names):
         # residual change for an offset o: force +o, moment +(c - p) x o (not where idle);
         # idle readings change by -o
-        wrench = np.concatenate([eye, _skew(points[i] - d.pelvis)], axis=1)  # (T, 6, 3)
+        wrench = np.concatenate([eye, skew(points[i] - d.pelvis)], axis=1)  # (T, 6, 3)
         wrench = np.where(idle[i][:, None, None], 0.0, wrench)
         g = _profiled(ctx, wrench, _plate_idle(ctx, i, np.where(idle[i][:, None, None], -eye, 0.0)))
 
@@ -391,7 +383,7 @@ def plate_position_offset(ctx: Context) -> list[Alternative]:
     out: list[Alternative] = []
     for i, name in enumerate(d.plates.names):
         f = per[i][:, :3]
-        cols = -_skew(f)[:, :, [0, 2]]  # s x F = -F x s, for s = (sx, 0, sz)
+        cols = -skew(f)[:, :, [0, 2]]  # s x F = -F x s, for s = (sx, 0, sz)
         wrench = np.concatenate([np.zeros((d.n_frames, 3, 2)), cols], axis=1)
         g = _profiled(ctx, wrench)
 
@@ -499,7 +491,7 @@ def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
     residual = d.residual()
     ref = np.sum(full.project(full.raw_rows(residual, d.external()[2])) ** 2, axis=1)
     ext = ctx.ref_costs
-    runs = _runs(u)
+    runs = true_runs(u)
     params = {
         "value": [],
         "frames": [[int(a), int(b)] for a, b in runs],
@@ -509,11 +501,6 @@ def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
         "reasons": sorted({r for r in ctx.unmeasured_reasons if r}),
     }
     return [FixedAlternative("unmeasured_force", ext, ref, 6 * int(u.sum()), params, ctx.ref_rows)]
-
-
-def _runs(mask: BoolArray) -> list[tuple[int, int]]:
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
 #: ``unmeasured_force`` frames: the residual force (a missing support force) exceeds
@@ -546,19 +533,19 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
             off_plate |= off
             for j in np.flatnonzero(off):
                 feet_off[j].append(foot)
-    for a, b in _runs((support > SUPPORT_BW) & off_plate):
+    for a, b in true_runs((support > SUPPORT_BW) & off_plate):
         if b - a >= SUPPORT_FRAMES:
             mask[a:b] = True
             for j in range(a, b):
                 reasons[j] = f"{' and '.join(feet_off[j])} in contact with no plate force, {support[j]:.2f} BW missing"
     long = int(np.ceil(LARGE_SECONDS / data.dt))
-    for a, b in _runs(support > LARGE_BW):
+    for a, b in true_runs(support > LARGE_BW):
         if b - a >= long:
             for j in range(a, b):
                 if not mask[j]:
                     reasons[j] = f"{support[j]:.2f} BW of support force missing"
             mask[a:b] = True
-    for a, b in _runs(mask):
+    for a, b in true_runs(mask):
         for j in list(range(max(a - PAD_FRAMES, 0), a)) + list(range(b, min(b + PAD_FRAMES, t))):
             mask[j] = True
             reasons[j] = reasons[j] or "next to unmeasured frames"

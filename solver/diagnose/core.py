@@ -43,6 +43,7 @@ from solver.diagnose.selection import (
     make_blocks,
     make_folds,
 )
+from solver.dynamics.preprocess import nearest_frames
 from solver.errors import DiagnosisError
 from solver.io.subject import Subject, Trial, load_subject, load_trial
 from solver.model.osim import read_osim
@@ -244,13 +245,6 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray) -> d
 # --------------------------------------------------------------------------- extensions
 
 
-def _marker_frame(time: FloatArray, marker_time: FloatArray) -> np.ndarray:
-    """Nearest marker frame of each time."""
-    idx = np.clip(np.searchsorted(marker_time, time), 1, max(marker_time.size - 1, 1))
-    left = idx - 1
-    return np.where(np.abs(marker_time[left] - time) <= np.abs(marker_time[np.minimum(idx, marker_time.size - 1)] - time), left, idx)
-
-
 def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray) -> dict[str, Any]:
     """The :mod:`.extensions` entry of an evaluation (what ``--apply`` saves)."""
     p = ev.parameters
@@ -283,7 +277,7 @@ def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray
     if ev.cause == "unmeasured_force":
         frames = []
         for a, b in p["frames"]:
-            idx = _marker_frame(data.time[a:b], marker_time)
+            idx = nearest_frames(marker_time, data.time[a:b])
             frames.append([int(idx.min()), int(idx.max()) + 1])
         return {"cause": ev.cause, "trial": trial, "n_frames": int(marker_time.size), "frames": frames, "times_s": p["times_s"]}
     raise ValueError(f"unknown cause {ev.cause!r}")
@@ -332,7 +326,7 @@ def frame_flags(flags: BoolArray | None, marker_time: FloatArray, time: FloatArr
         return np.zeros(time.size, dtype=bool)
     flags = np.asarray(flags, dtype=bool)
     n = min(flags.size, marker_time.size)
-    idx = _marker_frame(time, marker_time[:n])
+    idx = nearest_frames(marker_time[:n], time)
     return flags[:n][np.clip(idx, 0, n - 1)]
 
 

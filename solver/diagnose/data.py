@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.dynamics.preprocess import lowpass, moment_about_origin, resample
+from solver.dynamics.preprocess import lowpass, moment_about_origin, resample, true_runs
 from solver.io.types import ForceRecording
 from solver.model.osim import Body, OsimModel, read_osim
 from solver.model.skeleton import Skeleton
@@ -107,9 +107,8 @@ def idle_samples(force: FloatArray, rate_hz: float, bw: float) -> BoolArray:
     """
     low = np.linalg.norm(force, axis=1) < IDLE_BW * bw
     out = np.zeros_like(low)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(int), [0]])))
     trim = int(round(IDLE_TRIM_SECONDS * rate_hz))
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in true_runs(low):
         if (b - a) / rate_hz >= IDLE_SECONDS:
             out[a + (trim if a > 0 else 0) : b - (trim if b < low.size else 0)] = True
     return out
@@ -302,6 +301,14 @@ def body_group(name: str) -> str:
     return "trunk"
 
 
+def group_masses(model: OsimModel) -> dict[str, float]:
+    """Mass of each :data:`BODY_GROUPS` group of ``model`` (groups without a body left out), kg."""
+    out: dict[str, float] = {}
+    for b in model.bodies:
+        out[body_group(b.name)] = out.get(body_group(b.name), 0.0) + b.mass
+    return out
+
+
 def root_wrench(sk: Skeleton, trial: ProcessedTrial) -> FloatArray:
     """``(T, 6)`` gravity + inertia root wrench of ``trial``'s motion (no external load)."""
     idr = sk.inverse_dynamics(trial.q, trial.qd, trial.qdd)
@@ -310,15 +317,14 @@ def root_wrench(sk: Skeleton, trial: ProcessedTrial) -> FloatArray:
 
 def group_wrenches(model: OsimModel, trial: ProcessedTrial) -> tuple[dict[str, FloatArray], dict[str, float]]:
     """Per body group, the root wrench of its bodies alone (they sum to the whole body's)."""
-    out, masses = {}, {}
+    out = {}
     by_group: dict[str, list[str]] = {}
     for b in model.bodies:
         by_group.setdefault(body_group(b.name), []).append(b.name)
     for group, names in by_group.items():
         sub = _scaled_bodies(model, dict.fromkeys(names, 1.0))
         out[group] = root_wrench(Skeleton(sub), trial)
-        masses[group] = float(sum(b.mass for b in model.bodies if b.name in names))
-    return out, masses
+    return out, group_masses(model)
 
 
 def marker_data(trial: ProcessedTrial, model: OsimModel, generic: OsimModel | None, offsets: Mapping[str, Sequence[float]]) -> MarkerData:
@@ -327,7 +333,7 @@ def marker_data(trial: ProcessedTrial, model: OsimModel, generic: OsimModel | No
     fixed_generic = {m.name: m.fixed for m in generic.markers} if generic is not None else {}
     bodies = tuple(mk[n].body if n in mk else "ground" for n in trial.marker_names)
     quat = trial.body_wxyz  # (T, B, 4)
-    rot_b = _wxyz_to_matrix(quat)
+    rot_b = wxyz_to_matrix(quat)
     bidx = {b: i for i, b in enumerate(trial.body_names)}
     rot = np.stack([rot_b[:, bidx[b]] if b in bidx else np.broadcast_to(np.eye(3), (trial.n_frames, 3, 3)) for b in bodies], axis=1)
     fixed = np.array([bool(fixed_generic.get(n, mk[n].fixed if n in mk else False)) for n in trial.marker_names])
@@ -335,7 +341,7 @@ def marker_data(trial: ProcessedTrial, model: OsimModel, generic: OsimModel | No
     return MarkerData(trial.marker_names, trial.modeled - trial.observed, rot, bodies, fixed, fitted)
 
 
-def _wxyz_to_matrix(q: FloatArray) -> FloatArray:
+def wxyz_to_matrix(q: FloatArray) -> FloatArray:
     """``(..., 4)`` unit quaternions (w, x, y, z) -> ``(..., 3, 3)`` rotation matrices."""
     w, x, y, z = (q[..., k] for k in range(4))
     return np.stack(

@@ -289,6 +289,7 @@ def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
         )
     entry = dict(entry)
     if entry["cause"] == "segment_mass_distribution":
+        from solver.diagnose.data import group_masses
         from solver.diagnose.refit import redistribute
         from solver.io.subject import load_subject
         from solver.model.osim import read_osim
@@ -296,11 +297,7 @@ def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
 
         subject = extend_subject(load_subject(folder))
         model = read_osim(subject.model_path)
-        group_mass: dict[str, float] = {}
-        from solver.diagnose.data import body_group
-
-        for b in model.bodies:
-            group_mass[body_group(b.name)] = group_mass.get(body_group(b.name), 0.0) + b.mass
+        group_mass = group_masses(model)
         change = {g: float(f) * group_mass.get(g, 0.0) for g, f in entry.get("fraction", {}).items()}
         write_osim(redistribute(model, change), folder / MODEL_NAME)
         entry["model"] = MODEL_NAME

@@ -76,19 +76,18 @@ def _second_difference(t: int, dt: float) -> sp.csr_matrix:
     return (d2.tocsr() / dt**2).tocsr()
 
 
+def skew(v: FloatArray) -> FloatArray:
+    """``(T, 3)`` vectors -> ``(T, 3, 3)`` cross-product matrices [v_t]x."""
+    z = np.zeros(v.shape[0])
+    return np.stack(
+        [np.stack([z, -v[:, 2], v[:, 1]], axis=1), np.stack([v[:, 2], z, -v[:, 0]], axis=1), np.stack([-v[:, 1], v[:, 0], z], axis=1)],
+        axis=1,
+    )
+
+
 def _cross_blocks(v: FloatArray) -> sp.csr_matrix:
     """Block diagonal ``(3T, 3T)`` of the cross-product matrices [v_t]x."""
-    t = v.shape[0]
-    z = np.zeros(t)
-    blocks = np.stack(
-        [
-            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
-            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
-            np.stack([-v[:, 1], v[:, 0], z], axis=1),
-        ],
-        axis=1,
-    )  # (T, 3, 3)
-    return sp.block_diag(list(blocks), format="csr")
+    return sp.block_diag(list(skew(v)), format="csr")
 
 
 class Profile:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.diagnose.data import body_group
+from solver.diagnose.data import body_group, group_masses
 from solver.dynamics.fit import FitSettings
 from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
 from solver.io.types import ForceRecording, MarkerTrajectories
@@ -58,9 +58,7 @@ class Refit:
 def redistribute(model: OsimModel, change_kg: Mapping[str, float]) -> OsimModel:
     """``model`` with each body group's mass (and inertia) changed by ``change_kg[group]`` kg,
     shared among its bodies in proportion to their masses."""
-    group_mass: dict[str, float] = {}
-    for b in model.bodies:
-        group_mass[body_group(b.name)] = group_mass.get(body_group(b.name), 0.0) + b.mass
+    group_mass = group_masses(model)
     bodies = []
     for b in model.bodies:
         g = body_group(b.name)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.dynamics.preprocess import true_runs
 from solver.model.skeleton import Skeleton
 from solver.results import PlateData
 
@@ -133,8 +134,7 @@ def _segment_distance(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray
 def _long_runs(mask: NDArray[np.bool_], min_len: int) -> NDArray[np.bool_]:
     """``mask`` keeping only runs of at least ``min_len`` consecutive True frames."""
     out = np.zeros_like(mask)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    for start, stop in zip(edges[::2], edges[1::2]):
+    for start, stop in true_runs(mask):
         if stop - start >= min_len:
             out[start:stop] = True
     return out

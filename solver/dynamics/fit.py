@@ -191,10 +191,10 @@ class _TrialProblem:
         pos = self.sk.marker_positions(q, self.data.markers)
         e = np.where(self.seen[..., None], pos - self.y, 0.0) / st.marker_sigma
         total = float(np.sum(e**2))
-        if True:  # residual terms on every frame (weights per frame)
-            hdot, com = self.momentum_rate(qp, vp, ap)
-            r = self.residual_wrench(hdot, com) * self.w_res
-            total += float(np.sum(r**2))
+        # residual terms on every frame (weights per frame)
+        hdot, com = self.momentum_rate(qp, vp, ap)
+        r = self.residual_wrench(hdot, com) * self.w_res
+        total += float(np.sum(r**2))
         smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
         return total + float(np.sum(smooth**2))
 
@@ -409,7 +409,7 @@ def fit_dynamics(
         if rnd == st.rounds - 1:
             break
         # mass factors: linear least squares on the root generalized forces of observed frames
-        rows_a, rows_b, weights = [], [], []
+        rows_a, rows_b = [], []
         joints: list[int] = []
         for i, tr in enumerate(trials):
             if not tr.observed.any():

@@ -92,6 +92,19 @@ def resample(time: FloatArray, x: FloatArray, new_time: FloatArray) -> FloatArra
     return out.reshape((new_time.size,) + x.shape[1:])
 
 
+def nearest_frames(src_time: FloatArray, time: FloatArray) -> NDArray[np.intp]:
+    """``(T,)`` index of the frame of ``src_time`` (sorted, at least 2 frames) nearest each of ``time``."""
+    idx = np.clip(np.searchsorted(src_time, time), 1, src_time.size - 1)
+    left = idx - 1
+    return np.where(np.abs(src_time[left] - time) <= np.abs(src_time[idx] - time), left, idx)
+
+
+def true_runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Half-open ``(start, stop)`` of every run of consecutive True values of ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask).astype(int), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
 def common_time(start: float, stop: float, rate_hz: float) -> FloatArray:
     """Frame times from ``start`` to ``stop`` (inclusive when on the grid) at ``rate_hz``."""
     n = int(np.floor((stop - start) * rate_hz + 1e-9)) + 1

@@ -30,7 +30,14 @@ from solver.dynamics.com_fit import ComTrial, fit_com
 from solver.dynamics.contact import ContactResult, ContactSettings, assign_contacts
 from solver.dynamics.fit import FitSettings, FitTrialInput, fit_dynamics
 from solver.dynamics.metrics import residual_metrics
-from solver.dynamics.preprocess import common_time, cop_from_wrench, lowpass, moment_about_origin, resample
+from solver.dynamics.preprocess import (
+    common_time,
+    cop_from_wrench,
+    lowpass,
+    moment_about_origin,
+    nearest_frames,
+    resample,
+)
 from solver.dynamics.spline import differentiate
 from solver.errors import DynamicsError
 from solver.io.types import ForceRecording, MarkerTrajectories
@@ -179,10 +186,7 @@ def _with_mass(model: OsimModel, total: float, factors: Mapping[str, float] | No
 
 def _resample_mask(mask: NDArray[np.bool_], src_time: FloatArray, time: FloatArray) -> NDArray[np.bool_]:
     """A frame is flagged when the nearest source frame is flagged."""
-    idx = np.clip(np.searchsorted(src_time, time), 1, src_time.size - 1)
-    left = idx - 1
-    nearest = np.where(np.abs(src_time[left] - time) <= np.abs(src_time[idx] - time), left, idx)
-    return np.asarray(mask, dtype=bool)[nearest]
+    return np.asarray(mask, dtype=bool)[nearest_frames(src_time, time)]
 
 
 @dataclass

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from solver.diagnose.data import wxyz_to_matrix
 from solver.io.mot import read_forces, write_forces
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
@@ -168,18 +169,6 @@ def hide_plate_shift(subject: Path, trial: str, rng: np.random.Generator) -> Hid
     return Hidden("plate_position_offset", plate, {"shift_m": shift.tolist()})
 
 
-def _wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = (q[..., k] for k in range(4))
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=-2,
-    )
-
-
 def landmark_markers(subject: Path, processed: ProcessedTrial, min_seen: float = 0.9) -> list[tuple[str, str]]:
     """(marker, body) of the generic model's ``fixed`` markers seen on most frames of the trial."""
     from solver.model.osim import read_osim
@@ -198,7 +187,7 @@ def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, proc
     shift = _random_direction(rng) * rng.uniform(0.01, 0.03)
     path = subject / "trials" / trial / "markers.trc"
     mk = read_trc(path)
-    rot = _wxyz_to_matrix(processed.body_wxyz[:, processed.body_names.index(body)])  # (T, 3, 3)
+    rot = wxyz_to_matrix(processed.body_wxyz[:, processed.body_names.index(body)])  # (T, 3, 3)
     idx = np.clip(np.searchsorted(processed.time, mk.time), 0, processed.n_frames - 1)
     pos = np.array(mk.positions)
     j = mk.names.index(marker)
@@ -209,7 +198,7 @@ def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, proc
 
 def hide_segment_mass(subject: Path, trial: str, rng: np.random.Generator) -> Hidden:
     """Move mass between the trunk group and the legs in the generic model (total kept)."""
-    from solver.diagnose.data import body_group
+    from solver.diagnose.data import group_masses
     from solver.diagnose.refit import redistribute
     from solver.model.osim import read_osim
     from solver.model.osim_writer import write_osim
@@ -220,9 +209,7 @@ def hide_segment_mass(subject: Path, trial: str, rng: np.random.Generator) -> Hi
     fraction = float(rng.uniform(0.04, 0.10) * rng.choice([-1.0, 1.0]))  # of the body mass, to the legs
     moved = fraction * total
     write_osim(redistribute(model, {"legs": moved, "trunk": -moved}), path)
-    groups = {}
-    for b in model.bodies:
-        groups[body_group(b.name)] = groups.get(body_group(b.name), 0.0) + b.mass
+    groups = group_masses(model)
     return Hidden("segment_mass_distribution", None, {"legs_fraction": fraction, "legs_kg_generic": moved, "legs_share": groups["legs"] / total})
 
 
