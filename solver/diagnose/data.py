@@ -222,8 +222,8 @@ class DiagnosisData:
     markers
         Marker errors.
     feet
-        ``(F,)`` foot body names, with ``foot_contact`` ``(F, T)`` their kinematic contact
-        and ``foot_loaded`` ``(F, T)`` whether a loaded plate is under them
+        ``(F,)`` foot body names, with ``foot_contact`` ``(F, T)`` their contact (kinematic
+        contact or a loaded plate under them) and ``foot_loaded`` ``(F, T)`` whether a loaded plate is under them
         (:func:`solver.dynamics.contact.assign_contacts` on the raw plates).
     """
 
@@ -419,7 +419,7 @@ def prepare(
         flagged=np.asarray(flagged, dtype=bool),
         markers=marker_data(trial, model, generic_model, marker_offsets or {}),
         feet=tuple(feet),
-        foot_contact=None if contact is None else contact.foot_in_contact,
+        foot_contact=None if contact is None else contact.foot_in_contact | contact.foot_loaded,
         foot_loaded=None if contact is None else contact.foot_loaded,
     )
 

@@ -29,6 +29,7 @@ from solver.model.skeleton import Skeleton
 from solver.results import PlateData
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,8 @@ class ContactSettings:
         A foot is in contact when its lowest point is within this height (m) of the level
         it has when standing on a plate.
     contact_speed
-        ... and moves slower than this (m/s).
+        ... and moves slower than this (m/s) relative to the surface it stands on (on a
+        treadmill, the belt: the median velocity of its lowest point while loaded).
     force_mismatch_bw
         Vertical force mismatch (in body weights) that marks a frame as unmeasured ...
     mismatch_seconds
@@ -140,6 +142,17 @@ def _long_runs(mask: NDArray[np.bool_], min_len: int) -> NDArray[np.bool_]:
     return out
 
 
+def _ground_velocity(velocity: FloatArray, loaded: BoolArray, contact_speed: float) -> FloatArray:
+    """``(3,)`` velocity of the surface a foot stands on, m/s: zero over ground; on a
+    treadmill the belt's, i.e. the median velocity of the foot's lowest point on the frames
+    its plate carries it, when that exceeds ``contact_speed`` (a foot standing still on
+    the ground moves slower)."""
+    if not loaded.any():
+        return np.zeros(3)
+    belt = np.median(velocity[loaded], axis=0)
+    return belt if np.linalg.norm(belt) > contact_speed else np.zeros(3)
+
+
 def assign_contacts(
     sk: Skeleton,
     q: FloatArray,
@@ -195,7 +208,8 @@ def assign_contacts(
     for k, (_, _, lowest) in enumerate(pts):
         height = lowest[:, 1] - ground
         stance_level = np.median(height[foot_loaded[k]]) if foot_loaded[k].any() else np.percentile(height, 5)
-        speed = np.linalg.norm(np.gradient(lowest, dt, axis=0), axis=1)
+        velocity = np.gradient(lowest, dt, axis=0)
+        speed = np.linalg.norm(velocity - _ground_velocity(velocity, foot_loaded[k], st.contact_speed), axis=1)
         contact[k] = (height <= stance_level + st.contact_height) & (speed <= st.contact_speed)
 
     reasons = [""] * t

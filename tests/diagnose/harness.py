@@ -14,6 +14,7 @@ import io
 import json
 import shutil
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -82,10 +83,24 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 3) -> Base:
 def draw(cause: str, index: int, keys: tuple[str, ...] = ("walk", "run")) -> tuple[str, int]:
     """(trial key, seed) of draw ``index`` of ``cause``: the draws of the benchmark
     (``tests/benchmarks/bench_diagnose.py``) alternate between the trials; the tests run
-    its first draws, so their outcome is in ``docs/diagnose/RESULTS.md`` too."""
+    its first draws, so their outcome is in ``docs/diagnose/RESULTS.md`` too.
+
+    ``marker_offset`` draws only use trials whose model has landmark (``fixed``) markers:
+    every other marker's offset is fitted by the kinematics stage, which absorbs a constant
+    body-fixed shift entirely (the run's model has none)."""
     from tests.diagnose.effects import CAUSES
 
+    if cause == "marker_offset":
+        keys = tuple(k for k in keys if has_landmarks(k)) or keys
     return keys[index % len(keys)], 1000 * (CAUSES.index(cause) + 1) + index
+
+
+@cache
+def has_landmarks(key: str) -> bool:
+    """Whether the generic model of trial ``key``'s subject has a ``fixed`` marker."""
+    from solver.model.osim import read_osim
+
+    return any(m.fixed for m in read_osim(SUBJECTS / TRIALS[key][0] / "unscaled_generic.osim").markers)
 
 
 def hidden_run(base: Base, cause: str, seed: int, dst: Path) -> tuple[Hidden, dict[str, Any]]:

@@ -86,3 +86,19 @@ def test_a_foot_on_the_floor_without_plate_force_is_proposed() -> None:
     assert res.proposed[off].all()
     assert all("calcn_l in contact with no plate force" == res.reasons[k] for k in np.flatnonzero(off))
     assert g > 9.8
+
+
+def test_a_foot_on_a_treadmill_belt_is_in_contact() -> None:
+    """On the treadmill run the stance foot moves backward with the belt (about 4 m/s): its
+    kinematic contact is judged relative to the belt, so loaded frames are in contact, and
+    no unloaded foot is called in contact (no false proposal of unmeasured force)."""
+    sk = subject_kinematics(load_subject(SHARED_DATA / "subjects" / "rajagopal2016_run"))
+    trial = sk.kinematics.trial("run")
+    raw = next(t for t in sk.trials if t.name == "run")
+    skel = Skeleton(sk.kinematics.model)
+    res = assign_contacts(skel, trial.q, plates_on_frames(raw.forces, trial.time), FEET, 72.84, 0.01)
+    for k in range(2):
+        loaded = res.foot_loaded[k]
+        assert loaded.sum() > 100
+        assert res.foot_in_contact[k, loaded].mean() > 0.3
+        assert not (res.foot_in_contact[k] & ~loaded).any()
