@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import hashlib
 import os
-import stat
 from pathlib import Path
+
+from solver.io.subject import folder_is_writable
 
 #: Name of the output folder inside a writable subject folder.
 OUTPUT_NAME = "addb_out"
@@ -40,23 +41,10 @@ def _is_bundled_demo(subject: Path) -> bool:
     return subject == DEMO_SUBJECT.resolve()
 
 
-def _writable(folder: Path) -> bool:
-    """The folder's permission bits allow writing, and this process may write there.
-
-    ``os.access`` alone says yes to root even for a read-only folder (a lab's shared data
-    mounted read-only, a folder marked ``r-x``): the mode bits are checked too.
-    """
-    try:
-        mode = stat.S_IMODE(folder.stat().st_mode)
-    except OSError:
-        return False
-    return bool(mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH)) and os.access(folder, os.W_OK | os.X_OK)
-
-
 def uses_subject_folder(subject_dir: str | os.PathLike[str]) -> bool:
     """True when outputs go inside ``subject_dir`` (writable and not the bundled demo)."""
     subject = Path(subject_dir).resolve()
-    return not _is_bundled_demo(subject) and _writable(subject)
+    return not _is_bundled_demo(subject) and folder_is_writable(subject)
 
 
 def default_output_dir(subject_dir: str | os.PathLike[str]) -> Path:

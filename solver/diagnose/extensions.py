@@ -278,12 +278,10 @@ def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
     SubjectFolderError
         The subject folder is not writable.
     """
-    import os
-    import stat
+    from solver.io.subject import folder_is_writable
 
     folder = Path(subject_dir)
-    # (mode bits too: os.access says yes to root even for a folder marked read-only)
-    if not os.access(folder, os.W_OK) or not stat.S_IMODE(folder.stat().st_mode) & 0o222:
+    if not folder_is_writable(folder):
         raise SubjectFolderError(
             "the subject folder is read-only; copy the subject to a folder you can write to and apply there", path=folder
         )

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -107,6 +109,20 @@ class Trial:
     name: str
     markers: MarkerTrajectories
     forces: ForceRecording | None
+
+
+def folder_is_writable(folder: str | Path) -> bool:
+    """Whether the folder's permission bits allow writing and this process may write there.
+
+    ``os.access`` alone says yes to root even for a read-only folder (a lab's shared data
+    mounted read-only, a folder marked ``r-x``): the mode bits are checked too. A folder
+    that does not exist is not writable.
+    """
+    try:
+        mode = stat.S_IMODE(Path(folder).stat().st_mode)
+    except OSError:
+        return False
+    return bool(mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH)) and os.access(folder, os.W_OK | os.X_OK)
 
 
 def load_subject(path: str | Path) -> Subject:

@@ -109,3 +109,18 @@ def test_extension_naming_an_unknown_plate_is_refused(walk: Path) -> None:
     rec = read_forces(walk / "trials" / "walk" / "grf.mot")
     with pytest.raises(SubjectFolderError, match="plate 'nope'"):
         correct_forces(rec, {"cause": "plate_force_gain", "plate": "nope", "gain": 1.1})
+
+
+def test_saving_into_a_read_only_subject_is_refused(walk: Path) -> None:
+    """A subject folder marked read-only (the shared data) gets no extension file, and the
+    error names the folder, even for root, whom ``os.access`` lets write anywhere."""
+    from solver.diagnose.extensions import FILE_NAME, save_extension
+
+    walk.chmod(0o555)
+    try:
+        with pytest.raises(SubjectFolderError, match="read-only") as err:
+            save_extension(walk, {"cause": "body_mass", "trial": "walk", "mass_change_kg": 3.0})
+        assert str(walk) in str(err.value)
+        assert not (walk / FILE_NAME).exists()
+    finally:
+        walk.chmod(0o755)
