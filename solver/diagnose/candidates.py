@@ -505,14 +505,17 @@ def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
 
 #: ``unmeasured_force`` frames: the residual force (a missing support force) exceeds
 #: SUPPORT_BW body weights while a foot is in kinematic contact with no plate force under
-#: it, for at least SUPPORT_FRAMES frames; or exceeds LARGE_BW for LARGE_SECONDS anyway
+#: it, for at least SUPPORT_FRAMES frames (then that whole contact counts, its lightly
+#: loaded start and end too); or exceeds LARGE_BW for LARGE_SECONDS anyway
 #: (another unmeasured contact: sustained, unlike the transients of a time offset between
-#: forces and motion at each foot strike). Runs grow by PAD_FRAMES on each side.
+#: forces and motion at each foot strike). Runs grow while the missing support force
+#: exceeds GROW_BW (a step's load builds up and fades), then by PAD_FRAMES on each side.
 SUPPORT_BW = 0.25
 SUPPORT_FRAMES = 3
 LARGE_BW = 0.4
 LARGE_SECONDS = 0.2
 PAD_FRAMES = 3
+GROW_BW = 0.1
 
 
 def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
@@ -533,10 +536,13 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
             off_plate |= off
             for j in np.flatnonzero(off):
                 feet_off[j].append(foot)
+    contacts = true_runs(off_plate)
     for a, b in true_runs((support > SUPPORT_BW) & off_plate):
         if b - a >= SUPPORT_FRAMES:
-            mask[a:b] = True
-            for j in range(a, b):
+            # the whole contact is unmeasured, also its lightly loaded start and end
+            lo, hi = next((x, y) for x, y in contacts if x <= a and b <= y)
+            mask[lo:hi] = True
+            for j in range(lo, hi):
                 reasons[j] = f"{' and '.join(feet_off[j])} in contact with no plate force, {support[j]:.2f} BW missing"
     long = int(np.ceil(LARGE_SECONDS / data.dt))
     for a, b in true_runs(support > LARGE_BW):
@@ -546,8 +552,14 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
                     reasons[j] = f"{support[j]:.2f} BW of support force missing"
             mask[a:b] = True
     for a, b in true_runs(mask):
-        for j in list(range(max(a - PAD_FRAMES, 0), a)) + list(range(b, min(b + PAD_FRAMES, t))):
-            mask[j] = True
-            reasons[j] = reasons[j] or "next to unmeasured frames"
+        # the support force builds up and fades: grow while it is still missing, then pad
+        while a > 0 and support[a - 1] > GROW_BW:
+            a -= 1
+        while b < t and support[b] > GROW_BW:
+            b += 1
+        for j in list(range(max(a - PAD_FRAMES, 0), b + PAD_FRAMES)):
+            if j < t and not mask[j]:
+                mask[j] = True
+                reasons[j] = "next to unmeasured frames"
     mask &= ~data.flagged
     return mask, [r if m else "" for r, m in zip(reasons, mask)]

@@ -14,7 +14,9 @@ Conventions (what each cause's parameter means, as :mod:`solver.diagnose` report
   with the body orientations of the unmodified processed trial;
 * ``segment_mass_distribution``: the generic model's trunk bodies lose (or gain) mass
   that the leg bodies gain, total kept;
-* ``unmeasured_force``: one stance of one plate erased (all its columns zero).
+* ``unmeasured_force``: one stance of one plate erased (all its columns zero); the share of
+  it missed counts only its frames the base does not already leave out (its own steps off
+  the plates, saved as extensions).
 """
 
 from __future__ import annotations
@@ -235,7 +237,24 @@ def hide_unmeasured(subject: Path, trial: str, rng: np.random.Generator) -> Hidd
         return ForcePlate(p.name, f, c, m, p.corners)
 
     write_forces(_forces_path(subject, trial), _map_plate(rec, plate, fn))
-    return Hidden("unmeasured_force", plate, {"times_s": [float(rec.time[a]), float(rec.time[b - 1])]})
+    return Hidden("unmeasured_force", plate, {"times_s": [float(rec.time[a]), float(rec.time[b - 1])], "known_s": known_unmeasured(subject, trial)})
+
+
+def known_unmeasured(subject: Path, trial: str) -> list[list[float]]:
+    """Time spans (s) the subject's saved extensions already leave out of the dynamics (the
+    base's own steps off the plates): an erased step found there cannot be found again."""
+    from solver.diagnose.extensions import read_extensions
+
+    spans: list[list[float]] = []
+    for e in read_extensions(subject):
+        if e.get("cause") == "unmeasured_force" and e.get("trial") == trial:
+            spans.extend([float(x), float(y)] for x, y in e.get("times_s", []))
+    return spans
+
+
+def _overlap(spans: list[list[float]], a: float, b: float) -> list[tuple[float, float]]:
+    """The parts of the spans inside [a, b]."""
+    return [(max(a, x), min(b, y)) for x, y in spans if min(b, y) > max(a, x)]
 
 
 def hide(cause: str, subject: Path, trial: str, seed: int, processed: ProcessedTrial) -> Hidden:
@@ -295,10 +314,15 @@ def error(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) 
         expected = t["legs_fraction"] * modified["settings"]["fitted_mass_kg"]
         return abs(legs - expected)
     if hidden.cause == "unmeasured_force":
+        # share of the erased step missed, counting only its frames not already left out
+        # (time spans; the known spans do not overlap each other, nor do the found ones)
         a, b = t["times_s"]
-        found = got["times_s"]
-        covered = sum(max(0.0, min(b, y) - max(a, x)) for x, y in found)
-        return 1.0 - covered / max(b - a, 1e-9)
+        new = [(a, b)]
+        for x, y in t.get("known_s", []):
+            new = [piece for u, v in new for piece in ((u, min(v, x)), (max(u, y), v)) if piece[1] > piece[0]]
+        length = sum(v - u for u, v in new)
+        covered = sum(y - x for u, v in new for x, y in _overlap(got["times_s"], u, v))
+        return 1.0 - covered / max(length, 1e-9)
     raise ValueError(hidden.cause)
 
 
