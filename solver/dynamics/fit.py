@@ -187,7 +187,7 @@ class _TrialProblem:
     def cost(self, q: FloatArray) -> float:
         """Total cost (see the module docstring)."""
         st = self.st
-        _, qdd, qp, vp, ap = self.kinematics(q)
+        _, _, qp, vp, ap = self.kinematics(q)
         pos = self.sk.marker_positions(q, self.data.markers)
         e = np.where(self.seen[..., None], pos - self.y, 0.0) / st.marker_sigma
         total = float(np.sum(e**2))
@@ -216,15 +216,13 @@ class _TrialProblem:
         grad = np.zeros((t, nf))
         _, _, qp, vp, ap = self.kinematics(q)
         model, data = self.sk.model, self.sk.data
-        obs = np.ones(t, dtype=bool)  # every frame has a residual term (weights differ)
         sm = self.st.marker_sigma
         dq = np.zeros((t, 6, nf))
         dv = np.zeros((t, 6, nf))
         da = np.zeros((t, 6, nf))
-        res = np.zeros((t, 6))
-        if obs.any():
-            hdot_all, com_all = self.momentum_rate(qp, vp, ap)
-            res = self.residual_wrench(hdot_all, com_all) * self.w_res
+        # every frame has a residual term (unmeasured frames with a weaker weight)
+        hdot_all, com_all = self.momentum_rate(qp, vp, ap)
+        res = self.residual_wrench(hdot_all, com_all) * self.w_res
         for k in range(t):
             # markers: only frame k
             seen = self.seen[k]
@@ -234,18 +232,17 @@ class _TrialProblem:
                 rm = ((pos - self.y[k, seen]) / sm).reshape(-1)
                 blocks[k, 0] += jm.T @ jm
                 grad[k] += jm.T @ rm
-            if obs[k]:
-                _, hdot_dq, hdot_dv, hdot_da = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-                jcom = pin.jacobianCenterOfMass(model, data, qp[k], False)
-                cmat = self.sk.cmap.jacobian(q[k])[:, free]
-                f_ext = self.data.force[k]
-                d_q = hdot_dq.copy()
-                d_q[3:] -= _skew(f_ext) @ jcom
-                dq[k] = (d_q @ cmat) * self.w_res[k][:, None]
-                dv[k] = (hdot_dv @ cmat) * self.w_res[k][:, None]
-                da[k] = (hdot_da @ cmat) * self.w_res[k][:, None]
+            _, hdot_dq, hdot_dv, hdot_da = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+            jcom = pin.jacobianCenterOfMass(model, data, qp[k], False)
+            cmat = self.sk.cmap.jacobian(q[k])[:, free]
+            f_ext = self.data.force[k]
+            d_q = hdot_dq.copy()
+            d_q[3:] -= _skew(f_ext) @ jcom
+            dq[k] = (d_q @ cmat) * self.w_res[k][:, None]
+            dv[k] = (hdot_dv @ cmat) * self.w_res[k][:, None]
+            da[k] = (hdot_da @ cmat) * self.w_res[k][:, None]
         # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k)
-        idx = np.flatnonzero(obs)
+        idx = np.arange(t)
         for o1 in range(-b, b + 1):
             s1 = idx + o1
             ok1 = (s1 >= 0) & (s1 < t)
