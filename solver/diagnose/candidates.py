@@ -557,8 +557,8 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
             a -= 1
         while b < t and support[b] > GROW_BW:
             b += 1
-        for j in list(range(max(a - PAD_FRAMES, 0), b + PAD_FRAMES)):
-            if j < t and not mask[j]:
+        for j in range(max(a - PAD_FRAMES, 0), min(b + PAD_FRAMES, t)):
+            if not mask[j]:
                 mask[j] = True
                 reasons[j] = "next to unmeasured frames"
     mask &= ~data.flagged

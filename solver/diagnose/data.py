@@ -223,8 +223,9 @@ class DiagnosisData:
         Marker errors.
     feet
         ``(F,)`` foot body names, with ``foot_contact`` ``(F, T)`` their contact (kinematic
-        contact or a loaded plate under them) and ``foot_loaded`` ``(F, T)`` whether a loaded plate is under them
-        (:func:`solver.dynamics.contact.assign_contacts` on the raw plates).
+        contact or a loaded plate under them) and ``foot_loaded`` ``(F, T)`` whether a
+        loaded plate is under them (:func:`solver.dynamics.contact.assign_contacts` on the
+        raw plates).
     """
 
     trial: ProcessedTrial

@@ -171,21 +171,23 @@ def hide_plate_shift(subject: Path, trial: str, rng: np.random.Generator) -> Hid
     return Hidden("plate_position_offset", plate, {"shift_m": shift.tolist()})
 
 
-def landmark_markers(subject: Path, processed: ProcessedTrial, min_seen: float = 0.9) -> list[tuple[str, str]]:
-    """(marker, body) of the generic model's ``fixed`` markers seen on most frames of the trial."""
+def fixed_markers(subject: Path) -> list[tuple[str, str]]:
+    """(marker, body) of the subject's generic model's ``fixed`` (landmark) markers."""
     from solver.model.osim import read_osim
 
-    model = read_osim(subject / "unscaled_generic.osim")
+    return [(m.name, m.body) for m in read_osim(subject / "unscaled_generic.osim").markers if m.fixed]
+
+
+def landmark_markers(subject: Path, processed: ProcessedTrial, min_seen: float = 0.9) -> list[tuple[str, str]]:
+    """(marker, body) of the generic model's ``fixed`` markers seen on most frames of the trial."""
     seen = np.isfinite(processed.observed).all(axis=2).mean(axis=0)
-    out = []
-    for m in model.markers:
-        if m.fixed and m.name in processed.marker_names and seen[processed.marker_names.index(m.name)] >= min_seen:
-            out.append((m.name, m.body))
-    return out
+    names = list(processed.marker_names)
+    return [(m, b) for m, b in fixed_markers(subject) if m in names and seen[names.index(m)] >= min_seen]
 
 
 def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, processed: ProcessedTrial) -> Hidden:
-    marker, body = landmark_markers(subject, processed)[int(rng.integers(len(landmark_markers(subject, processed))))]
+    landmarks = landmark_markers(subject, processed)
+    marker, body = landmarks[int(rng.integers(len(landmarks)))]
     shift = _random_direction(rng) * rng.uniform(0.01, 0.03)
     path = subject / "trials" / trial / "markers.trc"
     mk = read_trc(path)

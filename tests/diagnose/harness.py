@@ -98,9 +98,9 @@ def draw(cause: str, index: int, keys: tuple[str, ...] = ("walk", "run")) -> tup
 @cache
 def has_landmarks(key: str) -> bool:
     """Whether the generic model of trial ``key``'s subject has a ``fixed`` marker."""
-    from solver.model.osim import read_osim
+    from tests.diagnose.effects import fixed_markers
 
-    return any(m.fixed for m in read_osim(SUBJECTS / TRIALS[key][0] / "unscaled_generic.osim").markers)
+    return bool(fixed_markers(SUBJECTS / TRIALS[key][0]))
 
 
 def hidden_run(base: Base, cause: str, seed: int, dst: Path) -> tuple[Hidden, dict[str, Any]]:
