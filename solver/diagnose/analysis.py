@@ -1,8 +1,8 @@
 """What is wrong: where the residuals of a processed trial concentrate.
 
-All figures are on the frames the diagnosis evaluates (not flagged by the reviewer), for
-the root residual of the processed trial as the pipeline computed it (force N, moment
-about the pelvis origin N·m, ground frame):
+All figures are on the frames of the processed trial's dynamic fit (not flagged by the
+reviewer, not left out by the solver), for the root residual as the pipeline computed it
+(force N, moment about the pelvis origin N·m, ground frame):
 
 * ``over_time``: RMS and peak, and the time ranges where the residual force exceeds twice
   its RMS (and 0.05 BW);
@@ -13,11 +13,15 @@ about the pelvis origin N·m, ground frame):
   lab frame) and each axis' share;
 * ``correlations``: Pearson correlation, over frames, of the residual force norm (and of
   the moment norm) with the measured total force, its rate of change, the centre-of-mass
-  acceleration, each plate's vertical load and the per-frame marker RMS.
+  acceleration, each plate's vertical load and the per-frame marker RMS;
+* ``left_out``: the frames the solver left out of its dynamic fit on its own (unmeasured
+  force proposals, not reviewer flags): how many, when, why, and the RMS of the force
+  missing there (the residual force of the free motion on those frames).
 """
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -28,6 +32,11 @@ from solver.dynamics.preprocess import true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+
+
+def _kind(reason: str) -> str:
+    """A proposal reason without its per-frame figure ("... by 0.42 BW")."""
+    return re.sub(r" by [-+0-9.]+ BW$", "", reason)
 
 
 def _rms(x: FloatArray) -> float:
@@ -56,7 +65,8 @@ def phases(data: DiagnosisData) -> list[str]:
 def analyse(data: DiagnosisData) -> dict[str, Any]:
     """The concentration report of the module docstring (a JSON-ready dict)."""
     trial = data.trial
-    ev = ~data.flagged
+    left = trial.unobserved & ~data.flagged
+    ev = ~data.flagged & ~left
     force, moment = trial.residual_force, trial.residual_moment
     fn, mn = np.linalg.norm(force, axis=1), np.linalg.norm(moment, axis=1)
     total = float(np.sum(fn[ev] ** 2) + np.sum(mn[ev] ** 2)) or 1.0
@@ -112,6 +122,12 @@ def analyse(data: DiagnosisData) -> dict[str, Any]:
     return {
         "frames_evaluated": int(ev.sum()),
         "frames_flagged": int(data.flagged.sum()),
+        "left_out": {
+            "frames": int(left.sum()),
+            "times_s": [[float(time[a]), float(time[b - 1])] for a, b in true_runs(left)],
+            "reasons": sorted({_kind(trial.proposal_reasons[j]) for j in np.flatnonzero(left) if trial.proposal_reasons[j]}),
+            "linear_rms_N": _rms(force[left]) if left.any() else None,
+        },
         "over_time": over_time,
         "by_phase": by_phase,
         "by_foot": by_foot,

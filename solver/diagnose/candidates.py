@@ -75,7 +75,8 @@ class Context:
     sigmas
         Channel standard deviations.
     evaluated
-        ``(T,)`` frames whose residual terms count (not flagged, not in U).
+        ``(T,)`` frames whose residual terms count (not flagged, not in U, not left out
+        of the solver's dynamic fit without U explaining it).
     profile
         Translation profile over ``evaluated``.
     ref_rows
@@ -511,7 +512,7 @@ def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
 #: forces and motion at each foot strike). Runs grow while the missing support force
 #: exceeds GROW_BW (a step's load builds up and fades), then by PAD_FRAMES on each side.
 SUPPORT_BW = 0.25
-SUPPORT_FRAMES = 3
+SUPPORT_FRAMES = 8
 LARGE_BW = 0.4
 LARGE_SECONDS = 0.2
 PAD_FRAMES = 3

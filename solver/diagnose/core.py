@@ -142,10 +142,13 @@ def build_context(
     """
     s = sigmas or Sigmas.of(data)
     u, reasons = C.unmeasured_frames(data) if unmeasured is None else unmeasured
-    evaluated = ~data.flagged & ~u
+    # frames the solver left out of its dynamic fit that U does not explain: their motion
+    # had free centre-of-mass accelerations, so their residual says nothing about a cause
+    considered = ~data.flagged & ~(data.trial.unobserved & ~u)
+    evaluated = considered & ~u
     prof = Profile(data, evaluated, s)
     ref = prof.project(prof.raw_rows(data.residual(), data.external()[2]))
-    full = prof if not u.any() else Profile(data, ~data.flagged, s)
+    full = prof if not u.any() else Profile(data, considered, s)
     return C.Context(data, s, evaluated, prof, ref, u, reasons), full
 
 

@@ -449,7 +449,8 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
     The dynamics fit absorbs part of any force error into the motion (the root follows the
     centre-of-mass path the forces imply, joints move to cancel moments); the motion that
     only the markers decide carries none of it. Same model, same 30 Hz zero-phase
-    low-pass and spline derivatives as the dynamics stage.
+    low-pass and spline derivatives as the dynamics stage. No frame of this motion came
+    from the dynamic fit, so none is marked ``unobserved`` (left out of it).
     """
     from solver.dynamics.preprocess import lowpass
     from solver.dynamics.spline import differentiate
@@ -476,4 +477,5 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
         body_wxyz=rotations_to_wxyz(rot),
         com=sk.center_of_mass(q),
         com_acc=differentiate(sk.center_of_mass(q), dt, str(settings.get("derivative", "spline")))[1],
+        unobserved=np.zeros(trial.n_frames, dtype=bool),
     )

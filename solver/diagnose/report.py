@@ -198,10 +198,15 @@ def to_text(diag: Diagnosis) -> str:
         f"Diagnosis of {diag.subject} / {diag.trial}",
         "",
         "What is wrong",
-        f"  frames evaluated {a['frames_evaluated']} (flagged by the reviewer: {a['frames_flagged']})",
+        f"  frames evaluated {a['frames_evaluated']} (flagged by the reviewer: {a['frames_flagged']}, "
+        f"left out of the dynamic fit by the solver: {a['left_out']['frames']})",
         f"  residual force RMS {ot['linear_rms_N']:.1f} N (peak {ot['linear_peak_N']:.1f} N at {ot['linear_peak_time_s']:.2f} s), "
         f"moment RMS {ot['angular_rms_Nm']:.1f} N·m (peak {ot['angular_peak_Nm']:.1f} N·m at {ot['angular_peak_time_s']:.2f} s)",
     ]
+    lo = a["left_out"]
+    if lo["frames"]:
+        spans = ", ".join(f"{s:.2f}-{e:.2f} s" for s, e in lo["times_s"][:8])
+        lines.append(f"  left out by the solver: {spans}; force missing there RMS {lo['linear_rms_N']:.1f} N ({'; '.join(lo['reasons'][:3])})")
     if ot["hot_spots_s"]:
         lines.append("  residual force above twice its RMS: " + ", ".join(f"{s:.2f}-{e:.2f} s" for s, e in ot["hot_spots_s"][:8]))
     for name, ph in a["by_phase"].items():
