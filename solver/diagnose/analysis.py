@@ -21,22 +21,17 @@ reviewer, not left out by the solver), for the root residual as the pipeline com
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from solver.diagnose.data import DiagnosisData
+from solver.dynamics.contact import reason_kind
 from solver.dynamics.preprocess import true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-
-def _kind(reason: str) -> str:
-    """A proposal reason without its per-frame figure ("... by 0.42 BW")."""
-    return re.sub(r" by [-+0-9.]+ BW$", "", reason)
 
 
 def _rms(x: FloatArray) -> float:
@@ -65,7 +60,7 @@ def phases(data: DiagnosisData) -> list[str]:
 def analyse(data: DiagnosisData) -> dict[str, Any]:
     """The concentration report of the module docstring (a JSON-ready dict)."""
     trial = data.trial
-    left = trial.unobserved & ~data.flagged
+    left = data.left_out
     ev = ~data.flagged & ~left
     force, moment = trial.residual_force, trial.residual_moment
     fn, mn = np.linalg.norm(force, axis=1), np.linalg.norm(moment, axis=1)
@@ -125,7 +120,7 @@ def analyse(data: DiagnosisData) -> dict[str, Any]:
         "left_out": {
             "frames": int(left.sum()),
             "times_s": [[float(time[a]), float(time[b - 1])] for a, b in true_runs(left)],
-            "reasons": sorted({_kind(trial.proposal_reasons[j]) for j in np.flatnonzero(left) if trial.proposal_reasons[j]}),
+            "reasons": sorted({reason_kind(trial.proposal_reasons[j]) for j in np.flatnonzero(left) if trial.proposal_reasons[j]}),
             "linear_rms_N": _rms(force[left]) if left.any() else None,
         },
         "over_time": over_time,

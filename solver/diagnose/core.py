@@ -144,7 +144,7 @@ def build_context(
     u, reasons = C.unmeasured_frames(data) if unmeasured is None else unmeasured
     # frames the solver left out of its dynamic fit that U does not explain: their motion
     # had free centre-of-mass accelerations, so their residual says nothing about a cause
-    considered = ~data.flagged & ~(data.trial.unobserved & ~u)
+    considered = ~data.flagged & ~(data.left_out & ~u)
     evaluated = considered & ~u
     prof = Profile(data, evaluated, s)
     ref = prof.project(prof.raw_rows(data.residual(), data.external()[2]))

@@ -256,6 +256,13 @@ class DiagnosisData:
         return self.trial.time
 
     @property
+    def left_out(self) -> BoolArray:
+        """``(T,)`` frames the solver left out of its dynamic fit on its own (its unmeasured
+        force proposals; reviewer flags not included): their motion had free
+        centre-of-mass accelerations."""
+        return self.trial.unobserved & ~self.flagged
+
+    @property
     def bw(self) -> float:
         """Stated body weight, N."""
         return self.stated_mass * float(np.linalg.norm(self.gravity))

@@ -142,6 +142,16 @@ def _long_runs(mask: NDArray[np.bool_], min_len: int) -> NDArray[np.bool_]:
     return out
 
 
+#: Reason of a frame proposed because the plates' vertical force does not match the
+#: motion (followed by " by X BW", the mismatch on that frame).
+MISMATCH_REASON = "measured vertical force differs from m(a+g)"
+
+
+def reason_kind(reason: str) -> str:
+    """A proposal reason without its per-frame figure (the " by X BW" of a force mismatch)."""
+    return MISMATCH_REASON if reason.startswith(MISMATCH_REASON) else reason
+
+
 def _ground_velocity(velocity: FloatArray, loaded: BoolArray, contact_speed: float) -> FloatArray:
     """``(3,)`` velocity of the surface a foot stands on, m/s: zero over ground; on a
     treadmill the belt's, i.e. the median velocity of the foot's lowest point on the frames
@@ -225,7 +235,7 @@ def assign_contacts(
         mismatch = np.abs(measured - required) / bw
         bad = _long_runs(mismatch > st.force_mismatch_bw, int(np.ceil(st.mismatch_seconds / dt)))
         for j in np.flatnonzero(bad & ~proposed):
-            reasons[j] = f"measured vertical force differs from m(a+g) by {mismatch[j]:.2f} BW"
+            reasons[j] = f"{MISMATCH_REASON} by {mismatch[j]:.2f} BW"
         proposed |= bad
     return ContactResult(
         plate_foot=plate_foot,
