@@ -386,17 +386,31 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     t1 = _time.perf_counter()
     say("testing candidate causes", 0.15)
     ctx, alts, evaluations, folds = evaluate(data, options)
-    ranked = best_per_cause(evaluations)
-    chosen, reason = choose(ranked, options.rule, make_blocks(data.n_frames, data.dt, options.block_seconds))
     # parameters from the marker-only motion (not pulled toward the forces by the fit)
     # (same frames U as the fitted motion: the marker-only motion is noisier, and its own
     # residual would call far more frames unmeasured)
-    _, _, evaluations_ik, _ = evaluate(data_ik, options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
+    ctx_ik, alts_ik, evaluations_ik, _ = evaluate(data_ik, options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
+    for ev in evaluations_ik:
+        ev.motion = "marker-only"
     for ev in evaluations:
         twin = next((e for e in evaluations_ik if e.cause == ev.cause and e.choice == ev.choice), None)
         if twin is not None and ev.cause in MARKER_MOTION_ESTIMATES:
             ev.parameters_fitted_motion, ev.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
+            twin.parameters_fitted_motion, twin.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
+    blocks = make_blocks(data.n_frames, data.dt, options.block_seconds)
+    ranked = best_per_cause(evaluations)
+    chosen, reason = choose(ranked, options.rule, blocks)
+    held_ctx, held_alts = ctx, alts
+    delay = delay_on_marker_motion(chosen, evaluations_ik, options.rule, blocks)
+    if delay is not None:
+        chosen, why = delay
+        reason = (
+            "On the motion the markers alone decide (the dynamics fit leaves out or absorbs the force "
+            f"transients a delay leaves at every foot strike): {why}"
+        )
+        ranked = [chosen] + [e for e in ranked if e.cause != chosen.cause]
+        held_ctx, held_alts = ctx_ik, alts_ik
     t2 = _time.perf_counter()
     result = Diagnosis(
         subject=processed.subject,
@@ -422,7 +436,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     )
     result.seconds = {"prepare": t1 - t0, "candidates": t2 - t1}
     if chosen is not None:
-        result.held_out = held_out_figures(ctx, _alt_of(alts, chosen), folds)
+        result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), folds)
+        result.held_out["motion"] = chosen.motion
         result.parameters = dict(chosen.parameters)
         result.extension = extension_entry(chosen, data, marker_time)
         if options.refit:
@@ -431,6 +446,37 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     result.seconds["total"] = _time.perf_counter() - t0
     say("done", 1.0)
     return result
+
+
+#: Causes that act on the measured forces (the plates' readings or the body's weight).
+FORCE_CAUSES = ("body_mass", "force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
+
+
+def delay_on_marker_motion(
+    chosen: Evaluation | None, evaluations_ik: list[Evaluation], rule: ChoiceRule, blocks: np.ndarray
+) -> tuple[Evaluation, str] | None:
+    """``force_time_offset`` chosen on the marker-only motion, or None.
+
+    A delay between plates and cameras leaves its evidence in the force transients of
+    every foot strike. The dynamics fit cannot follow a force that comes too late, so it
+    leaves those frames out of its dynamic fit (free centre-of-mass accelerations there)
+    or bends the motion toward the late force, and on the fitted motion what is left of
+    the delay resembles a shifted centre of pressure or a wrong mass. The marker-only
+    motion keeps every frame and owes nothing to the forces. When the fitted motion names
+    no cause or one acting on the forces, the causes acting on the forces are compared on
+    the marker-only motion (same :func:`.selection.choose` rule, same frames U); if the
+    delay stands out there, it is the choice.
+
+    Returns
+    -------
+    (evaluation on the marker-only motion, the rule's sentence), or None
+    """
+    if chosen is not None and chosen.cause not in FORCE_CAUSES:
+        return None
+    pick, why = choose(best_per_cause([e for e in evaluations_ik if e.cause in FORCE_CAUSES]), rule, blocks)
+    if pick is None or pick.cause != "force_time_offset":
+        return None
+    return pick, why
 
 
 #: Causes whose parameters are estimated on the marker-only motion (see :func:`_diagnose`):

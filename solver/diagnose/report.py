@@ -13,6 +13,8 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
                     gain: fraction of the reference cost of the cause's channels removed
                     on held-out frames), held_out_gain (cost units), folds_improved,
                     n_params, parameters_fitted_motion (estimate on the processed motion),
+                    motion (the motion score and gain were computed on: "fitted", or
+                    "marker-only" for a delay decided on the marker-only motion),
                     alternatives (plate/marker causes: every plate or marker with its
                     parameters, score and gain)
     chosen        cause name or null
@@ -20,8 +22,9 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
     chosen_parameters   parameters of the chosen cause (null when none)
     after         metrics of the trial refitted with the chosen extension (baseline keys;
                   null when none)
-    held_out      {"before": {...}, "after": {...}}: marker RMS (m), linear (N) and angular
-                  (N·m) residual RMS on held-out frames (fixed kinematics)
+    held_out      {"before": {...}, "after": {...}, "motion"}: marker RMS (m), linear (N) and
+                  angular (N·m) residual RMS on held-out frames (fixed kinematics; on the
+                  motion the chosen cause was decided on)
     extension     the entry ``--apply`` saves (:mod:`solver.diagnose.extensions`)
     settings, seconds
 """
@@ -97,6 +100,7 @@ def candidate_json(ev: Evaluation, alternatives: list[Evaluation]) -> dict[str, 
         "folds_improved": ev.folds_improved,
         "n_params": ev.n_params,
         "parameters_fitted_motion": _params(ev.parameters_fitted_motion),
+        "motion": ev.motion,
     }
     if len(alternatives) > 1:
         out["alternatives"] = [
@@ -171,6 +175,7 @@ def candidate_line(c: dict[str, Any]) -> str:
     return (
         f"{c['cause']:<26s} score {c['score']:10.0f}  gain {100 * (c['gain'] or 0.0):5.1f}%  "
         f"folds {100 * (c['folds_improved'] or 0.0):3.0f}%  {_fmt_params(c['cause'], c['parameters'], c['uncertainty'])}"
+        + (" (on the marker-only motion)" if c.get("motion") == "marker-only" else "")
     )
 
 

@@ -76,6 +76,9 @@ class Evaluation:
         ``(K,)`` G per fold.
     score
         S = G - n_params log T.
+    motion
+        The motion the costs were computed on: ``"fitted"`` (the processed motion) or
+        ``"marker-only"`` (:func:`solver.diagnose.data.marker_kinematics`).
     """
 
     cause: str
@@ -91,6 +94,17 @@ class Evaluation:
     reference_costs: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
     parameters_fitted_motion: dict[str, Any] | None = None
     uncertainty_fitted_motion: Any = None
+    motion: str = "fitted"
+
+    @property
+    def estimates(self) -> list[dict[str, Any]]:
+        """The estimates that must all be worth naming for this alternative to contend: the
+        reported one and, when scored on the fitted motion, that motion's own estimate too
+        (a cause that matters on one motion and is negligible on the other is not robust,
+        and the extension saved, the reported estimate, would change nothing)."""
+        if self.motion == "fitted" and self.parameters_fitted_motion is not None:
+            return [self.parameters, self.parameters_fitted_motion]
+        return [self.parameters]
 
     def block_gains(self, blocks: IntArray) -> FloatArray:
         """``(B,)`` held-out gain of each block of frames (``blocks`` ``(T,)`` block index)."""
@@ -188,9 +202,21 @@ class ChoiceRule:
     )
 
 
-def effect_size(ev: Evaluation) -> float:
-    """The magnitude compared with :attr:`ChoiceRule.min_effect` (units per cause)."""
-    p = ev.parameters
+#: Causes judged on the observed markers' own error channels; every other cause acts on the
+#: root residual channels. Causes on different channels explain different residuals and may
+#: both be true at once, so they do not stand in each other's way (:func:`choose`).
+MARKER_CHANNEL_CAUSES = ("marker_offset",)
+
+
+def channels(cause: str) -> str:
+    """``"markers"`` or ``"residuals"``: the channels ``cause`` acts on."""
+    return "markers" if cause in MARKER_CHANNEL_CAUSES else "residuals"
+
+
+def effect_size(ev: Evaluation, parameters: dict[str, Any] | None = None) -> float:
+    """The magnitude compared with :attr:`ChoiceRule.min_effect` (units per cause) of
+    ``parameters`` (default: the evaluation's reported ones)."""
+    p = ev.parameters if parameters is None else parameters
     if ev.cause == "body_mass":
         return abs(p["mass_change_kg"])
     if ev.cause == "force_time_offset":
@@ -246,10 +272,10 @@ def paired_blocks(best: Evaluation, other: Evaluation, blocks: IntArray) -> tupl
 def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: IntArray | None = None) -> tuple[Evaluation | None, str]:
     """The chosen cause (or None) and a sentence saying why.
 
-    The contenders are the causes whose estimate is worth naming and plausible
-    (:attr:`ChoiceRule.min_effect`, :attr:`ChoiceRule.max_effect`);
+    The contenders are the causes whose estimates (:attr:`Evaluation.estimates`) are all
+    worth naming and plausible (:attr:`ChoiceRule.min_effect`, :attr:`ChoiceRule.max_effect`);
     the best-scoring contender is chosen when it passes the rule's checks against the
-    runner-up contender.
+    runner-up contender acting on the same channels (:func:`channels`).
 
     Parameters
     ----------
@@ -267,7 +293,9 @@ def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: Int
     # a cause whose estimate is negligible (a 1 ms delay, a 0.3 kg mass change) is no
     # contender: it neither gets named nor stands in the way of one that matters
     contenders = [
-        e for e in ranked if rule.min_effect.get(e.cause, 0.0) <= effect_size(e) <= rule.max_effect.get(e.cause, np.inf)
+        e
+        for e in ranked
+        if all(rule.min_effect.get(e.cause, 0.0) <= effect_size(e, p) <= rule.max_effect.get(e.cause, np.inf) for p in e.estimates)
     ]
     if not contenders:
         best = ranked[0]
@@ -277,7 +305,8 @@ def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: Int
             f"to {rule.max_effect.get(best.cause, np.inf):g})."
         )
     best = contenders[0]
-    second = contenders[1] if len(contenders) > 1 else None
+    rivals = [e for e in contenders[1:] if channels(e.cause) == channels(best.cause)]
+    second = rivals[0] if rivals else None
     t_pair, frac_pair = paired_blocks(best, second, blocks) if (second is not None and blocks is not None) else (0.0, 0.0)
     clear = second is None or second.score <= rule.runner_up_ratio * best.score or (
         t_pair >= rule.paired_t and frac_pair >= rule.paired_fraction
