@@ -73,7 +73,7 @@ class ProtocolClient:
         self._reader.join(timeout=2.0)
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 20.0, what: str = "condition") -> Any:
+def wait_for(predicate: Callable[[], Any], timeout: float = 60.0, what: str = "condition") -> Any:
     """Poll ``predicate`` until it returns something truthy; fail after ``timeout`` s."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
