@@ -482,14 +482,7 @@ def delay_on_marker_motion(
 #: Causes whose parameters are estimated on the marker-only motion (see :func:`_diagnose`):
 #: every cause acting on the forces. ``segment_mass_distribution`` and ``unmeasured_force``
 #: keep the fitted motion (the marker-only motion's moment noise dominates the former).
-MARKER_MOTION_ESTIMATES = (
-    "body_mass",
-    "force_time_offset",
-    "plate_force_offset",
-    "plate_force_gain",
-    "plate_position_offset",
-    "marker_offset",
-)
+MARKER_MOTION_ESTIMATES = (*FORCE_CAUSES, "marker_offset")
 
 
 def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray) -> None:

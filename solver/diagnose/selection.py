@@ -333,6 +333,6 @@ def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: Int
         return None, f"No cause stands out: the best candidate, {best.cause}, is not chosen because " + "; ".join(failed) + "."
     return best, (
         f"{best.cause} stands out: it removes {100 * best.relative_gain:.0f}% of the held-out cost of its channels "
-        f"in {100 * best.folds_improved:.0f}% of the folds, with a score of {best.score:.0f} against {second.score if second else 0:.0f} "
-        f"for the runner-up ({second.cause if second else 'none'})."
+        f"in {100 * best.folds_improved:.0f}% of the folds, with a score of {best.score:.0f} "
+        + (f"against {second.score:.0f} for the runner-up ({second.cause})." if second else "and no rival acting on the same channels.")
     )
