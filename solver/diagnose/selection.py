@@ -299,9 +299,12 @@ def choose(ranked: list[Evaluation], rule: ChoiceRule | None = None, blocks: Int
     ]
     if not contenders:
         best = ranked[0]
+        size = f"{effect_size(best):.3g}"
+        if len(best.estimates) > 1:  # the fitted motion's estimate may be the one out of range
+            size += f" ({effect_size(best, best.parameters_fitted_motion):.3g} on the fitted motion)"
         return None, (
             f"No cause stands out: every candidate's estimate is negligible or implausible "
-            f"(the best, {best.cause}, {effect_size(best):.3g}; worth naming from {rule.min_effect.get(best.cause, 0.0):g} "
+            f"(the best, {best.cause}, {size}; worth naming from {rule.min_effect.get(best.cause, 0.0):g} "
             f"to {rule.max_effect.get(best.cause, np.inf):g})."
         )
     best = contenders[0]
