@@ -203,11 +203,14 @@ def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, proc
 def hide_segment_mass(subject: Path, trial: str, rng: np.random.Generator) -> Hidden:
     """Move mass between the trunk group and the legs in the generic model (total kept)."""
     from solver.diagnose.data import group_masses
+    from solver.diagnose.extensions import extend_subject
     from solver.diagnose.refit import redistribute
+    from solver.io.subject import load_subject
     from solver.model.osim import read_osim
     from solver.model.osim_writer import write_osim
 
-    path = subject / "unscaled_generic.osim"
+    # the subject's current model: the generic one, or a redistribution the base applied
+    path = extend_subject(load_subject(subject)).model_path
     model = read_osim(path)
     total = sum(b.mass for b in model.bodies)
     fraction = float(rng.uniform(0.04, 0.10) * rng.choice([-1.0, 1.0]))  # of the body mass, to the legs
@@ -311,9 +314,9 @@ def error(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) 
     if hidden.cause == "marker_offset":
         return float(np.linalg.norm(np.subtract(got["shift_m"], base_p["shift_m"] if base_p else 0.0) - t["shift_m"]))
     if hidden.cause == "segment_mass_distribution":
-        # kg moved to the legs of the processed model, compared with the generic share moved
+        # the model's legs gained legs_fraction of the body mass: the diagnosis moves it back
         legs = got["mass_change_kg"].get("legs", 0.0) - (base_p["mass_change_kg"].get("legs", 0.0) if base_p else 0.0)
-        expected = t["legs_fraction"] * modified["settings"]["fitted_mass_kg"]
+        expected = -t["legs_fraction"] * modified["settings"]["fitted_mass_kg"]
         return abs(legs - expected)
     if hidden.cause == "unmeasured_force":
         # share of the erased step missed, counting only its frames not already left out
