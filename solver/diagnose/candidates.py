@@ -444,8 +444,11 @@ def marker_offset(ctx: Context) -> list[Alternative]:
     """``marker_offset``: a landmark marker sits s (body frame) from where the model puts it.
 
     Channel: the marker's error minus the frame's mean error, in its body frame, over the
-    marker sigma. The reported shift adds the offset the kinematics stage already fitted
-    (so it is the whole misplacement relative to the generic model's landmark).
+    marker sigma. A shift s moves the model marker by R s, of which the pose solved again
+    leaves P_jj R s in the marker's error (:func:`solver.diagnose.data.retained_displacement`),
+    so the shift is fitted to the error through Rᵀ P_jj R rather than through the identity.
+    The reported shift adds the offset the kinematics stage already fitted (so it is the
+    whole misplacement relative to the generic model's landmark).
     """
     d = ctx.data
     mk = d.markers
@@ -460,7 +463,9 @@ def marker_offset(ctx: Context) -> list[Alternative]:
             continue
         dev = np.where(seen[:, None], mk.error[:, j] - mean_err, 0.0)
         u = np.einsum("tji,tj->ti", mk.rotation[:, j], dev) / s  # body frame
-        g = np.where(seen[:, None, None], np.broadcast_to(np.eye(3), (d.n_frames, 3, 3)), 0.0) / s
+        rot = mk.rotation[:, j]
+        kept = np.einsum("tki,tkl,tlm->tim", rot, mk.retained[:, j], rot)  # body frame: R^T P_jj R
+        g = np.where(seen[:, None, None], kept, 0.0) / s
         fitted = mk.fitted_offset[j]
 
         # the model marker moves by R s: error + R s -> in body frame u + s / sigma

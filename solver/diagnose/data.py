@@ -166,6 +166,10 @@ class MarkerData:
     fitted_offset
         ``(M, 3)`` body-fixed offset the kinematics stage fitted for each marker, m (zero
         when unknown).
+    retained
+        ``(T, M, 3, 3)`` ground frame: the part of a displacement of each landmark
+        (``fixed``) marker's model position that stays in that marker's own error once the
+        pose is solved again (:func:`retained_displacement`); identity for other markers.
     """
 
     names: tuple[str, ...]
@@ -174,6 +178,7 @@ class MarkerData:
     bodies: tuple[str, ...]
     fixed: BoolArray
     fitted_offset: FloatArray
+    retained: FloatArray
 
     @property
     def seen(self) -> BoolArray:
@@ -335,8 +340,72 @@ def group_wrenches(model: OsimModel, trial: ProcessedTrial) -> tuple[dict[str, F
     return out, group_masses(model)
 
 
-def marker_data(trial: ProcessedTrial, model: OsimModel, generic: OsimModel | None, offsets: Mapping[str, Sequence[float]]) -> MarkerData:
-    """Marker errors, body rotations and placement information of a processed trial."""
+def retained_displacement(sk: Skeleton, q: FloatArray, marker_names: Sequence[str], seen: BoolArray, which: BoolArray) -> FloatArray:
+    """How much of a shift of one marker's model position inverse kinematics leaves in
+    that marker's error.
+
+    Inverse kinematics minimizes the sum of squared marker errors e over the coordinates:
+    moving marker j's model position by d (error e + B d) moves the pose by
+    dq = -(JᵀJ + λI)⁻¹ Jᵀ B d, so the errors change by P B d with
+    P = I - J (JᵀJ + λI)⁻¹ Jᵀ (J: ``(3M, n)`` Jacobian of the seen markers' positions,
+    λ the solver's pull toward the previous frame, :class:`solver.kinematics.ik.IkSettings`).
+    Marker j's own error keeps P_jj d: the joints take up the rest, spread over the other
+    markers. A body-fixed marker offset fitted with the pose held fixed therefore
+    underestimates a misplacement by the share the pose absorbed.
+
+    Parameters
+    ----------
+    sk
+        Skeleton of the trial's model.
+    q
+        ``(T, n)`` coordinates of the motion.
+    marker_names
+        ``(M,)`` marker names (those not in the model keep the identity).
+    seen
+        ``(T, M)`` marker observed (the unseen take no part in the pose).
+    which
+        ``(M,)`` markers whose block is computed (the others keep the identity).
+
+    Returns
+    -------
+    ``(T, M, 3, 3)`` diagonal blocks P_jj, ground frame (identity where not computed or
+    the marker is unseen).
+    """
+    from solver.kinematics.ik import IkSettings
+
+    t_frames, m = seen.shape
+    out = np.broadcast_to(np.eye(3), (t_frames, m, 3, 3)).copy()
+    known = np.array([n in sk.marker_names for n in marker_names])
+    if not (which & known).any():
+        return out
+    cols = np.flatnonzero(known)
+    idx = sk.marker_index([marker_names[c] for c in cols])
+    lam = IkSettings().temporal_weight
+    for t in range(t_frames):
+        use = seen[t, cols]
+        if not (use & which[cols]).any():
+            continue
+        _, jac = sk.marker_jacobian(q[t], idx[use])  # (k, 3, n)
+        jf = jac.reshape(-1, jac.shape[2])
+        free = np.abs(jf).sum(axis=0) > 0
+        jf = jf[:, free]
+        h_inv = np.linalg.inv(jf.T @ jf + lam * np.eye(jf.shape[1]))
+        jk = jac[:, :, free]  # (k, 3, n_free)
+        for k, c in enumerate(cols[use]):
+            if which[c]:
+                out[t, c] = np.eye(3) - jk[k] @ h_inv @ jk[k].T
+    return out
+
+
+def marker_data(
+    trial: ProcessedTrial,
+    model: OsimModel,
+    generic: OsimModel | None,
+    offsets: Mapping[str, Sequence[float]],
+    sk: Skeleton | None = None,
+) -> MarkerData:
+    """Marker errors, body rotations and placement information of a processed trial
+    (``sk``: the model's skeleton, built when not given)."""
     mk = {m.name: m for m in model.markers}
     fixed_generic = {m.name: m.fixed for m in generic.markers} if generic is not None else {}
     bodies = tuple(mk[n].body if n in mk else "ground" for n in trial.marker_names)
@@ -346,7 +415,11 @@ def marker_data(trial: ProcessedTrial, model: OsimModel, generic: OsimModel | No
     rot = np.stack([rot_b[:, bidx[b]] if b in bidx else np.broadcast_to(np.eye(3), (trial.n_frames, 3, 3)) for b in bodies], axis=1)
     fixed = np.array([bool(fixed_generic.get(n, mk[n].fixed if n in mk else False)) for n in trial.marker_names])
     fitted = np.array([np.asarray(offsets.get(n, (0.0, 0.0, 0.0)), dtype=float) for n in trial.marker_names]).reshape(-1, 3)
-    return MarkerData(trial.marker_names, trial.modeled - trial.observed, rot, bodies, fixed, fitted)
+    error = trial.modeled - trial.observed
+    seen = np.isfinite(error).all(axis=2)
+    landmark = fixed & np.array([b != "ground" for b in bodies])
+    retained = retained_displacement(sk or Skeleton(model), trial.q, trial.marker_names, seen, landmark)
+    return MarkerData(trial.marker_names, error, rot, bodies, fixed, fitted, retained)
 
 
 def wxyz_to_matrix(q: FloatArray) -> FloatArray:
@@ -425,7 +498,7 @@ def prepare(
         group_mass=group_mass,
         plates=plates,
         flagged=np.asarray(flagged, dtype=bool),
-        markers=marker_data(trial, model, generic_model, marker_offsets or {}),
+        markers=marker_data(trial, model, generic_model, marker_offsets or {}, sk),
         feet=tuple(feet),
         foot_contact=None if contact is None else contact.foot_in_contact | contact.foot_loaded,
         foot_loaded=None if contact is None else contact.foot_loaded,
