@@ -347,8 +347,9 @@ def retained_displacement(sk: Skeleton, q: FloatArray, marker_names: Sequence[st
     Inverse kinematics minimizes the sum of squared marker errors e over the coordinates:
     moving marker j's model position by d (error e + B d) moves the pose by
     dq = -(JᵀJ + λI)⁻¹ Jᵀ B d, so the errors change by P B d with
-    P = I - J (JᵀJ + λI)⁻¹ Jᵀ (J: ``(3M, n)`` Jacobian of the seen markers' positions,
-    λ the solver's pull toward the previous frame, :class:`solver.kinematics.ik.IkSettings`).
+    P = I - J (JᵀJ + λI)⁻¹ Jᵀ (J: ``(3M, n)`` Jacobian of the seen markers' positions
+    over the coordinates the solver moves, λ the solver's pull toward the previous frame,
+    :class:`solver.kinematics.ik.IkSettings`; coordinate bounds are ignored).
     Marker j's own error keeps P_jj d: the joints take up the rest, spread over the other
     markers. A body-fixed marker offset fitted with the pose held fixed therefore
     underestimates a misplacement by the share the pose absorbed.
@@ -381,16 +382,14 @@ def retained_displacement(sk: Skeleton, q: FloatArray, marker_names: Sequence[st
     cols = np.flatnonzero(known)
     idx = sk.marker_index([marker_names[c] for c in cols])
     lam = IkSettings().temporal_weight
+    free = np.flatnonzero(sk.is_independent & ~sk.locked)  # what the solver moves
     for t in range(t_frames):
         use = seen[t, cols]
         if not (use & which[cols]).any():
             continue
-        _, jac = sk.marker_jacobian(q[t], idx[use])  # (k, 3, n)
-        jf = jac.reshape(-1, jac.shape[2])
-        free = np.abs(jf).sum(axis=0) > 0
-        jf = jf[:, free]
-        h_inv = np.linalg.inv(jf.T @ jf + lam * np.eye(jf.shape[1]))
-        jk = jac[:, :, free]  # (k, 3, n_free)
+        jk = sk.marker_jacobian(q[t], idx[use])[1][:, :, free]  # (k, 3, n_free)
+        jf = jk.reshape(-1, free.size)
+        h_inv = np.linalg.inv(jf.T @ jf + lam * np.eye(free.size))
         for k, c in enumerate(cols[use]):
             if which[c]:
                 out[t, c] = np.eye(3) - jk[k] @ h_inv @ jk[k].T
