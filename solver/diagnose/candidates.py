@@ -448,7 +448,9 @@ def marker_offset(ctx: Context) -> list[Alternative]:
     leaves P_jj R s in the marker's error (:func:`solver.diagnose.data.retained_displacement`),
     so the shift is fitted to the error through Rᵀ P_jj R rather than through the identity.
     The reported shift adds the offset the kinematics stage already fitted (so it is the
-    whole misplacement relative to the generic model's landmark).
+    whole misplacement relative to the generic model's landmark); ``visible_shift_m`` is the
+    part the marker's error shows (mean Rᵀ P_jj R times the residual shift), which is what
+    is judged worth naming (:func:`solver.diagnose.selection.effect_size`).
     """
     d = ctx.data
     mk = d.markers
@@ -467,9 +469,12 @@ def marker_offset(ctx: Context) -> list[Alternative]:
         kept = np.einsum("tki,tkl,tlm->tim", rot, mk.retained[:, j], rot)  # body frame: R^T P_jj R
         g = np.where(seen[:, None, None], kept, 0.0) / s
         fitted = mk.fitted_offset[j]
+        shown = kept[seen].mean(axis=0)
 
         # the model marker moves by R s: error + R s -> in body frame u + s / sigma
-        def physical(theta: FloatArray, name: str = name, fitted: FloatArray = fitted, body: str = mk.bodies[j]) -> dict[str, Any]:
+        def physical(
+            theta: FloatArray, name: str = name, fitted: FloatArray = fitted, body: str = mk.bodies[j], shown: FloatArray = shown
+        ) -> dict[str, Any]:
             total = fitted + theta
             return {
                 "value": [float(v) for v in total],
@@ -478,6 +483,7 @@ def marker_offset(ctx: Context) -> list[Alternative]:
                 "shift_m": [float(v) for v in total],
                 "residual_shift_m": [float(v) for v in theta],
                 "fitted_offset_m": [float(v) for v in fitted],
+                "visible_shift_m": [float(v) for v in shown @ theta],
             }
 
         out.append(LinearAlternative("marker_offset", name, u, g, physical, ("shift_x_m", "shift_y_m", "shift_z_m")))

@@ -185,7 +185,7 @@ class ChoiceRule:
             "plate_force_gain": 0.015,  # relative
             "plate_position_offset": 0.005,  # m
             "segment_mass_distribution": 1.0,  # kg moved
-            "marker_offset": 0.005,  # m (residual part)
+            "marker_offset": 0.005,  # m (residual part the marker's error shows)
             "unmeasured_force": 3.0,  # frames
         }
     )
@@ -230,7 +230,8 @@ def effect_size(ev: Evaluation, parameters: dict[str, Any] | None = None) -> flo
     if ev.cause == "segment_mass_distribution":
         return float(np.sum(np.abs(list(p["mass_change_kg"].values()))) / 2)
     if ev.cause == "marker_offset":
-        return float(np.linalg.norm(p["residual_shift_m"]))
+        # the part of the shift the marker's own error shows (the pose takes up the rest)
+        return float(np.linalg.norm(p.get("visible_shift_m", p["residual_shift_m"])))
     if ev.cause == "unmeasured_force":
         return float(p["n_frames"])
     return 0.0
