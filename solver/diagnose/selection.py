@@ -231,7 +231,7 @@ def effect_size(ev: Evaluation, parameters: dict[str, Any] | None = None) -> flo
         return float(np.sum(np.abs(list(p["mass_change_kg"].values()))) / 2)
     if ev.cause == "marker_offset":
         # the part of the shift the marker's own error shows (the pose takes up the rest)
-        return float(np.linalg.norm(p.get("visible_shift_m", p["residual_shift_m"])))
+        return float(np.linalg.norm(p["visible_shift_m"]))
     if ev.cause == "unmeasured_force":
         return float(p["n_frames"])
     return 0.0

@@ -39,7 +39,7 @@ def _evaluation(cause: str, parameters: dict, gain_per_frame: float, reference: 
 
 DELAY = {"delay_s": 0.03}
 SHIFT = {"shift_m": [0.02, 0.0, 0.0]}
-MARKER = {"residual_shift_m": [0.0, 0.012, 0.0]}
+MARKER = {"residual_shift_m": [0.0, 0.012, 0.0], "visible_shift_m": [0.0, 0.012, 0.0]}
 
 
 def test_a_cause_on_other_channels_does_not_stand_in_the_way() -> None:
