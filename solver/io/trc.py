@@ -13,7 +13,8 @@ Variants found in lab files and accepted: tab- or space-separated header values 
 with spaces or extra tabs; trailing tabs on any line; marker names separated by one,
 two or three tabs; a missing ``X1 Y1 Z1`` line; blank lines before, between or after
 the data rows; frame numbers not starting at 1; an empty cell (or ``nan``) for a
-missing marker. Everything else is an error naming the file and the line.
+missing marker, and a marker at exactly (0, 0, 0), which is how several exporters (Vicon
+Nexus among them) fill a gap. Everything else is an error naming the file and the line.
 """
 
 from __future__ import annotations
@@ -48,8 +49,8 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     -------
     MarkerTrajectories
         ``positions`` ``(T, M, 3)`` in metres in the file's lab frame (OpenSim files
-        are Y up; no rotation is applied), NaN where a marker is missing (empty cell
-        or ``nan``); ``time`` ``(T,)`` s from the Time column; ``rate_hz`` from
+        are Y up; no rotation is applied), NaN where a marker is missing (empty cell,
+        ``nan``, or all three coordinates exactly 0, a gap filled with zeros); ``time`` ``(T,)`` s from the Time column; ``rate_hz`` from
         ``DataRate`` (a :class:`UserWarning` says so when the Time column steps at a
         rate more than 1 % away); marker names from line 4.
 
@@ -85,6 +86,7 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     _check_rate(time, rate, path)
     coords = _parse_coordinates(rows, line_numbers, shift, path)
     positions = coords.reshape(len(rows), len(names), 3)
+    positions[np.all(positions == 0.0, axis=2)] = np.nan  # gaps exported as (0, 0, 0)
     return MarkerTrajectories(names, positions, time, rate, source=str(path))
 
 

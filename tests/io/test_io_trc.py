@@ -115,6 +115,25 @@ def test_nan_cells_become_nan(shared_data: Path) -> None:
     assert m.rate_hz == 200.0 and m.time[0] == 0.005
 
 
+def test_gaps_exported_as_zeros_become_missing(shared_data: Path) -> None:
+    """The stair-descent file fills a head marker's gaps with 0 0 0 (Vicon export): those
+    frames are missing, every other frame keeps the file's values."""
+    path = shared_data / "trials/stairdown/markers.trc"
+    lines = path.read_text().splitlines()
+    names = lines[3].split("\t")[2:]
+    column = 2 + 3 * [n for n in names if n].index("RFHD")
+    rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
+    zero_rows = [i for i, r in enumerate(rows) if all(float(v) == 0.0 for v in r[column : column + 3])]
+    assert len(zero_rows) > 0
+    m = read_trc(path)
+    rfhd = m.marker("RFHD")
+    assert sorted(np.flatnonzero(np.isnan(rfhd).all(axis=1)).tolist()) == zero_rows
+    kept = [i for i in range(len(rows)) if i not in set(zero_rows)]
+    expected = np.array([[float(v) for v in rows[i][column : column + 3]] for i in kept])
+    np.testing.assert_allclose(rfhd[kept], expected, rtol=0, atol=1e-12)
+    assert not np.isnan(np.delete(m.positions, m.names.index("RFHD"), axis=1)).any()
+
+
 def test_blank_line_before_data_and_trailing_tab_in_expert_files(shared_data: Path) -> None:
     path = shared_data / "expert_comparison/Expert1/walking1.trc"
     assert path.read_text().splitlines()[5].strip() == ""
