@@ -1,6 +1,6 @@
 """Assemble an AddBiomechanics subject folder for an example that is not one in shared/data.
 
-    python scripts/make_example_subject.py camargo2021_levelground OUT_DIR
+    python scripts/make_example_subject.py camargo2021_levelground|stairdown|opensim_c3d_walking OUT_DIR
 
 The trial files and the model stay in ../shared (they are linked, not copied); the
 folder gets the example's marker mapping (examples/<name>/markers.yaml) and a
@@ -26,6 +26,30 @@ EXAMPLES = {
         "trials": {"levelground": SHARED / "trials" / "camargo2021_levelground"},
         "subject": {"massKg": 74.0, "heightM": 1.75, "sex": "unknown", "footBodyNames": ["calcn_r", "calcn_l"]},
     },
+    # Stair descent over two plates set in the stairs (AddBiomechanics test data). No body
+    # mass is published with it: 65 kg is the mean vertical ground reaction force over the
+    # stride from the first plate's mid-stance to its second mid-stance (1.66-3.16 s, every
+    # foot on a plate), divided by g; the height (used only to normalise moments) is the head
+    # markers' height above the heel marker while the subject stands on the top step (1.58
+    # m) plus 12 cm.
+    "stairdown": {
+        "model": SHARED / "models" / "Rajagopal2015_ViconPlugInGait.osim",
+        "trials": {"stairdown": SHARED / "trials" / "stairdown"},
+        "subject": {"massKg": 65.0, "heightM": 1.70, "sex": "unknown", "footBodyNames": ["calcn_r", "calcn_l"]},
+    },
+    # Two overground walks of one subject from opensim-core's test data (C3D, forces from
+    # the file's two platforms). 66 kg: the mean vertical force from one plate's mid-stance
+    # to the other's (every foot on a plate; each plate's unloaded reading, -14 and -19 N,
+    # subtracted), divided by g, 65.6 and 66.3 kg in the two trials; height: the head
+    # markers' highest point (1.73 m) plus 5 cm.
+    "opensim_c3d_walking": {
+        "model": SHARED / "models" / "Rajagopal2016.osim",
+        "trials": {
+            "walking2": SHARED / "trials" / "opensim_c3d" / "walking2.c3d",
+            "walking5": SHARED / "trials" / "opensim_c3d" / "walking5.c3d",
+        },
+        "subject": {"massKg": 66.0, "heightM": 1.78, "sex": "unknown", "footBodyNames": ["calcn_r", "calcn_l"]},
+    },
 }
 
 
@@ -38,11 +62,14 @@ def make_subject(name: str, out: Path) -> Path:
     (out / "unscaled_generic.osim").symlink_to(spec["model"])
     shutil.copy(REPO / "examples" / name / "markers.yaml", out / "markers.yaml")
     (out / "_subject.json").write_text(json.dumps(spec["subject"], indent=2) + "\n")
-    for trial, folder in spec["trials"].items():
+    for trial, source in spec["trials"].items():
         (out / "trials" / trial).mkdir()
+        if source.suffix.lower() == ".c3d":  # markers and forces in one file
+            (out / "trials" / trial / "markers.c3d").symlink_to(source)
+            continue
         for f in ("markers.trc", "grf.mot"):
-            if (folder / f).exists():
-                (out / "trials" / trial / f).symlink_to(folder / f)
+            if (source / f).exists():
+                (out / "trials" / trial / f).symlink_to(source / f)
     return out
 
 
