@@ -132,3 +132,24 @@ def test_leave_one_subject_out_tests_every_subject_once() -> None:
 def test_dataset_of_subjects() -> None:
     ds = build_dataset([processed_trial(20, subject="a"), processed_trial(20, subject="b")], inputs="processed")
     assert ds.of_subjects(["b"]).subjects == ["b"]
+
+
+def test_kinematic_input_starts_from_the_best_observed_frame() -> None:
+    """A subject walking into the capture volume: the first 15 frames see half of the
+    markers, and in a pose turned half a turn about the vertical (labels swapped, as a
+    poorly reconstructed entry can look). The inverse kinematics starts from the frame that
+    sees the most markers and runs outwards, so those frames do not carry a wrong pose into
+    the well-observed ones (started from the first frame instead, it ends metres away)."""
+    from dataclasses import replace
+
+    from solver.benchmark.dataset import kinematic_coordinates
+
+    t = processed_trial(40)
+    half = t.observed.shape[1] // 2
+    observed = np.array(t.observed)
+    observed[:15] = np.nan
+    entry = t.observed[:15, :half] - t.observed[:15, :half].mean(axis=1, keepdims=True)
+    entry[..., [0, 2]] *= -1.0
+    observed[:15, :half] = entry + t.observed[:15, :half].mean(axis=1, keepdims=True)
+    q = kinematic_coordinates(replace(t, observed=observed))
+    np.testing.assert_allclose(q[15:], t.q[15:], atol=2e-3)
