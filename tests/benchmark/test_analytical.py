@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from solver.benchmark.analytical import analytical_baseline, kinematic_contact
-from solver.benchmark.dataset import GRAVITY, benchmark_trial
+from solver.benchmark.dataset import GRAVITY, benchmark_trial, skeleton_for
 from solver.benchmark.evaluate import score_trial
 from solver.benchmark.metrics import summarize
 
@@ -78,3 +78,18 @@ def test_kinematic_contact_uses_foot_height() -> None:
     np.testing.assert_allclose(pred.grf[:, 0], pred.grf[:, 1])
     with pytest.raises(ValueError, match="contact"):
         analytical_baseline(trial, contact="guess")
+
+
+def test_kinematic_contact_follows_the_step_the_foot_stands_on() -> None:
+    """Standing still, then (from frame 40) standing 0.3 m higher, as on a stair: the floor
+    of each foot is its own lowest point nearby, so both feet stay in contact on the upper
+    step, and a foot lifted 0.2 m above it is not."""
+    trial = benchmark_trial(processed_trial(q=motion(100, accel=(0.0, 0.0, 0.0), swing=0.0)), inputs="processed", cutoff_hz=60.0)
+    sk = skeleton_for(trial.model_path)
+    q = np.array(trial.q)
+    q[40:, sk.coordinate_index("pelvis_ty")] += 0.3
+    on = kinematic_contact(trial, q)
+    assert on[:15].all() and on[65:].all()  # a quarter window away from the step
+    lifted = q.copy()
+    lifted[70:80, sk.coordinate_index("pelvis_ty")] += 0.2  # both feet 0.2 m up
+    assert not kinematic_contact(trial, lifted)[70:80].any()
