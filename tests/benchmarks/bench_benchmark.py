@@ -2,9 +2,9 @@
 
     .venv/bin/python tests/benchmarks/bench_benchmark.py [--work DIR] [--docs docs/benchmark]
 
-Processes the three subjects of ../shared/data/subjects and the Camargo circuit
-(``scripts/make_example_subject.py camargo2021_levelground``) into ``DIR`` (skipped when
-already processed there), then runs, each in a fresh process as a user would:
+Processes the three subjects of ../shared/data/subjects and the examples assembled by
+``scripts/make_example_subject.py`` (the Camargo circuit, the stair descent, opensim-core's
+two C3D walks) into ``DIR`` (skipped when already processed there), then runs, each in a fresh process as a user would:
 
     addb benchmark DIR/out/* --method analytical --method mlp --contact measured --contact kinematic --filtering
     addb benchmark DIR/out/* --method analytical --method mlp --inputs processed
@@ -27,14 +27,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
 NAMES = ("rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023")
+EXAMPLES = ("camargo2021_levelground", "stairdown", "opensim_c3d_walking")
 
 
 def _process(addb: Path, work: Path) -> list[Path]:
     outs = []
-    camargo = work / "subjects" / "camargo2021_levelground"
-    if not camargo.exists():
-        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), "camargo2021_levelground", str(camargo)], check=True, capture_output=True)
-    for subject in [SUBJECTS / n for n in NAMES] + [camargo]:
+    examples = [work / "subjects" / n for n in EXAMPLES]
+    for example in examples:
+        if not example.exists():
+            subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), example.name, str(example)], check=True, capture_output=True)
+    for subject in [SUBJECTS / n for n in NAMES] + examples:
         out = work / "out" / subject.name
         if not any(out.glob("*/trial.npz")):
             t0 = time.perf_counter()
