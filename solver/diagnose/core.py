@@ -304,12 +304,17 @@ class TrialInputs:
         extensions included), or None.
     marker_offsets
         Fitted marker offsets (``OUT/subject.json``).
+    reviewed
+        A reviewer's flags were given: they replace the solver's own unmeasured-force
+        proposals, as in ``addb process``; otherwise the proposals stand and saved
+        extensions join them.
     """
 
     subject: Subject
     raw: Trial
     flags: BoolArray | None
     marker_offsets: dict[str, list[float]]
+    reviewed: bool = False
 
 
 def load_inputs(subject_dir: str | Path, trial: str, out_dir: str | Path, flags: BoolArray | None = None) -> TrialInputs:
@@ -320,7 +325,9 @@ def load_inputs(subject_dir: str | Path, trial: str, out_dir: str | Path, flags:
     raw = apply_extensions(subject, (load_trial(subject.trial(trial)),))[0]
     masks = None if flags is None else {trial: np.asarray(flags, dtype=bool)}
     masks = join_masks(masks, extension_masks(subject))
-    return TrialInputs(extend_subject(subject), raw, None if masks is None else masks.get(trial), load_offsets(out_dir))
+    return TrialInputs(
+        extend_subject(subject), raw, None if masks is None else masks.get(trial), load_offsets(out_dir), reviewed=flags is not None
+    )
 
 
 def frame_flags(flags: BoolArray | None, marker_time: FloatArray, time: FloatArray) -> BoolArray:
@@ -498,7 +505,9 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
     forces = inputs.raw.forces
     mass = data.stated_mass
     observed = None
-    unmeasured = np.array(data.flagged)
+    # as `addb process` would: a reviewer's flags replace the solver's proposals; saved
+    # extensions and an unmeasured_force extension join them
+    known = np.array(data.flagged)
     if ev.cause == "body_mass":
         mass += p["mass_change_kg"]
     elif ev.cause == "segment_mass_distribution":
@@ -511,10 +520,13 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
         observed[:, j] += np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["residual_shift_m"]))
     elif ev.cause == "unmeasured_force":
         for a, b in p["frames"]:
-            unmeasured[a:b] = True
+            known[a:b] = True
     else:
         forces = correct_forces(forces, extension_entry(ev, data, marker_time))
-    refit = refit_trial(trial, model, forces, mass_kg=mass, feet=data.feet, unmeasured=unmeasured, observed=observed)
+    unmeasured = np.array(data.flagged) if inputs.reviewed else None
+    refit = refit_trial(
+        trial, model, forces, mass_kg=mass, feet=data.feet, unmeasured=unmeasured, known_unmeasured=known, observed=observed
+    )
     result.after = refit.metrics
     result.seconds["refit"] = refit.seconds
 

@@ -75,7 +75,8 @@ def refit_trial(
     *,
     mass_kg: float,
     feet: tuple[str, ...],
-    unmeasured: BoolArray,
+    unmeasured: BoolArray | None,
+    known_unmeasured: BoolArray | None = None,
     observed: np.ndarray | None = None,
     settings: Mapping[str, Any] | None = None,
 ) -> Refit:
@@ -94,7 +95,11 @@ def refit_trial(
     feet
         Foot bodies.
     unmeasured
-        ``(T,)`` frames with unmeasured force on the trial's frames (they replace proposals).
+        ``(T,)`` frames with unmeasured force on the trial's frames that replace the stage's
+        own proposals (a reviewer's flags), or None to keep the proposals.
+    known_unmeasured
+        ``(T,)`` frames with unmeasured force that join the proposals (saved extensions,
+        the ``unmeasured_force`` extension), or None.
     observed
         ``(T, M, 3)`` observed markers to fit (default: the trial's).
     settings
@@ -129,7 +134,8 @@ def refit_trial(
         mass_kg=mass_kg,
         foot_bodies=feet,
         height_m=trial.height_m,
-        unmeasured={trial.trial: np.asarray(unmeasured, dtype=bool)},
+        unmeasured=None if unmeasured is None else {trial.trial: np.asarray(unmeasured, dtype=bool)},
+        known_unmeasured=None if known_unmeasured is None else {trial.trial: np.asarray(known_unmeasured, dtype=bool)},
         options=opts,
     )
     if dyn is None:  # pragma: no cover - the trial had forces when it was processed

@@ -65,6 +65,20 @@ def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict])
     assert held["after"]["linear_residual_rms_N"] < 0.5 * held["before"]["linear_residual_rms_N"]
 
 
+def test_refit_keeps_the_frames_the_solver_left_out(tmp_path: Path) -> None:
+    """With no reviewer flags, the refit runs as the next ``addb process`` would: the
+    solver's own unmeasured-force proposals stand (OpenCap's walk steps off its plates),
+    so the refit fits about the frames the processing did. Replacing the proposals by the
+    (empty) reviewer flags had brought every step off the plates back into the fit."""
+    subject = copy_subject(SHARED_DATA / "subjects" / "opencap_uhlrich2023", tmp_path / "opencap")
+    report = diagnose_json(subject, "walking1")
+    results = json.loads((subject / "addb_out" / "walking1" / "results.json").read_text())
+    assert report["chosen"] not in (None, "unmeasured_force")  # the extension leaves the flags alone
+    left_out = results["n_frames"] - results["n_observed_frames"]
+    assert left_out >= 10  # the solver left steps out
+    assert abs(report["after"]["n_observed_frames"] - results["n_observed_frames"]) <= 0.25 * left_out
+
+
 def test_apply_feeds_the_next_processing_and_the_review_app(tmp_path: Path) -> None:
     """A hidden mass error is named, --apply saves it, the next processing uses it: the
     diagnosis of the reprocessed subject no longer names it, and the review app shows both."""
