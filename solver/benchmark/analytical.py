@@ -72,7 +72,7 @@ def kinematic_contact(
     from scipy.ndimage import minimum_filter1d
 
     y = foot_origins(trial, q)[..., 1]
-    width = max(1, int(round(window_s / trial.dt))) | 1  # odd: centred on the frame
+    width = max(1, round(window_s / trial.dt)) | 1  # odd: centred on the frame
     return (y - minimum_filter1d(y, width, axis=0, mode="nearest")) < height_m
 
 
