@@ -457,10 +457,11 @@ def marker_offset(ctx: Context) -> list[Alternative]:
     mean_err, _ = mk.mean_error()
     out: list[Alternative] = []
     s = ctx.sigmas.marker
+    seen_all, landmark = mk.seen, mk.landmark
     for j, name in enumerate(mk.names):
-        if not mk.fixed[j] or mk.bodies[j] == "ground":
+        if not landmark[j]:
             continue
-        seen = mk.seen[:, j]
+        seen = seen_all[:, j]
         if seen.sum() < 10:
             continue
         dev = np.where(seen[:, None], mk.error[:, j] - mean_err, 0.0)

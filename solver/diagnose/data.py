@@ -185,6 +185,11 @@ class MarkerData:
         """``(T, M)`` marker observed."""
         return np.isfinite(self.error).all(axis=2)
 
+    @property
+    def landmark(self) -> BoolArray:
+        """``(M,)`` landmark markers: ``fixed`` and on a body of the model."""
+        return self.fixed & np.array([b != "ground" for b in self.bodies], dtype=bool)
+
     def mean_error(self) -> tuple[FloatArray, FloatArray]:
         """``(T, 3)`` mean error over the seen markers (m; zero where none) and ``(T,)`` their count."""
         seen = self.seen
@@ -414,11 +419,9 @@ def marker_data(
     rot = np.stack([rot_b[:, bidx[b]] if b in bidx else np.broadcast_to(np.eye(3), (trial.n_frames, 3, 3)) for b in bodies], axis=1)
     fixed = np.array([bool(fixed_generic.get(n, mk[n].fixed if n in mk else False)) for n in trial.marker_names])
     fitted = np.array([np.asarray(offsets.get(n, (0.0, 0.0, 0.0)), dtype=float) for n in trial.marker_names]).reshape(-1, 3)
-    error = trial.modeled - trial.observed
-    seen = np.isfinite(error).all(axis=2)
-    landmark = fixed & np.array([b != "ground" for b in bodies])
-    retained = retained_displacement(sk or Skeleton(model), trial.q, trial.marker_names, seen, landmark)
-    return MarkerData(trial.marker_names, error, rot, bodies, fixed, fitted, retained)
+    identity = np.broadcast_to(np.eye(3), (*rot.shape[:2], 3, 3))
+    md = MarkerData(trial.marker_names, trial.modeled - trial.observed, rot, bodies, fixed, fitted, identity)
+    return replace(md, retained=retained_displacement(sk or Skeleton(model), trial.q, md.names, md.seen, md.landmark))
 
 
 def wxyz_to_matrix(q: FloatArray) -> FloatArray:
