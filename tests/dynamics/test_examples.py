@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from solver.dynamics.preprocess import true_runs
 from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.types import ForceRecording
@@ -41,8 +42,7 @@ def _midstance_mass(forces: ForceRecording, *, zero_unloaded: bool) -> float:
         fy = plate.force[:, 1]
         on = fy > 20.0
         total += fy - (np.median(fy[~on]) if zero_unloaded else 0.0)
-        runs = np.split(np.flatnonzero(on), np.flatnonzero(np.diff(np.flatnonzero(on)) > 1) + 1)
-        mids += [forces.time[r].mean() for r in runs if r.size > 50]
+        mids += [forces.time[a:b].mean() for a, b in true_runs(on) if b - a > 50]
     sel = (forces.time >= min(mids)) & (forces.time <= max(mids))
     return float(total[sel].mean() / G)
 
