@@ -60,6 +60,9 @@ CAUSES = (
 #: Prior standard deviation of a body group's mass change, relative to its mass.
 SEGMENT_PRIOR = 0.1
 
+#: A plate bears load when its vertical force exceeds this fraction of body weight.
+LOADED_BW = 0.02
+
 #: Delays searched by ``force_time_offset``, s (forces late is positive).
 DELAY_GRID = np.round(np.arange(-0.120, 0.1205, 0.001), 4)
 
@@ -118,6 +121,10 @@ class LinearAlternative:
         Optional ``(k, j)`` basis: theta = basis @ beta (e.g. total mass kept).
     prior
         Optional ``(m, k)`` rows added to every fit (a ridge prior in cost units).
+    acts_on
+        Optional ``(T,)`` frames the cause can change (e.g. where its plate bears load):
+        its relative gain is measured against the reference cost of those frames only
+        (:attr:`solver.diagnose.selection.Evaluation.relative_gain`). None: every frame.
     """
 
     def __init__(
@@ -130,8 +137,10 @@ class LinearAlternative:
         names: tuple[str, ...],
         basis: FloatArray | None = None,
         prior: FloatArray | None = None,
+        acts_on: BoolArray | None = None,
     ) -> None:
         self.cause, self.choice = cause, choice
+        self.acts_on = acts_on
         self.rho0, self.g = rho0, g if basis is None else np.einsum("trk,kj->trj", g, basis)
         self.basis = basis
         self.prior = None if prior is None else (prior if basis is None else prior @ basis)
@@ -190,6 +199,7 @@ class GridAlternative:
 
     n_params = 1
     choice = None
+    acts_on = None
     names = ("delay_s",)
 
     def __init__(
@@ -242,6 +252,7 @@ class FixedAlternative:
 
     choice = None
     names = ()
+    acts_on = None
 
     def __init__(self, cause: str, costs: FloatArray, ref_costs: FloatArray, n_params: int, params: dict[str, Any], rows: FloatArray) -> None:
         self.cause, self._costs, self.ref_costs, self.n_params = cause, costs, ref_costs, n_params
@@ -311,7 +322,7 @@ def plate_points(data: DiagnosisData) -> FloatArray:
     for i in range(f.shape[0]):
         loaded_cop = data.plates.centre[i]
         plane = float(loaded_cop[1])
-        cop, _ = cop_from_wrench(f[i], m_o[i], plane, 0.02 * data.bw)
+        cop, _ = cop_from_wrench(f[i], m_o[i], plane, LOADED_BW * data.bw)
         bad = ~np.isfinite(cop).all(axis=1)
         cop[bad] = data.plates.centre[i]
         out[i] = cop
@@ -392,7 +403,12 @@ def plate_position_offset(ctx: Context) -> list[Alternative]:
             s = [float(theta[0]), 0.0, float(theta[1])]
             return {"value": s, "plate": name, "shift_m": s}
 
-        out.append(LinearAlternative("plate_position_offset", name, ctx.ref_rows, g, physical, ("shift_x_m", "shift_z_m")))
+        # a shifted CoP changes nothing where the plate bears no load: the shift's gain is
+        # measured against the residual of the frames it can explain
+        loaded = f[:, 1] > LOADED_BW * d.bw
+        out.append(
+            LinearAlternative("plate_position_offset", name, ctx.ref_rows, g, physical, ("shift_x_m", "shift_z_m"), acts_on=loaded)
+        )
     return out
 
 

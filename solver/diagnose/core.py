@@ -407,14 +407,15 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
     blocks = make_blocks(data.n_frames, data.dt, options.block_seconds)
     ranked = best_per_cause(evaluations)
-    chosen, reason = choose(ranked, options.rule, blocks)
+    chosen, reason = choose(ranked, options.rule, blocks, evaluations)
     held_ctx, held_alts = ctx, alts
-    delay = delay_on_marker_motion(chosen, evaluations_ik, options.rule, blocks)
-    if delay is not None:
-        chosen, why = delay
+    on_markers = choice_on_marker_motion(chosen, evaluations_ik, options.rule, blocks)
+    if on_markers is not None:
+        chosen, why = on_markers
         reason = (
             "On the motion the markers alone decide (the dynamics fit leaves out or absorbs the force "
-            f"transients a delay leaves at every foot strike): {why}"
+            "transients a delay leaves at every foot strike, and turns the body to balance a shifted "
+            f"centre of pressure): {why}"
         )
         ranked = [chosen] + [e for e in ranked if e.cause != chosen.cause]
         held_ctx, held_alts = ctx_ik, alts_ik
@@ -459,20 +460,27 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
 FORCE_CAUSES = ("body_mass", "force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
 
 
-def delay_on_marker_motion(
+#: Force-side causes that may be chosen on the marker-only motion (:func:`choice_on_marker_motion`).
+MARKER_MOTION_CHOICES = ("force_time_offset", "plate_position_offset")
+
+
+def choice_on_marker_motion(
     chosen: Evaluation | None, evaluations_ik: list[Evaluation], rule: ChoiceRule, blocks: np.ndarray
 ) -> tuple[Evaluation, str] | None:
-    """``force_time_offset`` chosen on the marker-only motion, or None.
+    """A force delay or plate shift chosen on the marker-only motion, or None.
 
     A delay between plates and cameras leaves its evidence in the force transients of
     every foot strike. The dynamics fit cannot follow a force that comes too late, so it
     leaves those frames out of its dynamic fit (free centre-of-mass accelerations there)
     or bends the motion toward the late force, and on the fitted motion what is left of
-    the delay resembles a shifted centre of pressure or a wrong mass. The marker-only
-    motion keeps every frame and owes nothing to the forces. When the fitted motion names
-    no cause or one acting on the forces, the causes acting on the forces are compared on
-    the marker-only motion (same :func:`.selection.choose` rule, same frames U); if the
-    delay stands out there, it is the choice.
+    the delay resembles a shifted centre of pressure or a wrong mass. A shifted centre of
+    pressure under the large forces of running is absorbed too: the fit turns the body so
+    that the shifted moment is balanced (on the treadmill run the fitted motion keeps
+    0-10 % of a hidden 1-4 cm shift). The marker-only motion keeps every frame and owes
+    nothing to the forces. When the fitted motion names no cause or one acting on the
+    forces, the causes acting on the forces are compared on the marker-only motion (same
+    :func:`.selection.choose` rule, same frames U); if a delay or a plate shift
+    (:data:`MARKER_MOTION_CHOICES`) stands out there, it is the choice.
 
     Returns
     -------
@@ -480,8 +488,9 @@ def delay_on_marker_motion(
     """
     if chosen is not None and chosen.cause not in FORCE_CAUSES:
         return None
-    pick, why = choose(best_per_cause([e for e in evaluations_ik if e.cause in FORCE_CAUSES]), rule, blocks)
-    if pick is None or pick.cause != "force_time_offset":
+    force_side = [e for e in evaluations_ik if e.cause in FORCE_CAUSES]
+    pick, why = choose(best_per_cause(force_side), rule, blocks, force_side)
+    if pick is None or pick.cause not in MARKER_MOTION_CHOICES:
         return None
     return pick, why
 

@@ -107,7 +107,7 @@ def idle_samples(force: FloatArray, rate_hz: float, bw: float) -> BoolArray:
     """
     low = np.linalg.norm(force, axis=1) < IDLE_BW * bw
     out = np.zeros_like(low)
-    trim = int(round(IDLE_TRIM_SECONDS * rate_hz))
+    trim = round(IDLE_TRIM_SECONDS * rate_hz)
     for a, b in true_runs(low):
         if (b - a) / rate_hz >= IDLE_SECONDS:
             out[a + (trim if a > 0 else 0) : b - (trim if b < low.size else 0)] = True

@@ -207,8 +207,10 @@ def to_text(diag: Diagnosis) -> str:
             f"  frames evaluated {a['frames_evaluated']} (flagged by the reviewer: {a['frames_flagged']}, "
             f"left out of the dynamic fit by the solver: {a['left_out']['frames']})"
         ),
-        f"  residual force RMS {ot['linear_rms_N']:.1f} N (peak {ot['linear_peak_N']:.1f} N at {ot['linear_peak_time_s']:.2f} s), "
-        f"moment RMS {ot['angular_rms_Nm']:.1f} N·m (peak {ot['angular_peak_Nm']:.1f} N·m at {ot['angular_peak_time_s']:.2f} s)",
+        (
+            f"  residual force RMS {ot['linear_rms_N']:.1f} N (peak {ot['linear_peak_N']:.1f} N at {ot['linear_peak_time_s']:.2f} s), "
+            f"moment RMS {ot['angular_rms_Nm']:.1f} N·m (peak {ot['angular_peak_Nm']:.1f} N·m at {ot['angular_peak_time_s']:.2f} s)"
+        ),
     ]
     lo = a["left_out"]
     if lo["frames"]:

@@ -2,14 +2,25 @@
 
 The hidden-effect tests exercise the rule on real trials; these cases pin down the two
 comparisons it makes: a cause must stand out from the runner-up that explains the same
-residuals, and a cause acting on other channels (a marker's own error) is no such rival.
+residuals, and a cause acting on other channels (a marker's own error) is no such rival;
+and the relative gain of a cause that acts on some frames only (a plate shift where its
+plate is loaded) is measured on those frames.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from solver.diagnose.selection import ChoiceRule, Evaluation, choose, make_blocks
+from solver.diagnose.candidates import LinearAlternative
+from solver.diagnose.selection import (
+    ChoiceRule,
+    Evaluation,
+    choose,
+    cross_validate,
+    make_blocks,
+    make_folds,
+)
 
 T = 200
 DT = 0.01
@@ -61,8 +72,59 @@ def test_a_rival_on_the_same_channels_blocks_the_choice() -> None:
     assert "explains the residuals nearly as well" in reason
 
 
+def _plate_evaluation(plate: str, loaded: np.ndarray, gain_per_frame: float) -> Evaluation:
+    """A plate shift's evaluation whose held-out gain lies on the frames its plate is loaded."""
+    ev = _evaluation("plate_position_offset", {"shift_m": [0.02, 0.0, 0.0]}, gain_per_frame)
+    ev.choice = plate
+    ev.held_out_costs = np.where(loaded, ev.held_out_costs, ev.reference_costs)
+    ev.gain = float(np.sum(ev.reference_costs - ev.held_out_costs))
+    ev.fold_gains = np.array([f.sum() for f in np.array_split(ev.reference_costs - ev.held_out_costs, 5)])
+    ev.score = ev.gain - np.log(T)
+    ev.reference = float(ev.reference_costs[loaded].sum())
+    return ev
+
+
+def test_a_plate_shift_must_stand_out_from_the_other_plate() -> None:
+    # the right foot on the plate R in even steps of 0.2 s, the left on L in odd ones; the
+    # shifts of both plates explain the residuals alike, as a misplaced centre of mass
+    # would: no plate is named; with the other plate far behind, the shift is named
+    right_down = (make_blocks(T, DT) % 2) == 0
+    right = _plate_evaluation("R", right_down, 0.3)
+    left = _plate_evaluation("L", ~right_down, 0.28)
+    chosen, reason = choose([right], ChoiceRule(), make_blocks(T, DT), [right, left])
+    assert chosen is None
+    assert "the same cause on L explains them nearly as well" in reason
+    weak = _plate_evaluation("L", ~right_down, 0.05)
+    chosen, reason = choose([right], ChoiceRule(), make_blocks(T, DT), [right, weak])
+    assert chosen is right, reason
+
+
 def test_a_negligible_estimate_is_no_contender() -> None:
     # the delay's estimate (1 ms) is below what is worth naming: the plate shift stands alone
     ranked = [_evaluation("plate_position_offset", SHIFT, 0.3), _evaluation("force_time_offset", {"delay_s": 0.001}, 0.29)]
     chosen, _ = choose(ranked, ChoiceRule(), make_blocks(T, DT))
     assert chosen is not None and chosen.cause == "plate_position_offset"
+
+
+def test_a_plate_shift_is_judged_on_the_frames_its_plate_is_loaded() -> None:
+    # unit-variance residual rows on every frame; on the third of the frames where the plate
+    # is loaded, a shift of 0.5 adds rows of variance 0.25: fitting it removes 0.25 / 1.25
+    # = 20 % of the cost of those frames, but only 0.25 / 3.25 = 8 % of the trial's
+    rng = np.random.default_rng(0)
+    t, r = 600, 3
+    loaded = (np.arange(t) // 30) % 3 == 0
+    g = np.zeros((t, r, 1))
+    g[loaded, :, 0] = rng.standard_normal((int(loaded.sum()), r))
+    rho0 = rng.standard_normal((t, r)) - 0.5 * g[:, :, 0]
+
+    def physical(theta: np.ndarray) -> dict:
+        return {"value": float(theta[0]), "shift_m": [float(theta[0]), 0.0, 0.0]}
+
+    folds = make_folds(t, DT)
+    on_loaded = cross_validate(LinearAlternative("plate_position_offset", "R", rho0, g, physical, ("s",), acts_on=loaded), folds)
+    on_all = cross_validate(LinearAlternative("plate_position_offset", "R", rho0, g, physical, ("s",)), folds)
+    assert on_loaded.gain == on_all.gain  # the same fit and held-out costs
+    assert on_loaded.reference == pytest.approx(np.sum(rho0[loaded] ** 2))
+    assert 0.15 < on_loaded.relative_gain < 0.25
+    assert on_all.relative_gain < ChoiceRule().min_relative_gain < on_loaded.relative_gain
+    assert abs(on_loaded.parameters["value"] - 0.5) < 0.05
