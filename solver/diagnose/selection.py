@@ -175,11 +175,12 @@ class ChoiceRule:
     distinct_choice
         Causes whose named plate must also stand out, by the same test, from the same cause
         on the other plates. A centre of mass misplaced in the model moves the moment under
-        both feet alike, which a shift of either plate mimics (two walk draws hiding a 5 kg
-        redistribution: the right plate's shift scored 409 and 350, the left one's 349 and
+        both feet alike, which a shift of either plate mimics (two walk draws hiding a 4.5-5.4
+        kg redistribution: the right plate's shift scored 409 and 350, the left one's 349 and
         295), and the fitted motion absorbs the redistribution itself; a misplaced plate
-        stands out from the other one (scores 4 to 100 times higher in the hidden-shift
-        draws).
+        stands out from the other one (in five captured draws of a hidden shift that were
+        named, the hidden plate's shift scored 3.9 to 270 times the other's, or the other's
+        score was negative).
     """
 
     min_relative_gain: float = 0.10
