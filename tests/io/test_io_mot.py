@@ -108,14 +108,9 @@ def test_every_shared_mot_reads_and_is_classified(path: Path) -> None:
             assert np.median(horizontal) < 1.0
 
 
-def test_force_file_speed(shared_data: Path) -> None:
-    import time
-
-    path = shared_data / "trials/rajagopal2016/grf_walk.mot"
-    read_forces(path)
-    start = time.perf_counter()
-    forces = read_forces(path)
-    assert time.perf_counter() - start < 0.2
+def test_force_file_reads_whole(shared_data: Path) -> None:
+    # a 2000 Hz force file (its read time: tests/benchmarks/bench_io.py)
+    forces = read_forces(shared_data / "trials/rajagopal2016/grf_walk.mot")
     assert forces.n_frames == 4778 and forces.rate_hz == 2000.0
 
 

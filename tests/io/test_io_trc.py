@@ -376,14 +376,9 @@ def test_rate_disagreeing_with_time_column_warns(tmp_path: Path, small_trc: list
     assert markers.rate_hz == 200.0
 
 
-def test_large_trc_reads_fast(shared_data: Path) -> None:
-    import time
-
+def test_large_trc_reads_whole(shared_data: Path) -> None:
+    # the largest TRC of the shared data (its read time: tests/benchmarks/bench_io.py)
     path = shared_data / "trials/camargo2021_levelground/markers.trc"
-    best = float("inf")
-    for _ in range(3):
-        start = time.perf_counter()
-        markers = read_trc(path)
-        best = min(best, time.perf_counter() - start)
+    markers = read_trc(path)
     assert markers.n_frames == 3067
-    assert best < 0.2
+    np.testing.assert_allclose(np.diff(markers.time), 1.0 / markers.rate_hz, rtol=1e-6)
