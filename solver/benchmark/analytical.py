@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import minimum_filter1d
 
 from solver.benchmark.dataset import BenchmarkTrial, skeleton_for
 
@@ -69,8 +70,6 @@ def kinematic_contact(
     """``(T, 2)`` feet whose body origin is within ``height_m`` (m) of its own lowest height
     within ``window_s`` (s) centred on the frame, from the coordinates ``q`` ``(T, n)``
     alone (see the module docstring)."""
-    from scipy.ndimage import minimum_filter1d
-
     y = foot_origins(trial, q)[..., 1]
     width = max(1, round(window_s / trial.dt)) | 1  # odd: centred on the frame
     return (y - minimum_filter1d(y, width, axis=0, mode="nearest")) < height_m

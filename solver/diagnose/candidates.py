@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.diagnose.data import DiagnosisData
+from solver.diagnose.data import LOADED_BW, DiagnosisData
 from solver.diagnose.profile import ROWS, Profile, Sigmas, skew
 from solver.dynamics.preprocess import cop_from_wrench, true_runs
 
@@ -59,9 +59,6 @@ CAUSES = (
 
 #: Prior standard deviation of a body group's mass change, relative to its mass.
 SEGMENT_PRIOR = 0.1
-
-#: A plate bears load when its vertical force exceeds this fraction of body weight.
-LOADED_BW = 0.02
 
 #: Delays searched by ``force_time_offset``, s (forces late is positive).
 DELAY_GRID = np.round(np.arange(-0.120, 0.1205, 0.001), 4)

@@ -516,7 +516,8 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
     observed = None
     # as `addb process` would: a reviewer's flags replace the solver's proposals; saved
     # extensions and an unmeasured_force extension join them
-    known = np.array(data.flagged)
+    flagged = np.asarray(data.flagged, dtype=bool)
+    known = flagged.copy()
     if ev.cause == "body_mass":
         mass += p["mass_change_kg"]
     elif ev.cause == "segment_mass_distribution":
@@ -532,7 +533,7 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
             known[a:b] = True
     else:
         forces = correct_forces(forces, extension_entry(ev, data, marker_time))
-    unmeasured = np.array(data.flagged) if inputs.reviewed else None
+    unmeasured = flagged if inputs.reviewed else None
     refit = refit_trial(
         trial, model, forces, mass_kg=mass, feet=data.feet, unmeasured=unmeasured, known_unmeasured=known, observed=observed
     )

@@ -94,6 +94,9 @@ class RawPlates:
 #: IDLE_SECONDS (a swing or flight phase, or a plate nobody uses), trimmed by IDLE_TRIM_SECONDS
 #: at both ends (the filter spreads each contact over a few samples).
 IDLE_BW = 0.15
+#: A plate bears load when its vertical force exceeds this fraction of body weight (where
+#: its centre of pressure is defined and a shift of it acts).
+LOADED_BW = 0.02
 IDLE_SECONDS = 0.1
 IDLE_TRIM_SECONDS = 0.03
 
@@ -124,14 +127,14 @@ def raw_plates(forces: ForceRecording, cutoff_hz: float, order: int, bw: float) 
     cutoff_hz, order
         The stage's filter settings.
     bw
-        Body weight, N (a plate is loaded above 2 % of it).
+        Body weight, N (a plate is loaded above LOADED_BW of it).
     """
     f_all, m_all, centres, idle = [], [], [], []
     for p in forces.plates:
         f = np.nan_to_num(np.asarray(p.force, dtype=float))
         cop = np.asarray(p.cop, dtype=float)
         m_o = moment_about_origin(f, cop, np.nan_to_num(np.asarray(p.free_moment, dtype=float)))
-        loaded = f[:, 1] > 0.02 * bw
+        loaded = f[:, 1] > LOADED_BW * bw
         centre = np.nanmedian(cop[loaded], axis=0) if loaded.any() else np.zeros(3)
         f_all.append(lowpass(f, forces.rate_hz, cutoff_hz, order))
         m_all.append(lowpass(m_o, forces.rate_hz, cutoff_hz, order))
@@ -520,7 +523,7 @@ def _contact(sk: Skeleton, trial: ProcessedTrial, plates: RawPlates, feet: Seque
     bw = mass * float(np.linalg.norm(sk.osim.gravity))
     data = []
     for i, name in enumerate(plates.names):
-        cop, free = cop_from_wrench(f[i], m_o[i], float(plates.centre[i][1]), 0.02 * bw)
+        cop, free = cop_from_wrench(f[i], m_o[i], float(plates.centre[i][1]), LOADED_BW * bw)
         data.append(PlateData(name, f[i], cop, free))
     return assign_contacts(sk, trial.q, data, feet, mass, float(np.median(np.diff(trial.time))), None)
 
