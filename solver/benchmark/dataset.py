@@ -253,24 +253,17 @@ def kinematic_coordinates(trial: ProcessedTrial) -> FloatArray:
 
     Per frame, the kinematics stage's least-squares solver (equal marker weights), warm
     started along time, forwards and backwards, from the processed pose of the frame that
-    sees the most markers: a trial whose subject walks into the capture volume (markers
-    appearing one by one) would otherwise carry the poses that its first, barely observed
-    frames leave into the frames that are scored.
+    sees the most markers (:func:`solver.kinematics.ik.solve_trajectory_from_best_frame`).
     """
-    from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory
+    from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory_from_best_frame
 
     sk = skeleton_for(trial.model_path)
     idx = sk.marker_index(list(trial.marker_names))
     obs = np.asarray(trial.observed, dtype=float)
-    n_seen = np.isfinite(obs).all(axis=2).sum(axis=1)
-    if not n_seen.any():
+    if not np.isfinite(obs).all(axis=2).any():
         raise BenchmarkError("no observed marker on any frame", where=f"{trial.subject}/{trial.trial}")
-    anchor = int(np.argmax(n_seen))
     solver = FrameSolver(sk, idx, np.ones(idx.size), IkSettings())
-    q_anchor = np.asarray(trial.q[anchor], dtype=float)
-    forward = solve_trajectory(solver, obs[anchor:], q_anchor)
-    backward = solve_trajectory(solver, obs[anchor::-1], forward[0])[::-1]
-    return np.concatenate([backward[:-1], forward])
+    return solve_trajectory_from_best_frame(solver, obs, np.asarray(trial.q, dtype=float))
 
 
 def foot_wrenches(

@@ -534,18 +534,20 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
     The dynamics fit absorbs part of any force error into the motion (the root follows the
     centre-of-mass path the forces imply, joints move to cancel moments); the motion that
     only the markers decide carries none of it. Same model, same 30 Hz zero-phase
-    low-pass and spline derivatives as the dynamics stage. No frame of this motion came
-    from the dynamic fit, so none is marked ``unobserved`` (left out of it).
+    low-pass and spline derivatives as the dynamics stage; the solve starts at the frame
+    that sees the most markers (a subject walking into the capture volume would otherwise
+    leave the poses of its first, barely observed frames in every later one). No frame of
+    this motion came from the dynamic fit, so none is marked ``unobserved`` (left out of it).
     """
     from solver.dynamics.preprocess import lowpass
     from solver.dynamics.spline import differentiate
-    from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory
+    from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory_from_best_frame
     from solver.pipeline import rotations_to_wxyz
 
     sk = Skeleton(model)
     idx = sk.marker_index(list(trial.marker_names))
     solver = FrameSolver(sk, idx, np.ones(idx.size), IkSettings())
-    q = solve_trajectory(solver, trial.observed, trial.q[0])
+    q = solve_trajectory_from_best_frame(solver, trial.observed, trial.q)
     settings = trial.settings or {}
     dt = float(np.median(np.diff(trial.time)))
     q = lowpass(q, 1.0 / dt, float(settings.get("cutoff_hz", 30.0)), int(settings.get("filter_order", 3)))

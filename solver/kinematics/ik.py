@@ -201,6 +201,43 @@ def solve_trajectory(
     return out
 
 
+
+def solve_trajectory_from_best_frame(solver: FrameSolver, obs: FloatArray, q_guess: FloatArray) -> FloatArray:
+    """:func:`solve_trajectory` started at the frame that sees the most markers, then run
+    forwards and backwards in time from there.
+
+    A trial whose subject walks into the capture volume (markers appearing one by one, as
+    in opensim-core's C3D walks) would otherwise carry the poses its first, barely observed
+    frames leave into every later frame (poses metres away, residuals of 10^6 N).
+
+    Parameters
+    ----------
+    solver
+        The per-frame solver.
+    obs
+        ``(T, M, 3)`` observed marker positions, NaN where missing.
+    q_guess
+        ``(T, n)`` coordinates near the solution (e.g. the processed motion); only the
+        best-observed frame's row is used, to start that frame.
+
+    Returns
+    -------
+    ``(T, n)`` coordinates.
+
+    Raises
+    ------
+    ValueError
+        If no frame sees any marker.
+    """
+    obs = np.asarray(obs, dtype=float)
+    n_seen = np.isfinite(obs).all(axis=2).sum(axis=1)
+    if not n_seen.any():
+        raise ValueError("no observed marker on any frame")
+    anchor = int(np.argmax(n_seen))
+    forward = solve_trajectory(solver, obs[anchor:], np.asarray(q_guess[anchor], dtype=float))
+    backward = solve_trajectory(solver, obs[anchor::-1], forward[0])[::-1]
+    return np.concatenate([backward[:-1], forward])
+
 #: RMS marker error (m) of a local solve from the default limb pose above which the
 #: joint-by-joint grid search (:func:`greedy_pose`) is used to start the frame.
 GREEDY_TRIGGER_M = 0.02
