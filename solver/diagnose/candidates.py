@@ -577,13 +577,18 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
                 if not mask[j]:
                     reasons[j] = f"{support[j]:.2f} BW of support force missing"
             mask[a:b] = True
+    flagged = data.flagged
     for a, b in true_runs(mask):
-        # the support force builds up and fades: grow while it is still missing, then pad
+        # the support force builds up and fades: grow while it is still missing, then pad;
+        # a side that ends on flagged frames was padded when they were flagged (an applied
+        # unmeasured_force extension), so padding it again would only eat further frames
         while a > 0 and support[a - 1] > GROW_BW:
             a -= 1
         while b < t and support[b] > GROW_BW:
             b += 1
-        for j in range(max(a - PAD_FRAMES, 0), min(b + PAD_FRAMES, t)):
+        lo = a if flagged[a] else max(a - PAD_FRAMES, 0)
+        hi = b if flagged[b - 1] else min(b + PAD_FRAMES, t)
+        for j in range(lo, hi):
             if not mask[j]:
                 mask[j] = True
                 reasons[j] = "next to unmeasured frames"

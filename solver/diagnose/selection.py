@@ -221,8 +221,16 @@ MARKER_CHANNEL_CAUSES = ("marker_offset",)
 
 
 def channels(cause: str) -> str:
-    """``"markers"`` or ``"residuals"``: the channels ``cause`` acts on."""
-    return "markers" if cause in MARKER_CHANNEL_CAUSES else "residuals"
+    """``"markers"``, ``"frames"`` or ``"residuals"``: what ``cause`` explains.
+
+    ``unmeasured_force`` takes its frames U out of the residual terms, and every other
+    cause is evaluated with U already out (:func:`solver.diagnose.core.build_context`): its
+    gain is measured on top of U's, so the two are not alternatives and may both be true
+    (opensim-core's C3D walk: after its steps off the plates were applied, six more frames
+    of a foot on the floor stood in the way of a plate's zero drift that is real)."""
+    if cause in MARKER_CHANNEL_CAUSES:
+        return "markers"
+    return "frames" if cause == "unmeasured_force" else "residuals"
 
 
 def effect_size(ev: Evaluation, parameters: dict[str, Any] | None = None) -> float:
@@ -292,6 +300,49 @@ def _stands_out(best: Evaluation, rival: Evaluation | None, rule: ChoiceRule, bl
     return clear, t_pair, frac_pair
 
 
+def _verdict(
+    group: list[Evaluation], rule: ChoiceRule, blocks: IntArray | None, alternatives: list[Evaluation] | None
+) -> tuple[Evaluation, Evaluation | None, list[str]]:
+    """The best of contenders acting on the same channels (best first), its runner-up, and
+    the checks of :class:`ChoiceRule` it fails (empty: it stands out)."""
+    best = group[0]
+    second = group[1] if len(group) > 1 else None
+    clear, t_pair, frac_pair = _stands_out(best, second, rule, blocks)
+    siblings = [
+        e for e in (alternatives or []) if best.cause in rule.distinct_choice and e.cause == best.cause and e.choice != best.choice
+    ]
+    sibling = max(siblings, key=lambda e: e.score) if siblings else None
+    distinct, t_sib, frac_sib = _stands_out(best, sibling, rule, blocks)
+    checks = [
+        (best.score > 0, f"its score ({best.score:.0f}) is not positive"),
+        (
+            best.relative_gain >= rule.min_relative_gain,
+            f"it removes only {100 * best.relative_gain:.0f}% of the held-out cost (needs {100 * rule.min_relative_gain:.0f}%)",
+        ),
+        (
+            best.folds_improved >= rule.min_folds_improved,
+            f"it improves only {100 * best.folds_improved:.0f}% of the held-out folds",
+        ),
+        (
+            clear,
+            (
+                f"{second.cause if second else ''} explains the residuals nearly as well "
+                f"(score {second.score if second else 0:.0f} vs {best.score:.0f}; better in {100 * frac_pair:.0f}% of the "
+                f"blocks of frames, t = {t_pair:.1f})"
+            ),
+        ),
+        (
+            distinct,
+            (
+                f"the same cause on {sibling.choice if sibling else ''} explains them nearly as well (score "
+                f"{sibling.score if sibling else 0:.0f}; better in {100 * frac_sib:.0f}% of the blocks, t = {t_sib:.1f}), "
+                "as a centre of mass misplaced in the model would"
+            ),
+        ),
+    ]
+    return best, second, [msg for ok, msg in checks if not ok]
+
+
 def choose(
     ranked: list[Evaluation],
     rule: ChoiceRule | None = None,
@@ -338,45 +389,17 @@ def choose(
             f"(the best, {best.cause}, {size}; worth naming from {rule.min_effect.get(best.cause, 0.0):g} "
             f"to {rule.max_effect.get(best.cause, np.inf):g})."
         )
-    best = contenders[0]
-    rivals = [e for e in contenders[1:] if channels(e.cause) == channels(best.cause)]
-    second = rivals[0] if rivals else None
-    clear, t_pair, frac_pair = _stands_out(best, second, rule, blocks)
-    siblings = [
-        e for e in (alternatives or []) if best.cause in rule.distinct_choice and e.cause == best.cause and e.choice != best.choice
-    ]
-    sibling = max(siblings, key=lambda e: e.score) if siblings else None
-    distinct, t_sib, frac_sib = _stands_out(best, sibling, rule, blocks)
-    checks = [
-        (best.score > 0, f"its score ({best.score:.0f}) is not positive"),
-        (
-            best.relative_gain >= rule.min_relative_gain,
-            f"it removes only {100 * best.relative_gain:.0f}% of the held-out cost (needs {100 * rule.min_relative_gain:.0f}%)",
-        ),
-        (
-            best.folds_improved >= rule.min_folds_improved,
-            f"it improves only {100 * best.folds_improved:.0f}% of the held-out folds",
-        ),
-        (
-            clear,
-            (
-                f"{second.cause if second else ''} explains the residuals nearly as well "
-                f"(score {second.score if second else 0:.0f} vs {best.score:.0f}; better in {100 * frac_pair:.0f}% of the "
-                f"blocks of frames, t = {t_pair:.1f})"
-            ),
-        ),
-        (
-            distinct,
-            (
-                f"the same cause on {sibling.choice if sibling else ''} explains them nearly as well (score "
-                f"{sibling.score if sibling else 0:.0f}; better in {100 * frac_sib:.0f}% of the blocks, t = {t_sib:.1f}), "
-                "as a centre of mass misplaced in the model would"
-            ),
-        ),
-    ]
-    failed = [msg for ok, msg in checks if not ok]
-    if failed:
+    # causes on different channels do not stand in each other's way: the best of each
+    # channel group is checked against its own runner-up, and the best that passes is named
+    groups: dict[str, list[Evaluation]] = {}
+    for e in contenders:
+        groups.setdefault(channels(e.cause), []).append(e)
+    verdicts = [_verdict(group, rule, blocks, alternatives) for group in groups.values()]
+    passed = [v for v in verdicts if not v[2]]
+    if not passed:
+        best, _, failed = verdicts[0]
         return None, f"No cause stands out: the best candidate, {best.cause}, is not chosen because " + "; ".join(failed) + "."
+    best, second, _ = passed[0]
     return best, (
         f"{best.cause} stands out: it removes {100 * best.relative_gain:.0f}% of the held-out cost of its channels "
         f"in {100 * best.folds_improved:.0f}% of the folds, with a score of {best.score:.0f} "

@@ -2,7 +2,8 @@
 
 The hidden-effect tests exercise the rule on real trials; these cases pin down the two
 comparisons it makes: a cause must stand out from the runner-up that explains the same
-residuals, and a cause acting on other channels (a marker's own error) is no such rival;
+residuals, and a cause acting on other channels (a marker's own error, the frames of
+unmeasured force) is no such rival, nor does its failing hide a cause that stands out;
 and the relative gain of a cause that acts on some frames only (a plate shift where its
 plate is loaded) is measured on those frames.
 """
@@ -61,6 +62,27 @@ def test_a_cause_on_other_channels_does_not_stand_in_the_way() -> None:
     ranked.sort(key=lambda e: e.score, reverse=True)
     chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT))
     assert chosen is not None and chosen.cause == ranked[0].cause, reason
+
+
+def test_a_cause_that_fails_does_not_hide_one_on_other_channels() -> None:
+    # frames with unmeasured force score highest but improve too few folds (their gain sits
+    # in one block); a plate offset, evaluated with those frames already out, stands out on
+    # the residuals: it is named (before 2026-11-22 the failed best blocked every cause)
+    frames = _evaluation("unmeasured_force", {"n_frames": 6}, 0.0)
+    frames.held_out_costs = frames.reference_costs.copy()
+    frames.held_out_costs[:20] -= 5.0
+    frames.gain = float(np.sum(frames.reference_costs - frames.held_out_costs))
+    frames.fold_gains = np.array([frames.gain, -1.0, -1.0, 1.0, -1.0])  # 2 of 5 folds improve
+    frames.score = frames.gain
+    offset = _evaluation("plate_force_offset", {"offset_N": [0.0, -20.0, 0.0]}, 0.3)
+    assert frames.score > offset.score
+    chosen, reason = choose([frames, offset], ChoiceRule(), make_blocks(T, DT))
+    assert chosen is offset, reason
+    assert "unmeasured_force" not in reason  # the frames are no runner-up of the offset
+    # and the plate offset is no rival of the frames: had they passed, they were named
+    frames.fold_gains = np.full(5, frames.gain / 5)
+    chosen, reason = choose([frames, offset], ChoiceRule(), make_blocks(T, DT))
+    assert chosen is frames, reason
 
 
 def test_a_rival_on_the_same_channels_blocks_the_choice() -> None:
