@@ -353,8 +353,9 @@ def choose(
 
     The contenders are the causes whose estimates (:attr:`Evaluation.estimates`) are all
     worth naming and plausible (:attr:`ChoiceRule.min_effect`, :attr:`ChoiceRule.max_effect`);
-    the best-scoring contender is chosen when it passes the rule's checks against the
-    runner-up contender acting on the same channels (:func:`channels`).
+    contenders are grouped by the channels they act on (:func:`channels`); the best of each
+    group is checked against its group's runner-up, and the best-scoring one that passes
+    the rule's checks is chosen (when none passes, the reason is that of the overall best).
 
     Parameters
     ----------
