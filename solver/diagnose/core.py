@@ -38,6 +38,7 @@ from solver.diagnose.selection import (
     ChoiceRule,
     Evaluation,
     best_per_cause,
+    channels,
     choose,
     cross_validate,
     make_blocks,
@@ -477,16 +478,19 @@ def choice_on_marker_motion(
     pressure under the large forces of running is absorbed too: the fit turns the body so
     that the shifted moment is balanced (on the treadmill run the fitted motion keeps
     0-10 % of a hidden 1-4 cm shift). The marker-only motion keeps every frame and owes
-    nothing to the forces. When the fitted motion names no cause or one acting on the
-    forces, the causes acting on the forces are compared on the marker-only motion (same
-    :func:`.selection.choose` rule, same frames U); if a delay or a plate shift
-    (:data:`MARKER_MOTION_CHOICES`) stands out there, it is the choice.
+    nothing to the forces. When the fitted motion names no cause, one acting on the
+    forces or a marker offset (which acts on other channels: the walk's own shoulder
+    markers stand out on every draw hidden in it), the causes acting on the forces are
+    compared on the marker-only motion (same :func:`.selection.choose` rule, same frames
+    U); if a delay or a plate shift (:data:`MARKER_MOTION_CHOICES`) stands out there, it is
+    the choice: a force error matters for every dynamic output, a marker offset for one
+    marker's fit.
 
     Returns
     -------
     (evaluation on the marker-only motion, the rule's sentence), or None
     """
-    if chosen is not None and chosen.cause not in FORCE_CAUSES:
+    if chosen is not None and chosen.cause not in FORCE_CAUSES and channels(chosen.cause) != "markers":
         return None
     force_side = [e for e in evaluations_ik if e.cause in FORCE_CAUSES]
     pick, why = choose(best_per_cause(force_side), rule, blocks, force_side)

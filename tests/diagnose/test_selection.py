@@ -150,3 +150,19 @@ def test_a_plate_shift_is_judged_on_the_frames_its_plate_is_loaded() -> None:
     assert 0.15 < on_loaded.relative_gain < 0.25
     assert on_all.relative_gain < ChoiceRule().min_relative_gain < on_loaded.relative_gain
     assert abs(on_loaded.parameters["value"] - 0.5) < 0.05
+
+
+def test_a_marker_offset_does_not_hide_a_force_delay_on_the_marker_only_motion() -> None:
+    # the fitted motion names a marker offset (the walk's own shoulder marker stands out on
+    # every draw hidden in it); on the marker-only motion a force delay stands out: the
+    # delay is the choice. Frames of unmeasured force named on the fitted motion keep it.
+    from solver.diagnose.core import choice_on_marker_motion
+
+    marker = _evaluation("marker_offset", MARKER, 0.5)
+    delay = _evaluation("force_time_offset", DELAY, 0.3)
+    delay.motion = "marker-only"
+    blocks = make_blocks(T, DT)
+    picked = choice_on_marker_motion(marker, [delay], ChoiceRule(), blocks)
+    assert picked is not None and picked[0] is delay
+    frames = _evaluation("unmeasured_force", {"n_frames": 20}, 0.5)
+    assert choice_on_marker_motion(frames, [delay], ChoiceRule(), blocks) is None
