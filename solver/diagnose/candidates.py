@@ -535,7 +535,8 @@ def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
 #: loaded start and end too); or exceeds LARGE_BW for LARGE_SECONDS anyway
 #: (another unmeasured contact: sustained, unlike the transients of a time offset between
 #: forces and motion at each foot strike). Runs grow while the missing support force
-#: exceeds GROW_BW (a step's load builds up and fades), then by PAD_FRAMES on each side.
+#: exceeds GROW_BW (a step's load builds up and fades), then by PAD_FRAMES on each side that
+#: does not end on flagged frames (an applied extension's frames were padded already).
 SUPPORT_BW = 0.25
 SUPPORT_FRAMES = 8
 LARGE_BW = 0.4
