@@ -593,5 +593,5 @@ def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
             if not mask[j]:
                 mask[j] = True
                 reasons[j] = "next to unmeasured frames"
-    mask &= ~data.flagged
+    mask &= ~flagged
     return mask, [r if m else "" for r, m in zip(reasons, mask)]

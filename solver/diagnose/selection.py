@@ -48,10 +48,10 @@ def make_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 
     block_seconds
         Block length, s.
     """
-    block = max(round(block_seconds / dt), 1)
-    n_blocks = int(np.ceil(n_frames / block))
+    blocks = make_blocks(n_frames, dt, block_seconds)
+    n_blocks = int(blocks[-1]) + 1 if n_frames else 0
     k = int(max(2, min(folds, n_blocks // 2)))
-    return ((np.arange(n_frames) // block) % k).astype(np.intp)
+    return (blocks % k).astype(np.intp)
 
 
 @dataclass

@@ -201,7 +201,6 @@ def solve_trajectory(
     return out
 
 
-
 def solve_trajectory_from_best_frame(solver: FrameSolver, obs: FloatArray, q_guess: FloatArray) -> FloatArray:
     """:func:`solve_trajectory` started at the frame that sees the most markers, then run
     forwards and backwards in time from there.
