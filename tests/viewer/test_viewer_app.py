@@ -21,7 +21,6 @@ from viewer_support import ProtocolClient, wait_for
 
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.cli import main as cli_main
-from addb_viewer.demo import DEMO_SUBJECT
 
 REPO = Path(__file__).resolve().parents[2]
 
