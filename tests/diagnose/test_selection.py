@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from solver.diagnose.candidates import LinearAlternative
 from solver.diagnose.selection import (
@@ -22,7 +21,6 @@ from solver.diagnose.selection import (
     cross_validate,
     make_blocks,
     make_folds,
-    t_value,
 )
 
 T = 200
@@ -187,26 +185,3 @@ def test_an_estimate_within_two_standard_errors_of_none_is_no_contender() -> Non
     assert choose([gain], ChoiceRule(), make_blocks(T, DT))[0] is None
     gain.uncertainty = 0.01
     assert choose([gain], ChoiceRule(), make_blocks(T, DT))[0] is gain
-
-
-def test_a_vector_estimate_is_judged_component_by_component() -> None:
-    # a walk draw hiding a 2.7 cm plate shift: estimate [-1.6, 0, -0.8] ± [0.9, 0, 0.3] cm.
-    # Norm over norm (1.8 / 0.95 = 1.9) called it noise; its forward part alone lies 2.7
-    # standard errors from zero, and the Wald statistic of the two (3.2 + 7.1 = 10.3, two
-    # degrees of freedom) has the tail of a scalar t of 2.8
-    shift = _evaluation("plate_position_offset", {"value": [-0.016, 0.0, -0.008], "shift_m": [-0.016, 0.0, -0.008]}, 0.15)
-    shift.uncertainty = [0.009, 0.0, 0.003]
-    assert t_value(shift) == pytest.approx(stats.norm.isf(stats.chi2.sf((16 / 9) ** 2 + (8 / 3) ** 2, 2) / 2))
-    assert 2.7 < t_value(shift) < 2.9
-    assert choose([shift], ChoiceRule(), make_blocks(T, DT))[0] is shift
-    # the same estimate with the sideways error on both parts is noise
-    shift.uncertainty = [0.009, 0.0, 0.009]
-    assert t_value(shift) < 2.0
-    chosen, reason = choose([shift], ChoiceRule(), make_blocks(T, DT))
-    assert chosen is None and "standard errors of no effect" in reason
-    # one scalar: the plain t; a nonzero part with no spread over the folds is certain
-    mass = _evaluation("body_mass", {"value": -3.0, "mass_change_kg": -3.0}, 0.15)
-    mass.uncertainty = 1.2
-    assert t_value(mass) == pytest.approx(2.5)
-    shift.uncertainty = [0.009, 0.0, 0.0]
-    assert t_value(shift) == np.inf
