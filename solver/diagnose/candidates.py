@@ -19,7 +19,7 @@ unmeasured_force           frames U leave the residual terms (the paper's free  
 body_mass                  inertial wrench scaled to the stated mass + dm        dm, kg
 force_time_offset          plates read at t + delay (1-D search, 1 ms grid)      delay, s
 plate_force_offset         plate p's force minus a constant vector acting at     plate, (3,) N
-                           its centre of pressure (its centre when unloaded)
+                           its centre (zero drift: the plate's moment stays)
 plate_force_gain           plate p's wrench divided by its gain                  plate, gain
 plate_position_offset      plate p's centre of pressure minus a horizontal       plate, (3,) m
                            shift (y stays: the plate surface is levelled)        (y = 0)
@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from solver.diagnose.data import LOADED_BW, DiagnosisData
 from solver.diagnose.profile import ROWS, Profile, Sigmas, skew
-from solver.dynamics.preprocess import cop_from_wrench, true_runs
+from solver.dynamics.preprocess import true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -311,21 +311,6 @@ def _plate_idle(ctx: Context, plate: int, cols: FloatArray) -> FloatArray:
     return out
 
 
-def plate_points(data: DiagnosisData) -> FloatArray:
-    """``(P, T, 3)`` where each plate's force acts: its centre of pressure where loaded, its
-    centre (median loaded centre of pressure) elsewhere, m."""
-    f, m_o, _ = data.plates.on(data.time)
-    out = np.empty_like(f)
-    for i in range(f.shape[0]):
-        loaded_cop = data.plates.centre[i]
-        plane = float(loaded_cop[1])
-        cop, _ = cop_from_wrench(f[i], m_o[i], plane, LOADED_BW * data.bw)
-        bad = ~np.isfinite(cop).all(axis=1)
-        cop[bad] = data.plates.centre[i]
-        out[i] = cop
-    return out
-
-
 # --------------------------------------------------------------------------- causes
 
 
@@ -344,21 +329,25 @@ def body_mass(ctx: Context) -> list[Alternative]:
 
 
 def plate_force_offset(ctx: Context) -> list[Alternative]:
-    """``plate_force_offset``: plate p reads F + offset; the offset acts at its CoP (centre when unloaded)."""
+    """``plate_force_offset``: plate p reads F + offset, the zero drift of its force
+    channels; the offset acts at the plate's centre (``RawPlates.centre``), where the plate
+    refers its moment, not at the moving centre of pressure
+    (:func:`solver.diagnose.extensions.offset_plate`)."""
     d = ctx.data
-    points = plate_points(d)
     idle = d.plates.on(d.time)[2]
     out: list[Alternative] = []
     eye = np.broadcast_to(np.eye(3), (d.n_frames, 3, 3))
     for i, name in enumerate(d.plates.names):
         # residual change for an offset o: force +o, moment +(c - p) x o (not where idle);
         # idle readings change by -o
-        wrench = np.concatenate([eye, skew(points[i] - d.pelvis)], axis=1)  # (T, 6, 3)
+        wrench = np.concatenate([eye, skew(d.plates.centre[i] - d.pelvis)], axis=1)  # (T, 6, 3)
         wrench = np.where(idle[i][:, None, None], 0.0, wrench)
         g = _profiled(ctx, wrench, _plate_idle(ctx, i, np.where(idle[i][:, None, None], -eye, 0.0)))
 
-        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
-            return {"value": theta.tolist(), "plate": name, "offset_N": [float(v) for v in theta]}
+        centre = d.plates.centre[i].tolist()
+
+        def physical(theta: FloatArray, name: str = name, centre: list[float] = centre) -> dict[str, Any]:
+            return {"value": theta.tolist(), "plate": name, "offset_N": [float(v) for v in theta], "centre_m": centre}
 
         out.append(LinearAlternative("plate_force_offset", name, ctx.ref_rows, g, physical, ("offset_x_N", "offset_y_N", "offset_z_N")))
     return out

@@ -258,7 +258,7 @@ def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray
     if ev.cause == "force_time_offset":
         return {"cause": "force_time_offset", "trial": trial, "delay_s": p["delay_s"]}
     if ev.cause == "plate_force_offset":
-        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "offset_N": p["offset_N"]}
+        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "offset_N": p["offset_N"], "centre_m": p["centre_m"]}
     if ev.cause == "plate_force_gain":
         return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "gain": p["gain"]}
     if ev.cause == "plate_position_offset":

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.dynamics.preprocess import lowpass, moment_about_origin, resample, true_runs
-from solver.io.types import ForceRecording
+from solver.io.types import ForcePlate, ForceRecording
 from solver.model.osim import Body, OsimModel, read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
@@ -62,8 +62,8 @@ class RawPlates:
     force, moment
         ``(P, R, 3)`` filtered force (N) and moment about the ground origin (N·m), ground frame.
     centre
-        ``(P, 3)`` where a plate's unloaded reading acts: the median centre of pressure of
-        its loaded samples, m (the plate or foot region).
+        ``(P, 3)`` where a plate's zero drift acts, m (:func:`plate_centre`: its corners'
+        centre, or the median centre of pressure of its loaded samples).
     idle
         ``(P, R)`` samples where nobody stands on the plate (:func:`idle_samples`): its true
         force is zero there, whatever it reads.
@@ -117,6 +117,17 @@ def idle_samples(force: FloatArray, rate_hz: float, bw: float) -> BoolArray:
     return out
 
 
+def plate_centre(plate: ForcePlate, bw: float) -> FloatArray:
+    """``(3,)`` the point a plate refers its readings to, ground frame, m: the centre of its
+    corners when the recording gives them (C3D), otherwise the median centre of pressure of
+    its samples loaded above LOADED_BW body weights (``bw`` N), the origin if none is."""
+    if plate.corners is not None:
+        return np.asarray(plate.corners, dtype=float).mean(axis=0)
+    cop = np.asarray(plate.cop, dtype=float)
+    loaded = np.nan_to_num(np.asarray(plate.force, dtype=float)[:, 1]) > LOADED_BW * bw
+    return np.nan_to_num(np.nanmedian(cop[loaded], axis=0)) if loaded.any() else np.zeros(3)
+
+
 def raw_plates(forces: ForceRecording, cutoff_hz: float, order: int, bw: float) -> RawPlates:
     """Filter every plate of a raw recording (zero-phase Butterworth, as the dynamics stage).
 
@@ -134,8 +145,7 @@ def raw_plates(forces: ForceRecording, cutoff_hz: float, order: int, bw: float) 
         f = np.nan_to_num(np.asarray(p.force, dtype=float))
         cop = np.asarray(p.cop, dtype=float)
         m_o = moment_about_origin(f, cop, np.nan_to_num(np.asarray(p.free_moment, dtype=float)))
-        loaded = f[:, 1] > LOADED_BW * bw
-        centre = np.nanmedian(cop[loaded], axis=0) if loaded.any() else np.zeros(3)
+        centre = plate_centre(p, bw)
         f_all.append(lowpass(f, forces.rate_hz, cutoff_hz, order))
         m_all.append(lowpass(m_o, forces.rate_hz, cutoff_hz, order))
         centres.append(np.nan_to_num(centre))

@@ -7,7 +7,8 @@ two gains multiply)::
 
     {"schema": "addb.extensions", "version": 1, "extensions": [
         {"cause": "force_time_offset", "trial": "walk", "delay_s": 0.038},
-        {"cause": "plate_force_offset", "trial": "walk", "plate": "l", "offset_N": [20.1, 39.8, -17.5]},
+        {"cause": "plate_force_offset", "trial": "walk", "plate": "l", "offset_N": [20.1, 39.8, -17.5],
+         "centre_m": [0.35, 0.0, 0.2]},
         {"cause": "plate_force_gain", "trial": "walk", "plate": "r", "gain": 1.05},
         {"cause": "plate_position_offset", "trial": "walk", "plate": "r", "shift_m": [0.03, 0.0, 0.0]},
         {"cause": "marker_offset", "trial": "walk", "marker": "R.Knee", "body": "femur_r",
@@ -22,8 +23,10 @@ two gains multiply)::
 (each entry also records ``source`` and ``created``). Corrections:
 
 * ``force_time_offset``: the force samples move to ``time - delay_s`` (forces were late);
-* ``plate_force_offset``: the plate's force minus ``offset_N`` (centre of pressure and free
-  moment as recorded);
+* ``plate_force_offset``: the plate's force minus ``offset_N`` acting at ``centre_m``, the
+  plate's centre (its moment about that point as recorded; centre of pressure and free
+  moment derived again, :func:`offset_plate`); entries without ``centre_m`` (saved before
+  2026-11-22) subtract it at the centre of pressure;
 * ``plate_force_gain``: the plate's force and free moment divided by ``gain``;
 * ``plate_position_offset``: the plate's centre of pressure minus ``shift_m``;
 * ``marker_offset``: the marker's recorded positions minus ``lab_shift_m`` (its body-fixed
@@ -54,6 +57,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.dynamics.preprocess import cop_from_wrench, moment_about_origin
 from solver.errors import SubjectFolderError
 from solver.io.subject import Subject, Trial
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
@@ -64,6 +68,7 @@ SCHEMA = "addb.extensions"
 VERSION = 1
 
 BoolArray = NDArray[np.bool_]
+FloatArray = NDArray[np.float64]
 
 
 def extensions_path(subject_dir: str | Path) -> Path:
@@ -135,7 +140,10 @@ def correct_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecor
         return ForceRecording(np.asarray(forces.time) - float(ext["delay_s"]), forces.rate_hz, forces.plates, forces.source)
     if cause == "plate_force_offset":
         off = np.asarray(ext["offset_N"], dtype=float)
-        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force - off, p.cop, p.free_moment, p.corners))
+        if "centre_m" not in ext:  # entries saved before 2026-11-22 (fourth session): at the CoP
+            return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force - off, p.cop, p.free_moment, p.corners))
+        centre = np.asarray(ext["centre_m"], dtype=float)
+        return _map_plates(forces, ext["plate"], lambda p: offset_plate(p, -off, centre))
     if cause == "plate_force_gain":
         g = float(ext["gain"])
         return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force / g, p.cop, p.free_moment / g, p.corners))
@@ -143,6 +151,37 @@ def correct_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecor
         s = np.asarray(ext["shift_m"], dtype=float)
         return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force, p.cop - s, p.free_moment, p.corners))
     return forces
+
+
+#: Below this vertical force (N) a plate's corrected centre of pressure is not recomputed
+#: (:func:`offset_plate`): the recorded one is kept, where a near-zero force acts.
+COP_MIN_FORCE_N = 20.0
+
+
+def offset_plate(plate: ForcePlate, offset: FloatArray, centre: FloatArray) -> ForcePlate:
+    """A plate whose readings gain a constant force ``offset`` (3,) N acting at ``centre``
+    (3,) m, ground frame: the zero drift of its force channels.
+
+    A plate measures force and moment about its own reference point; a drift of its force
+    channels leaves that moment as it was, so the offset acts at the plate (its centre), not
+    at the foot's centre of pressure, and the centre of pressure the lab software derives
+    from the drifted force moves. Here the moment about the ground
+    origin gains ``centre x offset`` and the centre of pressure and vertical free moment are
+    derived again from the new force and moment (on the plane of ``centre``), where the new
+    vertical force exceeds :data:`COP_MIN_FORCE_N`; elsewhere the recorded ones are kept.
+
+    ``offset`` = -(a drift) corrects a drifting plate; + (a drift) hides one.
+    """
+    f = np.asarray(plate.force, dtype=float)
+    cop = np.asarray(plate.cop, dtype=float)
+    free = np.asarray(plate.free_moment, dtype=float)
+    m_o = moment_about_origin(np.nan_to_num(f), np.nan_to_num(cop), np.nan_to_num(free)) + np.cross(centre, offset)
+    f_new = f + offset
+    cop_new, free_new = cop_from_wrench(np.nan_to_num(f_new), m_o, float(centre[1]), COP_MIN_FORCE_N)
+    keep = ~np.isfinite(cop_new).all(axis=1)
+    cop_new[keep] = cop[keep]
+    free_new[keep] = free[keep]
+    return ForcePlate(plate.name, f_new, cop_new, free_new, plate.corners)
 
 
 def correct_markers(markers: MarkerTrajectories, ext: Mapping[str, Any]) -> MarkerTrajectories:

@@ -6,8 +6,10 @@ Conventions (what each cause's parameter means, as :mod:`solver.diagnose` report
 
 * ``force_time_offset``: the force file's time column + delay (forces recorded late);
 * ``body_mass``: ``massKg`` - change (the true mass is the stated one + change);
-* ``plate_force_offset``: force + offset on every sample; where the plate is unloaded the
-  centre of pressure is set to its centre (median loaded CoP), where a drift would act;
+* ``plate_force_offset``: force + offset on every sample, acting at the plate's centre
+  (median loaded CoP): the moment about that point as recorded, the centre of pressure and
+  free moment derived again (:func:`solver.diagnose.extensions.offset_plate`; where the
+  plate is unloaded the centre of pressure is its centre);
 * ``plate_force_gain``: force and free moment x gain;
 * ``plate_position_offset``: centre of pressure + a horizontal shift;
 * ``marker_offset``: a landmark (``fixed``) marker's recorded positions + R_body(t) shift,
@@ -29,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from solver.diagnose.data import wxyz_to_matrix
+from solver.diagnose.data import plate_centre, wxyz_to_matrix
+from solver.diagnose.extensions import offset_plate
 from solver.io.mot import read_forces, write_forces
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
@@ -146,12 +149,12 @@ def hide_plate_offset(subject: Path, trial: str, rng: np.random.Generator) -> Hi
     bw = 9.80665 * stated_mass(subject)
 
     def fn(p: ForcePlate) -> ForcePlate:
-        f = np.asarray(p.force)
-        loaded = f[:, 1] > 0.02 * bw
-        centre = np.nanmedian(np.asarray(p.cop)[loaded], axis=0)
+        # a drift of the force channels: the plate's moment about its centre stays, the
+        # exported centre of pressure follows the drifted force
+        centre = plate_centre(p, bw)
         cop = np.array(p.cop)
-        cop[np.linalg.norm(f, axis=1) < 1.0] = centre
-        return ForcePlate(p.name, f + offset, cop, p.free_moment, p.corners)
+        cop[np.linalg.norm(np.asarray(p.force), axis=1) < 1.0] = centre
+        return offset_plate(ForcePlate(p.name, p.force, cop, p.free_moment, p.corners), offset, centre)
 
     _edit_forces(subject, trial, lambda r: _map_plate(r, plate, fn))
     return Hidden("plate_force_offset", plate, {"offset_N": offset.tolist()})

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from solver.diagnose.data import plate_centre
 from solver.diagnose.extensions import (
     append_extension,
     correct_forces,
@@ -65,10 +66,27 @@ def test_force_corrections_undo_the_hidden_effect(walk: Path, hide, entry) -> No
 def test_plate_offset_correction_restores_the_loaded_force(walk: Path) -> None:
     original = _plates(WALK / "trials" / "walk" / "grf.mot")
     hidden = hide_plate_offset(walk, "walk", np.random.default_rng(3))
-    entry = {"cause": "plate_force_offset", "trial": "walk", "plate": hidden.choice, **hidden.truth}
+    bw = 9.80665 * load_subject(WALK).mass_kg
+    plate = next(p for p in read_forces(WALK / "trials" / "walk" / "grf.mot").plates if p.name == hidden.choice)
+    centre = plate_centre(plate, bw).tolist()
+    drifted = {p.name: p for p in read_forces(walk / "trials" / "walk" / "grf.mot").plates}[hidden.choice]
+    force, cop, free = original[hidden.choice]
+    loaded = np.nan_to_num(force[:, 1]) > 0.1 * bw
+    # the drift moved the exported centre of pressure (its force acts at the plate's centre)
+    assert np.max(np.linalg.norm(np.asarray(drifted.cop)[loaded] - cop[loaded], axis=1)) > 0.005
+    entry = {"cause": "plate_force_offset", "trial": "walk", "plate": hidden.choice, **hidden.truth, "centre_m": centre}
     corrected = correct_forces(read_forces(walk / "trials" / "walk" / "grf.mot"), entry)
-    got = {p.name: np.asarray(p.force) for p in corrected.plates}
-    np.testing.assert_allclose(np.nan_to_num(got[hidden.choice]), np.nan_to_num(original[hidden.choice][0]), atol=1e-3)
+    got = {p.name: p for p in corrected.plates}[hidden.choice]
+    np.testing.assert_allclose(np.nan_to_num(got.force), np.nan_to_num(force), atol=1e-3)
+    # where the plate bears load, the centre of pressure and free moment come back too (to the
+    # precision of the file's digits)
+    np.testing.assert_allclose(np.asarray(got.cop)[loaded], cop[loaded], atol=2e-4)
+    np.testing.assert_allclose(np.asarray(got.free_moment)[loaded], free[loaded], atol=0.05)
+    # an entry saved before the centre was recorded subtracts the force at the recorded CoP
+    old = correct_forces(read_forces(walk / "trials" / "walk" / "grf.mot"), {k: v for k, v in entry.items() if k != "centre_m"})
+    old_plate = {p.name: p for p in old.plates}[hidden.choice]
+    np.testing.assert_allclose(np.nan_to_num(old_plate.force), np.nan_to_num(force), atol=1e-3)
+    np.testing.assert_array_equal(np.asarray(old_plate.cop), np.asarray(drifted.cop))
 
 
 def test_marker_correction_subtracts_the_lab_shift(walk: Path) -> None:
