@@ -142,13 +142,24 @@ def main() -> None:
     p.add_argument("--causes", default="", help="comma-separated subset (default: all)")
     p.add_argument("--json", type=Path)
     p.add_argument("--markdown", type=Path)
-    p.add_argument("--from-json", type=Path, nargs="+", help="only merge earlier --json results into one table")
+    p.add_argument(
+        "--from-json", type=Path, nargs="+",
+        help="only merge earlier --json results into one table (a later file's rows of a cause replace the earlier files')",
+    )
     args = p.parse_args()
     if args.from_json:
         parts = [json.loads(f.read_text()) for f in args.from_json]
+        # a later file's rows of a cause (and its synthetic trials, if any) replace the
+        # earlier files' (a cause re-measured after a change to it)
+        rows: list[dict[str, Any]] = []
+        synthetic: list[dict[str, Any]] = []
+        for x in parts:
+            redone = {r["cause"] for r in x["rows"]}
+            rows = [r for r in rows if r["cause"] not in redone] + list(x["rows"])
+            synthetic = list(x["synthetic"]) if x["synthetic"] else synthetic
         result = {
-            "rows": [r for x in parts for r in x["rows"]],
-            "synthetic": [s for x in parts for s in x["synthetic"]],
+            "rows": rows,
+            "synthetic": synthetic,
             "bases": parts[0]["bases"],
             "draws": parts[0]["draws"],
             "trials": parts[0]["trials"],
