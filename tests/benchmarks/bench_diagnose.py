@@ -157,6 +157,7 @@ def main() -> None:
             redone = {r["cause"] for r in x["rows"]}
             rows = [r for r in rows if r["cause"] not in redone] + list(x["rows"])
             synthetic = list(x["synthetic"]) if x["synthetic"] else synthetic
+        rows.sort(key=lambda r: CAUSES.index(r["cause"]) if r["cause"] in CAUSES else len(CAUSES))
         result = {
             "rows": rows,
             "synthetic": synthetic,

@@ -35,7 +35,7 @@ RELIABLE = {
 #: usually neither stands out; a plate offset is named there, but its held-out residual
 #: check fails: the run draw of these causes is an expected failure.
 RUN_GAP = {
-    "plate_force_offset": "named and recovered on the run (10 of 10 benchmark draws), but on this draw the held-out moment residual rises with the extension (6.7 -> 8.8 N m)",
+    "plate_force_offset": "named and recovered on the run (10 of 10 benchmark draws), but on this draw the held-out moment residual rises with the extension (6.5 -> 8.7 N m, docs/diagnose/RESULTS.md)",
     "plate_force_gain": "on the treadmill run a one-plate gain competes with a body-mass change; usually neither stands out",
 }
 #: Causes not yet named reliably (detection rates in docs/diagnose/RESULTS.md): their first
