@@ -277,6 +277,7 @@ def t_value(ev: Evaluation) -> float:
     size = float(np.linalg.norm(value))
     return size / se if se > 0 else float("inf")
 
+
 def best_per_cause(evaluations: list[Evaluation]) -> list[Evaluation]:
     """The best-scoring alternative of each cause, best first."""
     best: dict[str, Evaluation] = {}

@@ -237,6 +237,7 @@ def solve_trajectory_from_best_frame(solver: FrameSolver, obs: FloatArray, q_gue
     backward = solve_trajectory(solver, obs[anchor::-1], forward[0])[::-1]
     return np.concatenate([backward[:-1], forward])
 
+
 #: RMS marker error (m) of a local solve from the default limb pose above which the
 #: joint-by-joint grid search (:func:`greedy_pose`) is used to start the frame.
 GREEDY_TRIGGER_M = 0.02
