@@ -18,7 +18,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from solver.diagnose.report import candidate_line, metric_row
+from solver.diagnose.report import candidate_line, held_out_labels, metric_row
 
 DIAGNOSIS_FILE = "diagnosis.json"
 
@@ -97,9 +97,14 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
         blocks.append("```\n" + "\n".join(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]) + "\n```")
     if chosen:
         held = report.get("held_out") or {}
-        rows = [metric_row("before", report.get("baseline")), metric_row("after (refit)", report.get("after"))]
+        rows = [
+            metric_row("before", report.get("baseline")),
+            metric_row("before (refit, none)", report.get("before_refit")),
+            metric_row("after (refit)", report.get("after")),
+        ]
         if held:
-            rows += [metric_row("held-out before", held.get("before")), metric_row("held-out after", held.get("after"))]
+            before, after = held_out_labels(held)
+            rows += [metric_row(before, held.get("before")), metric_row(after, held.get("after"))]
         blocks.append("Before and after the extension:")
         blocks.append("```\n" + "\n".join(r.strip() for r in rows) + "\n```")
     return blocks

@@ -99,7 +99,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "candidate cause (unmeasured force, body mass, force/motion time offset, plate force "
             "offset and gain, plate position, segment mass distribution, marker offset) on "
             "training frames and score it on held-out frames, name the cause that stands out (or "
-            "none), refit with it and report the gain. The subject is processed first if needed."
+            "none), refit with and without it and report the gain. The subject is processed first if needed."
         ),
     )
     p.add_argument("subject", help="AddBiomechanics subject folder")

@@ -24,7 +24,7 @@ import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,8 +47,11 @@ from solver.diagnose.selection import (
 from solver.dynamics.preprocess import nearest_frames
 from solver.errors import DiagnosisError
 from solver.io.subject import Subject, Trial, load_subject, load_trial
-from solver.model.osim import read_osim
+from solver.model.osim import OsimModel, read_osim
 from solver.results import ProcessedTrial, load_processed
+
+if TYPE_CHECKING:
+    from solver.diagnose.refit import Refit
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -103,7 +106,10 @@ class Diagnosis:
     parameters
         The chosen cause's parameters after the refit's refinement (or its first estimate).
     after
-        Metrics of the refitted trial (results.json keys), or None.
+        Metrics of the trial refitted with the extension (results.json keys), or None.
+    before_refit
+        Metrics of the same refit without the extension (what the refit alone gains, by
+        starting from the processed motion, is not credited to the extension), or None.
     held_out
         ``{"before": {...}, "after": {...}}`` held-out figures of the chosen cause.
     extension
@@ -124,6 +130,7 @@ class Diagnosis:
     reason: str
     parameters: dict[str, Any] | None = None
     after: dict[str, Any] | None = None
+    before_refit: dict[str, Any] | None = None
     held_out: dict[str, Any] | None = None
     extension: dict[str, Any] | None = None
     settings: dict[str, Any] = field(default_factory=dict)
@@ -213,11 +220,12 @@ def _figures(ctx: C.Context, rows: FloatArray, frames: BoolArray, evaluated: Boo
     }
 
 
-def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray) -> dict[str, Any]:
+def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scored: BoolArray | None = None) -> dict[str, Any]:
     """Before/after figures on held-out frames: every frame scored after a fit without its fold.
 
     Before: the reference (processed motion, stated mass, translation re-optimized). After:
-    the extension with the parameters of the fold the frame was held out of.
+    the extension with the parameters of the fold the frame was held out of. ``scored``
+    ``(T,)``: the frames whose residuals count (default: every evaluated frame).
     """
     d = ctx.data
     t = d.n_frames
@@ -232,7 +240,7 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray) -> d
             lab[test] = np.einsum("tij,j->ti", d.markers.rotation[test, j], theta)
         else:
             after_rows[test] = alt.rows(theta)[test]
-    everything = np.ones(t, dtype=bool)
+    frames = np.ones(t, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
     before_eval = ~d.flagged if alt.cause == "unmeasured_force" else ctx.evaluated
     before_rows = ctx.ref_rows
     if alt.cause == "unmeasured_force":
@@ -240,8 +248,8 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray) -> d
         before_rows = prof.project(prof.raw_rows(d.residual(), d.external()[2]))
     marker = None if j is None else (j, lab)
     return {
-        "before": _figures(ctx, before_rows, everything, before_eval, None),
-        "after": _figures(ctx, after_rows, everything, ctx.evaluated, marker),
+        "before": _figures(ctx, before_rows, frames, before_eval, None),
+        "after": _figures(ctx, after_rows, frames, ctx.evaluated, marker),
         "note": "fixed kinematics, translation re-optimized; after: parameters fitted without the frame's fold",
     }
 
@@ -377,7 +385,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     model = read_osim(processed.model_path)
     say("preparing", 0.05)
 
-    def prep(trial: ProcessedTrial) -> DiagnosisData:
+    def prep(trial: ProcessedTrial, fitted: OsimModel = model) -> DiagnosisData:
         return prepare(
             trial,
             inputs.raw.forces,
@@ -386,7 +394,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             generic_model=generic,
             marker_offsets=inputs.marker_offsets,
             feet=subject.foot_body_names,
-            model=model,
+            model=fitted,
         )
 
     data = prep(processed)
@@ -450,8 +458,25 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         result.parameters = dict(chosen.parameters)
         result.extension = extension_entry(chosen, data, marker_time)
         if options.refit:
-            say(f"refitting with {chosen.cause}", 0.3)
-            refit_result(result, inputs, marker_time)
+            say(f"refitting with and without {chosen.cause}", 0.3)
+            t_refit = _time.perf_counter()
+            refit, plain = _refits(result, inputs, marker_time, data_ik.trial.q)
+            result.after, result.before_refit = refit.metrics, plain.metrics
+            result.seconds["refit"] = _time.perf_counter() - t_refit
+            if chosen.cause in FORCE_CORRECTIONS and held_ctx is ctx:
+                # the processed motion was bent to balance the uncorrected forces: score the
+                # corrected forces on the motion refitted with them, against the same refit
+                # without them (the parameters of each frame still fitted without its fold)
+                ctx_p, full_p = build_context(prep(plain.trial, plain.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
+                ctx_r, full_r = build_context(prep(refit.trial, refit.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
+                both = ctx_p.evaluated & ctx_r.evaluated  # the two refits may leave out different frames
+                result.held_out.update(
+                    before=held_out_figures(ctx_p, _alt_of(alternatives(ctx_p, full_p, (chosen.cause,)), chosen), folds, both)["before"],
+                    after=held_out_figures(ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen), folds, both)["after"],
+                    motion="refitted",
+                    note="translation re-optimized; on the motions refitted without (before) and with (after) the "
+                    "extension, each frame corrected with parameters fitted without its fold",
+                )
     result.seconds["total"] = _time.perf_counter() - t0
     say("done", 1.0)
     return result
@@ -459,6 +484,11 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
 
 #: Causes that act on the measured forces (the plates' readings or the body's weight).
 FORCE_CAUSES = ("body_mass", "force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
+
+
+#: Causes that correct the plates' readings alone (model and markers as processed): their
+#: held-out "after" figures are taken on the refitted motion (:func:`_diagnose`).
+FORCE_CORRECTIONS = ("force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
 
 
 #: Force-side causes that may be chosen on the marker-only motion (:func:`choice_on_marker_motion`).
@@ -505,8 +535,38 @@ def choice_on_marker_motion(
 MARKER_MOTION_ESTIMATES = (*FORCE_CAUSES, "marker_offset")
 
 
-def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray) -> None:
-    """Refit the trial with the chosen extension and fill ``after`` (results.json keys)."""
+def _refits(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray, ik_q: FloatArray) -> tuple[Refit, Refit]:
+    """The refits with and without the chosen extension (``ik_q``: the marker-only motion,
+    see :func:`refit_result`), side by side in two processes where the platform can fork
+    (the two are independent; each takes seconds), else in turn."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    if "fork" in mp.get_all_start_methods():
+        try:
+            with ProcessPoolExecutor(1, mp_context=mp.get_context("fork")) as pool:
+                plain_job = pool.submit(refit_result, result, inputs, marker_time, False)
+                refit = refit_result(result, inputs, marker_time, ik_q=ik_q)
+                return refit, plain_job.result()
+        except (BrokenProcessPool, OSError):  # pragma: no cover - no process to spare
+            pass
+    return refit_result(result, inputs, marker_time, ik_q=ik_q), refit_result(result, inputs, marker_time, extension=False)
+
+
+def refit_result(
+    result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray, extension: bool = True, ik_q: FloatArray | None = None
+) -> Refit:
+    """Refit the trial with the chosen extension (``extension=False``: with none, the
+    reference the extension's refit is measured against) and return the refit
+    (:class:`solver.diagnose.refit.Refit`).
+
+    Without reviewer flags the extension's refit proposes its unmeasured frames as the next
+    processing would: on ``ik_q`` ``(T, n)``, the marker-only motion, when given (proposals
+    made on the processed motion differ at the edges of their runs, and the frames they let
+    in bend the refitted motion). The refit without the extension keeps the frames the
+    processing left out (same inputs, same frames).
+    """
     from solver.diagnose.refit import redistribute, refit_trial
 
     data = result.data
@@ -521,8 +581,14 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
     # as `addb process` would: a reviewer's flags replace the solver's proposals; saved
     # extensions and an unmeasured_force extension join them
     flagged = np.asarray(data.flagged, dtype=bool)
-    known = flagged.copy()
-    if ev.cause == "body_mass":
+    known: BoolArray | None = flagged.copy()
+    unmeasured = flagged if inputs.reviewed else None
+    if not extension:
+        # the processing continued on the same inputs: the frames it left out stay out (the
+        # refit's own proposals, made on the processed motion instead of the inverse
+        # kinematics, differ at the edges of its runs)
+        unmeasured, known = np.asarray(trial.unobserved, dtype=bool), None
+    elif ev.cause == "body_mass":
         mass += p["mass_change_kg"]
     elif ev.cause == "segment_mass_distribution":
         model = redistribute(model, p["mass_change_kg"])
@@ -537,12 +603,17 @@ def refit_result(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray
             known[a:b] = True
     else:
         forces = correct_forces(forces, extension_entry(ev, data, marker_time))
-    unmeasured = flagged if inputs.reviewed else None
-    refit = refit_trial(
-        trial, model, forces, mass_kg=mass, feet=data.feet, unmeasured=unmeasured, known_unmeasured=known, observed=observed
+    return refit_trial(
+        trial,
+        model,
+        forces,
+        mass_kg=mass,
+        feet=data.feet,
+        unmeasured=unmeasured,
+        known_unmeasured=known,
+        observed=observed,
+        proposal_q=ik_q if extension else None,
     )
-    result.after = refit.metrics
-    result.seconds["refit"] = refit.seconds
 
 
 def diagnose_trial(

@@ -5,7 +5,9 @@ from the processed coordinates (instead of inverse kinematics) with the processe
 (scaled, mass-fitted) model, on the extension-corrected raw forces and markers, and with
 fewer Gauss-Newton rounds than the pipeline (it starts near the optimum). It gives the
 metrics "after" the extension, in the pipeline's own terms (results.json keys), and a
-:class:`~solver.results.ProcessedTrial` the diagnosis can look at again.
+:class:`~solver.results.ProcessedTrial` the diagnosis can look at again. The diagnosis
+runs it twice, with and without the extension (:func:`solver.diagnose.core.refit_result`):
+starting from the processed motion, the refit lowers the residual by itself.
 """
 
 from __future__ import annotations
@@ -79,6 +81,7 @@ def refit_trial(
     known_unmeasured: BoolArray | None = None,
     observed: np.ndarray | None = None,
     settings: Mapping[str, Any] | None = None,
+    proposal_q: NDArray[np.float64] | None = None,
 ) -> Refit:
     """Run the dynamics stage again on one processed trial.
 
@@ -104,6 +107,10 @@ def refit_trial(
         ``(T, M, 3)`` observed markers to fit (default: the trial's).
     settings
         The trial's processing settings (cut-off, filter order, fit weights).
+    proposal_q
+        ``(T, n)`` coordinates on the trial's frames on which feet are assigned and
+        unmeasured frames proposed (default: the processed ones; see
+        :func:`solver.dynamics.stage.run_dynamics`).
     """
     import time
 
@@ -137,6 +144,7 @@ def refit_trial(
         unmeasured=None if unmeasured is None else {trial.trial: np.asarray(unmeasured, dtype=bool)},
         known_unmeasured=None if known_unmeasured is None else {trial.trial: np.asarray(known_unmeasured, dtype=bool)},
         options=opts,
+        proposal_q=None if proposal_q is None else {trial.trial: proposal_q},
     )
     if dyn is None:  # pragma: no cover - the trial had forces when it was processed
         raise ValueError(f"trial {trial.trial} has no force data to refit")

@@ -22,9 +22,14 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
     chosen_parameters   parameters of the chosen cause (null when none)
     after         metrics of the trial refitted with the chosen extension (baseline keys;
                   null when none)
-    held_out      {"before": {...}, "after": {...}, "motion"}: marker RMS (m), linear (N) and
-                  angular (N·m) residual RMS on held-out frames (fixed kinematics; on the
-                  motion the chosen cause was decided on)
+    before_refit  metrics of the same refit without the extension (baseline keys; null when
+                  none): the refit starts from the processed motion and may improve on it
+                  by itself, so the extension's gain is ``after`` against this
+    held_out      {"before": {...}, "after": {...}, "motion", "note"}: marker RMS (m), linear
+                  (N) and angular (N·m) residual RMS on held-out frames (each frame corrected
+                  with parameters fitted without its fold; fixed kinematics: the motion the
+                  chosen cause was decided on; for a plate-reading correction decided on the
+                  fitted motion, the motions refitted without and with it: "refitted")
     extension     the entry ``--apply`` saves (:mod:`solver.diagnose.extensions`)
     settings, seconds
 """
@@ -128,6 +133,7 @@ def to_json(diag: Diagnosis) -> dict[str, Any]:
             "reason": diag.reason,
             "chosen_parameters": _params(diag.parameters),
             "after": diag.after,
+            "before_refit": diag.before_refit,
             "held_out": diag.held_out,
             "extension": diag.extension,
             "settings": diag.settings,
@@ -179,10 +185,18 @@ def candidate_line(c: dict[str, Any]) -> str:
     )
 
 
+def held_out_labels(held_out: dict[str, Any]) -> tuple[str, str]:
+    """Row labels of the held-out "before" and "after" figures (naming the refitted motions
+    when used)."""
+    if held_out.get("motion") == "refitted":
+        return "held-out before (refit)", "held-out after (refit)"
+    return "held-out before", "held-out after"
+
+
 def metric_row(name: str, m: dict[str, Any] | None) -> str:
     """One text line of metrics (results.json keys, or the held-out figures)."""
     if not m:
-        return f"  {name:<22s} -"
+        return f"  {name:<23s} -"
     lin, ang = m.get("linear_residual_rms_N"), m.get("angular_residual_rms_Nm")
     hicks = ""
     if "hicks_linear_ok" in m:
@@ -192,7 +206,7 @@ def metric_row(name: str, m: dict[str, Any] | None) -> str:
     def num(x: Any, scale: float, width: int, digits: int) -> str:
         return f"{'-':>{width}s}" if x is None or not math.isfinite(float(x)) else f"{scale * float(x):{width}.{digits}f}"
 
-    return f"  {name:<22s} markers {num(mk, 100, 5, 2)} cm  linear {num(lin, 1, 7, 1)} N  angular {num(ang, 1, 7, 1)} N·m{hicks}"
+    return f"  {name:<23s} markers {num(mk, 100, 5, 2)} cm  linear {num(lin, 1, 7, 1)} N  angular {num(ang, 1, 7, 1)} N·m{hicks}"
 
 
 def to_text(diag: Diagnosis) -> str:
@@ -236,8 +250,10 @@ def to_text(diag: Diagnosis) -> str:
         lines.append(f"Estimate: {_fmt_params(diag.chosen.cause, _params(diag.parameters), _uncertainty(diag.chosen))}")
         lines += ["", "Gain of the extension"]
         lines.append(metric_row("before (processed)", diag.baseline))
+        lines.append(metric_row("before (refit, none)", diag.before_refit))
         lines.append(metric_row("after (refit)", diag.after))
         if diag.held_out:
-            lines.append(metric_row("held-out before", diag.held_out["before"]))
-            lines.append(metric_row("held-out after", diag.held_out["after"]))
+            before, after = held_out_labels(diag.held_out)
+            lines.append(metric_row(before, diag.held_out["before"]))
+            lines.append(metric_row(after, diag.held_out["after"]))
     return "\n".join(lines)

@@ -213,6 +213,7 @@ def run_dynamics(
     options: DynamicsOptions | None = None,
     progress: Progress | None = None,
     known_unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
+    proposal_q: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> DynamicsResult | None:
     """Run the dynamics stage on the trials that have force data.
 
@@ -239,6 +240,11 @@ def run_dynamics(
         Trial name -> ``(T,)`` bool mask at the marker rate of frames known to be
         unmeasured whatever the reviewer or the proposals say (saved by ``addb diagnose
         --apply``); joined to the reviewer's flags or to the automatic proposals.
+    proposal_q
+        Trial name -> ``(T, n)`` coordinates at the kinematics' times on which the feet are
+        assigned to the plates and unmeasured frames proposed, instead of the kinematics'
+        own (which the fit still starts from). A refit that starts from a processed motion
+        passes the inverse kinematics here, so that it proposes what the pipeline would.
 
     Returns
     -------
@@ -273,8 +279,11 @@ def run_dynamics(
         q = resample(kin.time, lowpass(kin.q, rate_m, opts.cutoff_hz, opts.filter_order), time)
         obs = resample(kin.time, kin.observed, time)
         plates = _filtered_plates(forces, time, opts, bw, name)
-        com_acc = differentiate(sk.center_of_mass(q), dt, opts.fit.derivative)[1]
-        contact = assign_contacts(sk, q, plates, foot_bodies, mass_kg, dt, com_acc, opts.contact)
+        q_contact = q
+        if proposal_q is not None and name in proposal_q:
+            q_contact = resample(kin.time, lowpass(np.asarray(proposal_q[name], dtype=float), rate_m, opts.cutoff_hz, opts.filter_order), time)
+        com_acc = differentiate(sk.center_of_mass(q_contact), dt, opts.fit.derivative)[1]
+        contact = assign_contacts(sk, q_contact, plates, foot_bodies, mass_kg, dt, com_acc, opts.contact)
         plates = tuple(
             replace(p, body=np.where(contact.plate_foot[i] >= 0, np.array([sk.body_index(f) for f in foot_bodies])[np.maximum(contact.plate_foot[i], 0)], -1))
             for i, p in enumerate(plates)

@@ -24,7 +24,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from solver.diagnose.report import _fmt_params, metric_row
+from solver.diagnose.report import _fmt_params, held_out_labels, metric_row
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import copy_subject
 from tests.diagnose.harness import TRIALS, diagnose_json
@@ -64,10 +64,12 @@ def markdown(all_reports: dict[str, list[dict[str, Any]]], command: str) -> str:
                 lines.append("")
                 lines.append("```")
                 lines.append(metric_row("before (processed)", r["baseline"]).strip())
+                lines.append(metric_row("before (refit, none)", r.get("before_refit")).strip())
                 lines.append(metric_row("after (refit)", r["after"]).strip())
                 if r.get("held_out"):
-                    lines.append(metric_row("held-out before", r["held_out"]["before"]).strip())
-                    lines.append(metric_row("held-out after", r["held_out"]["after"]).strip())
+                    before, after = held_out_labels(r["held_out"])
+                    lines.append(metric_row(before, r["held_out"]["before"]).strip())
+                    lines.append(metric_row(after, r["held_out"]["after"]).strip())
                 lines.append("```")
             lines.append("")
     return "\n".join(lines) + "\n"

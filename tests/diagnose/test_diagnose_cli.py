@@ -77,6 +77,8 @@ def test_refit_keeps_the_frames_the_solver_left_out(tmp_path: Path) -> None:
     left_out = results["n_frames"] - results["n_observed_frames"]
     assert left_out >= 10  # the solver left steps out
     assert abs(report["after"]["n_observed_frames"] - results["n_observed_frames"]) <= 0.25 * left_out
+    # the reference refit (no extension) continues the processing on its frames exactly
+    assert report["before_refit"]["n_observed_frames"] == results["n_observed_frames"]
 
 
 def test_apply_feeds_the_next_processing_and_the_review_app(tmp_path: Path) -> None:

@@ -27,15 +27,13 @@ RELIABLE = {
     "unmeasured_force": (0, 1, 2, 3),
     "force_time_offset": (0, 1, 2, 3),
     "body_mass": (0, 1, 2, 4),
-    "plate_force_offset": (0, 2, 4),
+    "plate_force_offset": (0, 1, 2, 3, 4),
     "plate_force_gain": (0, 2, 4),
 }
 #: On the treadmill run, whose two plates are the belts under one foot each, a gain of one
 #: plate competes with a body-mass change (both scale the load of every other stance) and
-#: usually neither stands out; a plate offset is named there, but its held-out residual
-#: check fails: the run draw of these causes is an expected failure.
+#: usually neither stands out: the run draw of this cause is an expected failure.
 RUN_GAP = {
-    "plate_force_offset": "named and recovered on the run (10 of 10 benchmark draws), but on this draw the held-out moment residual rises with the extension (6.5 -> 8.7 N m, docs/diagnose/RESULTS.md)",
     "plate_force_gain": "on the treadmill run a one-plate gain competes with a body-mass change; usually neither stands out",
 }
 #: Causes not yet named reliably (detection rates in docs/diagnose/RESULTS.md): their first
