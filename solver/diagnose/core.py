@@ -467,12 +467,15 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 # the processed motion was bent to balance the uncorrected forces: score the
                 # corrected forces on the motion refitted with them, against the same refit
                 # without them (the parameters of each frame still fitted without its fold)
-                ctx_p, full_p = build_context(prep(plain.trial, plain.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
-                ctx_r, full_r = build_context(prep(refit.trial, refit.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
+                def on(r: Refit) -> tuple[C.Context, C.Alternative]:
+                    ctx_r, full_r = build_context(prep(r.trial, r.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
+                    return ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen)
+
+                (ctx_p, alt_p), (ctx_r, alt_r) = on(plain), on(refit)
                 both = ctx_p.evaluated & ctx_r.evaluated  # the two refits may leave out different frames
                 result.held_out.update(
-                    before=held_out_figures(ctx_p, _alt_of(alternatives(ctx_p, full_p, (chosen.cause,)), chosen), folds, both)["before"],
-                    after=held_out_figures(ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen), folds, both)["after"],
+                    before=held_out_figures(ctx_p, alt_p, folds, both)["before"],
+                    after=held_out_figures(ctx_r, alt_r, folds, both)["after"],
                     motion="refitted",
                     note="translation re-optimized; on the motions refitted without (before) and with (after) the "
                     "extension, each frame corrected with parameters fitted without its fold",
@@ -487,8 +490,8 @@ FORCE_CAUSES = ("body_mass", "force_time_offset", "plate_force_offset", "plate_f
 
 
 #: Causes that correct the plates' readings alone (model and markers as processed): their
-#: held-out "after" figures are taken on the refitted motion (:func:`_diagnose`).
-FORCE_CORRECTIONS = ("force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
+#: held-out figures are taken on the refits without and with them (:func:`_diagnose`).
+FORCE_CORRECTIONS = tuple(c for c in FORCE_CAUSES if c != "body_mass")
 
 
 #: Force-side causes that may be chosen on the marker-only motion (:func:`choice_on_marker_motion`).
