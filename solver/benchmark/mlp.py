@@ -322,35 +322,82 @@ def train_mlp(
         raise BenchmarkError("no training frame for the MLP baseline")
     xd, yd = _stack(dev, spec, opts) if dev else (np.zeros((0, x.shape[1])), np.zeros((0, y.shape[1])))
     x_mean, x_std, y_mean, y_std = x.mean(axis=0), _std(x), y.mean(axis=0), _std(y)
-    if opts.threads:
-        torch.set_num_threads(opts.threads)
-    torch.manual_seed(opts.seed)
-    net = torch.nn.Sequential(
-        torch.nn.Linear(x.shape[1], opts.hidden), torch.nn.Sigmoid(), torch.nn.Linear(opts.hidden, y.shape[1])
+    mse = torch.nn.MSELoss()
+    net, history = fit_network(
+        (x - x_mean) / x_std, (y - y_mean) / y_std, y.shape[1], lambda out, target: mse(out, target), opts,
+        dev=((xd - x_mean) / x_std, (yd - y_mean) / y_std), progress=progress, name="MLP",
     )
-    optimizer = torch.optim.RMSprop(net.parameters(), lr=opts.learning_rate)
-    loss_fn = torch.nn.MSELoss()
-    xt = torch.as_tensor((x - x_mean) / x_std, dtype=torch.float32)
-    yt = torch.as_tensor((y - y_mean) / y_std, dtype=torch.float32)
-    xdt = torch.as_tensor((xd - x_mean) / x_std, dtype=torch.float32)
-    ydt = torch.as_tensor((yd - y_mean) / y_std, dtype=torch.float32)
-    gen = torch.Generator().manual_seed(opts.seed)
+    return TrainedMlp(net, spec, opts, x_mean, x_std, y_mean, y_std, history, time.perf_counter() - t0, len(x))
+
+
+def fit_network(
+    x: FloatArray,
+    y: FloatArray,
+    n_outputs: int,
+    loss: Callable[[Any, Any], Any],
+    options: MlpOptions,
+    *,
+    dev: tuple[FloatArray, FloatArray] | None = None,
+    progress: Callable[[str, float], None] | None = None,
+    name: str = "network",
+) -> tuple[Any, list[dict[str, float]]]:
+    """Train the paper's network shape, ``Linear(D, hidden) -> Sigmoid -> Linear(hidden,
+    n_outputs)``, with RMSprop on mini-batches (the options' learning rate, batch size,
+    epochs and seed).
+
+    Parameters
+    ----------
+    x, y
+        ``(N, D)`` standardized inputs and ``(N, E)`` targets (any columns ``loss`` reads).
+    n_outputs
+        Width of the output layer.
+    loss
+        ``loss(output (B, n_outputs), target (B, E)) -> scalar tensor`` to minimize.
+    options
+        Hyper-parameters (:class:`MlpOptions`).
+    dev
+        Development inputs and targets, whose loss is recorded after each epoch.
+    progress
+        Called with (message, fraction) after each epoch.
+    name
+        Name of the network in progress messages.
+
+    Returns
+    -------
+    net, history
+        The ``torch.nn.Sequential`` (in eval mode) and per epoch ``{"epoch", "train_loss",
+        "dev_loss"}`` (``dev_loss`` NaN without dev frames).
+    """
+    torch = _import_torch()
+    if options.threads:
+        torch.set_num_threads(options.threads)
+    torch.manual_seed(options.seed)
+    net = torch.nn.Sequential(
+        torch.nn.Linear(x.shape[1], options.hidden), torch.nn.Sigmoid(), torch.nn.Linear(options.hidden, n_outputs)
+    )
+    optimizer = torch.optim.RMSprop(net.parameters(), lr=options.learning_rate)
+    xt = torch.as_tensor(x, dtype=torch.float32)
+    yt = torch.as_tensor(y, dtype=torch.float32)
+    xd, yd = dev if dev is not None else (np.zeros((0, x.shape[1])), np.zeros((0, y.shape[1])))
+    xdt = torch.as_tensor(xd, dtype=torch.float32)
+    ydt = torch.as_tensor(yd, dtype=torch.float32)
+    gen = torch.Generator().manual_seed(options.seed)
     history = []
-    for epoch in range(opts.epochs):
+    for epoch in range(options.epochs):
         net.train()
         order = torch.randperm(len(xt), generator=gen)
         total = 0.0
-        for start in range(0, len(xt), opts.batch_size):
-            batch = order[start:start + opts.batch_size]
+        for start in range(0, len(xt), options.batch_size):
+            batch = order[start:start + options.batch_size]
             optimizer.zero_grad()
-            loss = loss_fn(net(xt[batch]), yt[batch])
-            loss.backward()
+            value = loss(net(xt[batch]), yt[batch])
+            value.backward()
             optimizer.step()
-            total += loss.item() * len(batch)
+            total += value.item() * len(batch)
         net.eval()
         with torch.no_grad():
-            dev_loss = float(loss_fn(net(xdt), ydt)) if len(xdt) else float("nan")
+            dev_loss = float(loss(net(xdt), ydt)) if len(xdt) else float("nan")
         history.append({"epoch": epoch + 1, "train_loss": total / len(xt), "dev_loss": dev_loss})
         if progress:
-            progress(f"MLP epoch {epoch + 1}/{opts.epochs}: train loss {total / len(xt):.3f}", (epoch + 1) / opts.epochs)
-    return TrainedMlp(net, spec, opts, x_mean, x_std, y_mean, y_std, history, time.perf_counter() - t0, len(x))
+            progress(f"{name} epoch {epoch + 1}/{options.epochs}: train loss {total / len(xt):.3f}", (epoch + 1) / options.epochs)
+    return net, history
