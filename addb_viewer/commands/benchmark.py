@@ -1,4 +1,4 @@
-"""``addb benchmark SUBJECT_DIR... --method analytical|mlp``: the seed paper's benchmark.
+"""``addb benchmark SUBJECT_DIR... --method analytical|mlp|hybrid``: the seed paper's benchmark.
 
 Estimating dynamics from motion (Werling et al. 2024, §5) on our own processed subjects:
 prints the paper's table (method x four metrics) with a dataset summary and writes both as
@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"protocol: {result.protocol}")
     for row in result.rows:
         if "train_seconds" in row.notes:
-            print(f"MLP training: {row.notes['train_seconds']:.1f} s over {len(row.notes['folds'])} fold(s)")
+            print(f"{row.method} training: {row.notes['train_seconds']:.1f} s over {len(row.notes['folds'])} fold(s)")
     for line in summary_lines(summary):
         print(line)
     js, md = write_report(args.output, result, summary, command=command)
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "benchmark",
-        help="the seed paper's benchmark: estimate dynamics from motion (analytical / MLP baselines)",
+        help="the seed paper's benchmark: estimate dynamics from motion (analytical / MLP baselines, hybrid)",
         description=(
             "Score methods that estimate the centre-of-mass acceleration, ground reaction forces and "
             "moments and joint torques from motion alone (Werling et al. 2024, section 5) on processed "
@@ -139,13 +139,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("subjects", nargs="+", metavar="SUBJECT_DIR", help="subject folder or processed output folder")
-    p.add_argument("--method", action="append", choices=("analytical", "mlp"), help="method to score (repeatable; default analytical)")
-    p.add_argument("--train", action="append", metavar="SUBJECT_DIR", help="train the MLP on these subjects only (repeatable)")
+    p.add_argument("--method", action="append", choices=("analytical", "mlp", "hybrid"), help="method to score (repeatable; default analytical): the paper's analytical and MLP baselines, or the hybrid (analytical total force split between the feet by a network)")
+    p.add_argument("--train", action="append", metavar="SUBJECT_DIR", help="train the networks (mlp, hybrid) on these subjects only (repeatable)")
     p.add_argument("--split", choices=("loso", "seeded"), default="loso", help="protocol without --train: leave-one-subject-out (default) or one seeded train/dev/test split")
-    p.add_argument("--seed", type=int, default=0, help="seed of the split and of the MLP (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the split and of the networks (default 0)")
     p.add_argument("--contact", action="append", choices=("measured", "kinematic"), help="analytical baseline's contact rule (repeatable; default measured)")
     p.add_argument("--inputs", choices=("kinematic", "processed"), default="kinematic", help="input coordinates: IK of the markers (default) or the dynamics-fitted ones")
-    p.add_argument("--epochs", type=int, default=10, help="MLP training epochs (default 10, the paper's)")
+    p.add_argument("--epochs", type=int, default=10, help="training epochs of the networks (default 10, the paper's)")
     p.add_argument("--filtering", action="store_true", help="also run the filtering study (error against low-pass cut-off)")
     p.add_argument("-o", "--output", default="addb_benchmark", help="folder for benchmark.json/.md (default ./addb_benchmark)")
     p.set_defaults(handler=run)

@@ -11,7 +11,9 @@ metrics
 analytical
     The analytical baseline (central differences, F = m a split over the feet, ID).
 mlp
-    The MLP baseline (PyTorch, optional extra ``mlp``).
+    The MLP baseline (PyTorch, optional extra ``mlp``) and the shared network training.
+hybrid
+    Not in the paper: the analytical total force split between the feet by a network.
 evaluate
     Scoring a method on the benchmark frames.
 filtering

@@ -2,17 +2,18 @@
 
 Protocols (every one keeps each subject in one split):
 
-* ``train`` given: the MLP trains on those subjects' trials and every method is scored on
+* ``train`` given: the trained methods (the MLP and the hybrid's network) train on those
+  subjects' trials and every method is scored on
   the dataset's subjects (none may be in both);
-* ``split="loso"`` (default): leave-one-subject-out folds; each subject is scored by an
-  MLP trained on all the others, and the table pools the scored frames of all subjects.
+* ``split="loso"`` (default): leave-one-subject-out folds; each subject is scored by
+  networks trained on all the others, and the table pools the scored frames of all subjects.
   This is the protocol for a dataset of a handful of subjects, where a single seeded
   test split would hold one subject;
 * ``split="seeded"``: one seeded train/dev/test split (:func:`~.dataset.split_subjects`);
-  every method is scored on the test subjects, the MLP trains on the train subjects and
-  reports its loss on the dev subjects.
+  every method is scored on the test subjects, the networks train on the train subjects
+  and report their loss on the dev subjects.
 
-The analytical baseline needs no training; it is scored on the same frames as the MLP.
+The analytical baseline needs no training; it is scored on the same frames.
 """
 
 from __future__ import annotations
@@ -31,13 +32,16 @@ from solver.benchmark.dataset import (
     split_subjects,
 )
 from solver.benchmark.evaluate import MethodResult, evaluate
+from solver.benchmark.hybrid import train_contact_split
 from solver.benchmark.metrics import FrameErrors, summarize
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, train_mlp
 
 Progress = Callable[[str, float], None]
 
 #: Methods of the benchmark.
-METHODS = ("analytical", "mlp")
+METHODS = ("analytical", "mlp", "hybrid")
+#: Table labels of the trained methods.
+LABELS = {"mlp": "MLP", "hybrid": "hybrid (analytical force, MLP contact split)"}
 #: Protocols without a separate training set.
 SPLITS = ("loso", "seeded")
 
@@ -92,7 +96,18 @@ def _analytical_row(dataset: Dataset, test: Sequence[str], contact: str) -> Meth
     )
 
 
-def _mlp_row(dataset: Dataset, folds: Sequence[Split], train: Dataset | None, options: MlpOptions, say: Progress) -> MethodResult:
+def _fit(method: str, tr: Sequence[Any], dv: Sequence[Any], te: Sequence[Any], options: MlpOptions, progress: Progress) -> Any:
+    """A trained model of ``method`` ("mlp" or "hybrid"), with ``predict``, ``seconds``,
+    ``n_train`` and ``history``."""
+    if method == "mlp":
+        spec = FeatureSpec.common(list(tr) + list(dv) + list(te))
+        return train_mlp(tr, dv, spec=spec, options=options, progress=progress)
+    return train_contact_split(tr, dv, options=options, progress=progress)
+
+
+def _trained_row(
+    method: str, dataset: Dataset, folds: Sequence[Split], train: Dataset | None, options: MlpOptions, say: Progress
+) -> MethodResult:
     source = train if train is not None else dataset
     parts: list[FrameErrors] = []
     per_trial: dict[str, dict[str, float]] = {}
@@ -102,11 +117,8 @@ def _mlp_row(dataset: Dataset, folds: Sequence[Split], train: Dataset | None, op
         tr, dv = source.of_subjects(fold.train).trials, source.of_subjects(fold.dev).trials
         te = dataset.of_subjects(fold.test).trials
         if not tr:
-            raise BenchmarkError(f"{fold.name}: no training subject for the MLP (give more subjects or --train)")
-        spec = FeatureSpec.common(list(tr) + list(dv) + list(te))
-        model = train_mlp(
-            tr, dv, spec=spec, options=options, progress=lambda m, f, i=i, name=fold.name: say(f"{name}: {m}", (i + f) / len(folds))
-        )
+            raise BenchmarkError(f"{fold.name}: no training subject for the {LABELS[method]} (give more subjects or --train)")
+        model = _fit(method, tr, dv, te, options, lambda m, f, i=i, name=fold.name: say(f"{name}: {m}", (i + f) / len(folds)))
         errors, pt = evaluate(model.predict, te)
         parts.append(errors)
         per_trial.update(pt)
@@ -123,7 +135,7 @@ def _mlp_row(dataset: Dataset, folds: Sequence[Split], train: Dataset | None, op
         )
     pooled = FrameErrors.concatenate(parts)
     return MethodResult(
-        method="MLP",
+        method=LABELS[method],
         metrics=summarize(pooled),
         per_trial=per_trial,
         n_frames=int(pooled.grf.size),
@@ -154,7 +166,7 @@ def run_benchmark(
     dataset
         The subjects to score (and to train on, without ``train``).
     methods
-        Any of ``"analytical"`` and ``"mlp"``.
+        Any of ``"analytical"``, ``"mlp"`` and ``"hybrid"`` (:mod:`~solver.benchmark.hybrid`).
     contacts
         Contact rules of the analytical baseline, one row each (``"measured"``, ``"kinematic"``).
     split, seed
@@ -162,15 +174,16 @@ def run_benchmark(
     train
         Training subjects of the MLP (disjoint from ``dataset``'s).
     mlp_options
-        Hyper-parameters (default: the paper's; seeded with ``seed``).
+        Hyper-parameters of the MLP and the hybrid's network (default: the paper's; seeded
+        with ``seed``).
     progress
         Called with (message, fraction).
 
     Raises
     ------
     BenchmarkError
-        An unknown method, no trial, a subject in both ``train`` and ``dataset``, or an MLP
-        fold without training subjects.
+        An unknown method, no trial, a subject in both ``train`` and ``dataset``, or a fold
+        without training subjects for a trained method.
     """
     say = progress or (lambda m, f: None)
     unknown = [m for m in methods if m not in METHODS]
@@ -192,5 +205,5 @@ def run_benchmark(
                 rows.append(_analytical_row(dataset, test, contact))
         else:
             opts = mlp_options or MlpOptions(seed=seed)
-            rows.append(_mlp_row(dataset, folds, train, opts, say))
+            rows.append(_trained_row(method, dataset, folds, train, opts, say))
     return BenchmarkResult(tuple(rows), protocol, tuple(folds), test)

@@ -41,9 +41,10 @@ def test_benchmark_rejects_a_folder_that_is_not_a_subject(tmp_path, capsys) -> N
     assert "neither a processed output folder nor a subject folder" in capsys.readouterr().err
 
 
-def test_mlp_needs_training_subjects(out_dirs, tmp_path, capsys) -> None:
+@pytest.mark.parametrize("method", ["mlp", "hybrid"])
+def test_trained_methods_need_training_subjects(out_dirs, tmp_path, capsys, method) -> None:
     pytest.importorskip("torch")
-    assert cli(["benchmark", str(out_dirs[0]), "--method", "mlp", "-o", str(tmp_path)]) == 1
+    assert cli(["benchmark", str(out_dirs[0]), "--method", method, "-o", str(tmp_path)]) == 1
     assert "no training subject" in capsys.readouterr().err
 
 
