@@ -1,4 +1,4 @@
-"""``addb benchmark`` on a real subject folder (processed on the fly into its ``addb_out``)."""
+"""``addb benchmark`` on real subject folders (processed on the fly into their ``addb_out``)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import shutil
 import pytest
 
 from addb_viewer.cli import main as cli
+from solver.benchmark.mlp import torch_available
 from tests.conftest import SHARED_DATA, writable_copy
 
 pytestmark = pytest.mark.slow
@@ -30,3 +31,26 @@ def test_walk_subject_is_processed_and_scored(tmp_path, capsys) -> None:
     assert measured["com_acc"] < 2.0 and measured["grf"] < 2.0 and measured["torque"] < 0.4
     assert kinematic["grf"] >= measured["grf"]  # the measured contact is the better split
     assert "walk" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
+def test_hybrid_beats_the_motion_only_analytical_baseline_on_another_subject(tmp_path) -> None:
+    """Two real subjects, leave-one-subject-out: the contact split learned on one subject's
+    walk (and drop jump) scores the other's frames with a lower GRF error than the analytical
+    baseline's kinematic contact rule, the motion-only way to split the same total force."""
+    subjects = []
+    for name in ("rajagopal2016_walk", "opencap_uhlrich2023"):
+        subjects.append(tmp_path / name)
+        writable_copy(SHARED_DATA / "subjects" / name, subjects[-1], ignore=shutil.ignore_patterns("addb_out*"))
+    out = tmp_path / "report"
+    args = ["benchmark", *map(str, subjects), "--method", "analytical", "--method", "hybrid", "--contact", "kinematic"]
+    assert cli([*args, "-o", str(out)]) == 0
+    report = json.loads((out / "benchmark.json").read_text())
+    kinematic, hybrid = report["rows"]
+    assert kinematic["method"] == "analytical (kinematic contact)" and hybrid["method"].startswith("hybrid")
+    assert hybrid["frames"] == kinematic["frames"] > 300
+    # the same total force, so the same CoM acceleration; a better split of it
+    assert hybrid["com_acc"] == pytest.approx(kinematic["com_acc"], rel=1e-9)
+    assert hybrid["grf"] < 0.7 * kinematic["grf"]
+    for trial in ("rajagopal2016_walk/walk", "opencap_uhlrich2023/walking1"):
+        assert hybrid["per_trial"][trial]["grf"] < kinematic["per_trial"][trial]["grf"]
