@@ -32,6 +32,23 @@ PAPER_CAVEAT = (
     "a few thousand frames. They are context, not targets."
 )
 
+#: What each row of the table is, printed under the Markdown table for the rows present.
+ROW_NOTES = {
+    "analytical (measured contact)": (
+        "the paper's analytical baseline handed the force plates' contact state (which foot is loaded): "
+        "information a motion-only method does not have, so a reference rather than a competitor"
+    ),
+    "analytical (kinematic contact)": (
+        "the analytical baseline from the motion alone: a foot is in contact within 0.1 m of its own lowest "
+        "point in 0.5 s (the paper's code uses a 0.1 m foot-height rule)"
+    ),
+    "MLP": "the paper's MLP baseline: per-foot wrenches predicted directly from a 50-frame history",
+    "hybrid (analytical force, MLP contact split)": (
+        "not one of the paper's baselines: the analytical total force, split between the feet by a network of "
+        "the MLP's shape that sees per-foot heights and velocities (solver/benchmark/hybrid.py); motion only"
+    ),
+}
+
 
 def dataset_summary(dataset: Dataset, *, activities: dict[str, float] | None = None) -> dict[str, Any]:
     """Size and composition of the scored dataset.
@@ -141,6 +158,9 @@ def to_markdown(result: BenchmarkResult, summary: dict[str, Any], *, command: st
     if command:
         out += [f"`{command}`", ""]
     out += [_md_table(table_header(), table_rows(result)), "", f"Protocol: {result.protocol}.", ""]
+    notes = [f"* {r.method}: {ROW_NOTES[r.method]}" for r in result.rows if r.method in ROW_NOTES]
+    if notes:
+        out += ["Rows:", "", *notes, ""]
     out += [f"* {line}" for line in summary_lines(summary)]
     if paper:
         rows = [[f"{name} (paper)", "-"] + [_num(v[k]) for k in METRICS] for name, v in PAPER.items()]

@@ -75,6 +75,7 @@ def test_report_layout(three_subjects, tmp_path) -> None:
     assert "| analytical (measured contact) | 120 |" in md and "CoM acc. error (m/s²)" in md
     assert "analytical (paper)" in md and "4.47" in md and "not targets" in md
     assert "overground_walking 1.2 s" in md
+    assert "* analytical (measured contact): the paper's analytical baseline handed the force plates' contact" in md
     data = to_json(result, summary)
     assert data["rows"][1]["method"] == "analytical (kinematic contact)" and data["paper"]["rows"] == PAPER
     js, _ = write_report(tmp_path, result, summary)

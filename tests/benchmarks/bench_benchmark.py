@@ -6,11 +6,11 @@ Processes the three subjects of ../shared/data/subjects and the examples assembl
 ``scripts/make_example_subject.py`` (the Camargo circuit, the stair descent, opensim-core's
 two C3D walks) into ``DIR`` (skipped when already processed there), then runs, each in a fresh process as a user would:
 
-    addb benchmark DIR/out/* --method analytical --method mlp --contact measured --contact kinematic --filtering
-    addb benchmark DIR/out/* --method analytical --method mlp --inputs processed
+    addb benchmark DIR/out/* --method analytical --method mlp --method hybrid --contact measured --contact kinematic --filtering
+    addb benchmark DIR/out/* --method analytical --method mlp --method hybrid --contact measured --contact kinematic --inputs processed
 
 and copies the tables (Markdown) and the filtering-study plot into ``--docs``. Prints the
-wall times, the MLP's training time included. Needs PyTorch (``pip install torch==2.13.0``)
+wall times and the networks' (MLP, hybrid) training times. Needs PyTorch (``pip install torch==2.13.0``)
 and matplotlib.
 """
 
@@ -62,17 +62,21 @@ def main() -> None:
     addb = Path(sys.executable).parent / "addb"
     outs = [str(o) for o in _process(addb, args.work)]
     runs = {
-        "kinematic": ["--method", "analytical", "--method", "mlp", "--contact", "measured", "--contact", "kinematic", "--filtering"],
-        "processed": ["--method", "analytical", "--method", "mlp", "--inputs", "processed"],
+        "kinematic": ["--method", "analytical", "--method", "mlp", "--method", "hybrid", "--contact", "measured", "--contact", "kinematic", "--filtering"],
+        "processed": ["--method", "analytical", "--method", "mlp", "--method", "hybrid", "--contact", "measured", "--contact", "kinematic",
+                      "--inputs", "processed"],
     }
     args.docs.mkdir(parents=True, exist_ok=True)
     for name, extra in runs.items():
         report = args.work / f"report_{name}"
         wall = _run(addb, [*outs, *extra, "-o", str(report)])
         data = json.loads((report / "benchmark.json").read_text())
-        mlp = next(r for r in data["rows"] if r["method"] == "MLP")
-        print(f"[{name} inputs] addb benchmark wall time {wall:.1f} s; MLP training {mlp['notes']['train_seconds']:.1f} s "
-              f"over {len(mlp['notes']['folds'])} folds ({sum(f['train_frames'] for f in mlp['notes']['folds'])} training frames in all)")
+        print(f"[{name} inputs] addb benchmark wall time {wall:.1f} s")
+        for row in data["rows"]:
+            if "train_seconds" in row["notes"]:
+                folds = row["notes"]["folds"]
+                print(f"  {row['method']}: training {row['notes']['train_seconds']:.1f} s over {len(folds)} folds "
+                      f"({sum(f['train_frames'] for f in folds)} training frames in all)")
         shutil.copy(report / "benchmark.md", args.docs / f"benchmark_{name}_inputs.md")
         shutil.copy(report / "benchmark.json", args.docs / f"benchmark_{name}_inputs.json")
         if (report / "filtering_study.png").exists():
