@@ -44,8 +44,9 @@ ROW_NOTES = {
     ),
     "MLP": "the paper's MLP baseline: per-foot wrenches predicted directly from a 50-frame history",
     "hybrid (analytical force, MLP contact split)": (
-        "not one of the paper's baselines: the analytical total force, split between the feet by a network of "
-        "the MLP's shape that sees per-foot heights and velocities (solver/benchmark/hybrid.py); motion only"
+        "not one of the paper's baselines: the analytical total force, from q̃ low-passed at a cut-off chosen "
+        "on the training subjects, split between the feet by a network of the MLP's shape that sees per-foot "
+        "heights and velocities (solver/benchmark/hybrid.py); motion only"
     ),
 }
 

@@ -131,6 +131,7 @@ def _trained_row(
                 "train_frames": model.n_train,
                 "train_seconds": model.seconds,
                 "loss": model.history,
+                **({"cutoff_hz": model.cutoff_hz, "cutoff_errors": model.cutoff_errors} if method == "hybrid" else {}),
             }
         )
     pooled = FrameErrors.concatenate(parts)

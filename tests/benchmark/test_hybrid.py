@@ -1,16 +1,21 @@
 """The hybrid method (analytical total force, network contact split): its training targets,
-the invariance its mirrored training copies rely on, and how a prediction is assembled."""
+the choice of its force filter, the invariance its mirrored training copies rely on, and how
+a prediction is assembled."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
 from solver.benchmark.analytical import analytical_baseline, kinematic_contact, torques_from_feet
-from solver.benchmark.dataset import benchmark_trial, build_dataset, skeleton_for
+from solver.benchmark.dataset import benchmark_input, benchmark_trial, build_dataset, skeleton_for
 from solver.benchmark.hybrid import (
+    CUTOFFS_HZ,
     FEATURES_PER_FOOT,
     contact_features,
+    select_cutoff,
     split_targets,
     toe_body,
     total_force,
@@ -42,6 +47,25 @@ def test_targets_are_the_measured_vertical_shares_or_airborne() -> None:
     np.testing.assert_allclose(y[:, 3], 1.0, atol=0.05)
     analytical = np.abs(total_force(trial)[0][:, 1]) / (trial.mass_kg * 9.81)
     np.testing.assert_allclose(y[25:32, 3], analytical[25:32])
+
+
+def test_the_total_force_filter_is_chosen_against_the_measured_force() -> None:
+    """On the clean synthetic motion no extra filter is chosen (30 Hz: every lower cut-off
+    flattens its accelerations). With a 20 Hz pelvis vibration of 1 mm (16 m/s² of
+    acceleration) in the input, which the plates, computed from the clean motion, do not
+    see, the chosen cut-off removes it, and the input as it is is far worse."""
+    q = motion(120)
+    clean = benchmark_trial(processed_trial(q=q), inputs="processed")
+    assert select_cutoff([clean])[0] == 30.0
+    noisy_q = q.copy()
+    sk = skeleton_for(str(MODEL))
+    noisy_q[:, sk.coordinate_index("pelvis_ty")] += 0.001 * np.sin(2 * np.pi * 20.0 * np.arange(120) / 100.0)
+    noisy = dataclasses.replace(clean, q_unfiltered=noisy_q, q=benchmark_input(noisy_q, cutoff_hz=clean.cutoff_hz))
+    cutoff, errors = select_cutoff([noisy])
+    assert cutoff <= 12.0 and set(errors) == set(CUTOFFS_HZ)
+    assert errors[30.0] > 10 * errors[cutoff]
+    np.testing.assert_array_equal(total_force(noisy, 30.0)[1], noisy.q)  # 30 Hz: q̃ as it is
+    assert select_cutoff([noisy], [30.0])[0] == 30.0
 
 
 def test_contact_features_do_not_depend_on_the_lab_heading() -> None:
@@ -86,13 +110,15 @@ def test_prediction_is_the_analytical_force_split_by_the_network() -> None:
     pred = model.predict(test)
     shares = model.shares(test)
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, atol=1e-6)
-    total, qd, qdd = total_force(test)
+    total, q, qd, qdd = total_force(test, model.cutoff_hz)
+    assert model.cutoff_hz in CUTOFFS_HZ and set(model.cutoff_errors) == set(CUTOFFS_HZ)
     gate = kinematic_contact(test, test.q)
     for k in range(2):
         np.testing.assert_allclose(pred.grf[:, k], (shares[:, k] * gate[:, k])[:, None] * total, atol=1e-9)
     np.testing.assert_allclose(pred.grm, 0.0)
-    np.testing.assert_allclose(pred.com_acc, analytical_baseline(test).com_acc, atol=1e-12)
-    np.testing.assert_allclose(pred.tau, torques_from_feet(test, test.q, qd, qdd, pred.grf, pred.grm), atol=1e-9)
+    # the CoM acceleration is the analytical baseline's on the same (re-filtered) coordinates
+    np.testing.assert_allclose(pred.com_acc, analytical_baseline(test, q=q).com_acc, atol=1e-12)
+    np.testing.assert_allclose(pred.tau, torques_from_feet(test, q, qd, qdd, pred.grf, pred.grm), atol=1e-9)
 
 
 @needs_torch

@@ -35,9 +35,10 @@ def test_walk_subject_is_processed_and_scored(tmp_path, capsys) -> None:
 
 @pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
 def test_hybrid_beats_the_motion_only_analytical_baseline_on_another_subject(tmp_path) -> None:
-    """Two real subjects, leave-one-subject-out: the contact split learned on one subject's
-    walk (and drop jump) scores the other's frames with a lower GRF error than the analytical
-    baseline's kinematic contact rule, the motion-only way to split the same total force."""
+    """Two real subjects, leave-one-subject-out: the contact split (and force filter) learned
+    on one subject's walk (and drop jump) scores the other's frames with a lower GRF error
+    than the analytical baseline with its kinematic contact rule, the motion-only way to
+    split the total force."""
     subjects = []
     for name in ("rajagopal2016_walk", "opencap_uhlrich2023"):
         subjects.append(tmp_path / name)
@@ -49,8 +50,8 @@ def test_hybrid_beats_the_motion_only_analytical_baseline_on_another_subject(tmp
     kinematic, hybrid = report["rows"]
     assert kinematic["method"] == "analytical (kinematic contact)" and hybrid["method"].startswith("hybrid")
     assert hybrid["frames"] == kinematic["frames"] > 300
-    # the same total force, so the same CoM acceleration; a better split of it
-    assert hybrid["com_acc"] == pytest.approx(kinematic["com_acc"], rel=1e-9)
+    # the total force's filter, chosen on the other subject, also improves the CoM acceleration
+    assert hybrid["com_acc"] < kinematic["com_acc"]
     assert hybrid["grf"] < 0.7 * kinematic["grf"]
     for trial in ("rajagopal2016_walk/walk", "opencap_uhlrich2023/walking1"):
         assert hybrid["per_trial"][trial]["grf"] < kinematic["per_trial"][trial]["grf"]
