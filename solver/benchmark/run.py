@@ -74,7 +74,7 @@ def make_folds(dataset: Dataset, *, split: str, seed: int, train: Dataset | None
     subjects = dataset.subjects
     if train is not None:
         fold = Split(tuple(train.subjects), (), tuple(subjects), name="given training subjects")
-        return [fold], f"MLP trained on {', '.join(train.subjects)}; scored on {', '.join(subjects)}"
+        return [fold], f"networks trained on {', '.join(train.subjects)}; scored on {', '.join(subjects)}"
     if split == "loso":
         return leave_one_subject_out(subjects), f"leave-one-subject-out over {len(subjects)} subjects (every subject scored once)"
     if split == "seeded":
