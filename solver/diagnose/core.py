@@ -37,6 +37,7 @@ from solver.diagnose.profile import Profile, Sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
     Evaluation,
+    also_standing_out,
     best_per_cause,
     channels,
     choose,
@@ -114,6 +115,10 @@ class Diagnosis:
         ``{"before": {...}, "after": {...}}`` held-out figures of the chosen cause.
     extension
         The entry ``--apply`` saves (:mod:`solver.diagnose.extensions`), or None.
+    also_standing_out
+        Marker offsets other than the chosen cause that stand out on their own markers'
+        errors (:func:`solver.diagnose.selection.also_standing_out`), each with the entry
+        ``--apply`` would save for it; ``--apply`` saves only the chosen cause's.
     settings
         Sigmas, folds and thresholds used.
     seconds
@@ -133,6 +138,7 @@ class Diagnosis:
     before_refit: dict[str, Any] | None = None
     held_out: dict[str, Any] | None = None
     extension: dict[str, Any] | None = None
+    also_standing_out: list[tuple[Evaluation, dict[str, Any]]] = field(default_factory=list)
     settings: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     data: DiagnosisData | None = field(default=None, repr=False)
@@ -275,14 +281,19 @@ def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray
         fractions = {g: p["mass_change_kg"][g] / p["group_mass_kg"][g] for g in p["mass_change_kg"]}
         return {"cause": ev.cause, "trial": None, "mass_change_kg": p["mass_change_kg"], "fraction": fractions}
     if ev.cause == "marker_offset":
+        # the model marker already carries the offset the kinematics stage fitted (from every
+        # trial, the static one included): the recordings move by the rest. Until 2026-11-23
+        # the whole shift was applied, which counted that offset twice: a marker's finding
+        # applied again and again stayed named (the walk's L.Shoulder, four rounds)
         j = data.markers.names.index(p["marker"])
-        lab = np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["shift_m"]))
+        lab = np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["residual_shift_m"]))
         return {
             "cause": ev.cause,
             "trial": trial,
             "marker": p["marker"],
             "body": p["body"],
-            "shift_m": p["shift_m"],
+            "shift_m": p["residual_shift_m"],
+            "misplacement_m": p["shift_m"],
             "time_s": data.time.tolist(),
             "lab_shift_m": np.round(lab, 6).tolist(),
         }
@@ -415,7 +426,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             twin.parameters_fitted_motion, twin.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
     blocks = make_blocks(data.n_frames, data.dt, options.block_seconds)
-    ranked = best_per_cause(evaluations)
+    ranked = best_per_cause(evaluations, options.rule)
     chosen, reason = choose(ranked, options.rule, blocks, evaluations)
     held_ctx, held_alts = ctx, alts
     on_markers = choice_on_marker_motion(chosen, evaluations_ik, options.rule, blocks)
@@ -452,6 +463,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         data=data,
     )
     result.seconds = {"prepare": t1 - t0, "candidates": t2 - t1}
+    result.also_standing_out = [(e, extension_entry(e, data, marker_time)) for e in also_standing_out(evaluations, chosen, options.rule)]
     if chosen is not None:
         result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), folds)
         result.held_out["motion"] = chosen.motion
@@ -596,11 +608,12 @@ def refit_result(
     elif ev.cause == "segment_mass_distribution":
         model = redistribute(model, p["mass_change_kg"])
     elif ev.cause == "marker_offset":
+        # the correction ``--apply`` saves (the recordings minus the lab shift; until
+        # 2026-11-23 the refit added it, which doubled the marker's error: the walk's marker
+        # RMS rose from 1.30 to 1.51 cm in the refit with a shoulder marker's offset)
         j = data.markers.names.index(p["marker"])
         observed = np.array(trial.observed)
-        # the model marker already carries the kinematics stage's offset: move the
-        # observation by the rest
-        observed[:, j] += np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["residual_shift_m"]))
+        observed[:, j] -= np.asarray(extension_entry(ev, data, marker_time)["lab_shift_m"])
     elif ev.cause == "unmeasured_force":
         for a, b in p["frames"]:
             known[a:b] = True

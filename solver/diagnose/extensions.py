@@ -31,7 +31,11 @@ two gains multiply)::
 * ``plate_position_offset``: the plate's centre of pressure minus ``shift_m``;
 * ``marker_offset``: the marker's recorded positions minus ``lab_shift_m`` (its body-fixed
   ``shift_m`` rotated by its body's orientation in the diagnosed trial, one row per time in
-  ``time_s``, interpolated onto the marker frames);
+  ``time_s``, interpolated onto the marker frames). ``shift_m`` is the shift beyond the
+  offset the kinematics stage already gives the model marker (fitted on every trial, the
+  static one included); ``misplacement_m`` (for reading) adds that offset, the whole
+  misplacement from the generic model's landmark. Entries saved before 2026-11-23 applied
+  the whole misplacement, which counted the fitted offset twice;
 * ``body_mass``: the subject's mass plus ``mass_change_kg``;
 * ``segment_mass_distribution``: the subject's model is replaced by ``model`` (the generic
   model with the groups' masses changed, written by ``--apply`` beside this file);

@@ -31,6 +31,9 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
                   chosen cause was decided on; for a plate-reading correction decided on the
                   fitted motion, the motions refitted without and with it: "refitted")
     extension     the entry ``--apply`` saves (:mod:`solver.diagnose.extensions`)
+    also_standing_out  marker offsets other than the chosen cause that stand out on their
+                  own markers' errors, each {cause, parameters, uncertainty, score,
+                  extension}: findings too (markers do not compete), not saved by ``--apply``
     settings, seconds
 """
 
@@ -136,6 +139,10 @@ def to_json(diag: Diagnosis) -> dict[str, Any]:
             "before_refit": diag.before_refit,
             "held_out": diag.held_out,
             "extension": diag.extension,
+            "also_standing_out": [
+                {"cause": e.cause, "parameters": _params(e.parameters), "uncertainty": _uncertainty(e), "score": e.score, "extension": entry}
+                for e, entry in diag.also_standing_out
+            ],
             "settings": diag.settings,
             "seconds": diag.seconds,
         }
@@ -246,6 +253,9 @@ def to_text(diag: Diagnosis) -> str:
     for ev in diag.ranked:
         lines.append("  " + candidate_line(candidate_json(ev, [])))
     lines += ["", diag.reason]
+    if diag.also_standing_out:
+        lines.append("Other markers that stand out on their own errors (findings too; `--apply` saves only the chosen cause):")
+        lines += [f"  {_fmt_params(e.cause, _params(e.parameters), _uncertainty(e))}" for e, _ in diag.also_standing_out]
     if diag.chosen is not None:
         lines.append(f"Estimate: {_fmt_params(diag.chosen.cause, _params(diag.parameters), _uncertainty(diag.chosen))}")
         lines += ["", "Gain of the extension"]

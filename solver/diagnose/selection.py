@@ -271,6 +271,14 @@ def t_value(ev: Evaluation) -> float:
     if ev.uncertainty is None or "value" not in ev.parameters:
         return float("inf")
     value = np.atleast_1d(np.asarray(ev.parameters["value"], dtype=float))
+    if ev.cause == "marker_offset":
+        # judged by the shift beyond the offset the kinematics stage already gave the model
+        # marker (what the marker's own error shows and ``--apply`` corrects); the reported
+        # value adds that offset, a constant, so its jackknife error is the same. Judged by
+        # the whole shift, a marker the trial shows 1.3 cm from the model's marker (the
+        # walk's L.Shoulder once corrected, 2026-11-23) was 0.8 errors from "no effect" and
+        # blocked every other marker
+        value = np.atleast_1d(np.asarray(ev.parameters["residual_shift_m"], dtype=float))
     if ev.cause == "plate_force_gain":
         value = value - 1.0
     se = float(np.linalg.norm(np.atleast_1d(np.asarray(ev.uncertainty, dtype=float))))
@@ -278,13 +286,53 @@ def t_value(ev: Evaluation) -> float:
     return size / se if se > 0 else float("inf")
 
 
-def best_per_cause(evaluations: list[Evaluation]) -> list[Evaluation]:
-    """The best-scoring alternative of each cause, best first."""
+def contends(ev: Evaluation, rule: ChoiceRule) -> bool:
+    """Whether every estimate of ``ev`` is worth naming and plausible and lies at least
+    ``rule.min_t`` standard errors from no effect (:meth:`ChoiceRule` fields)."""
+    lo, hi = rule.min_effect.get(ev.cause, 0.0), rule.max_effect.get(ev.cause, np.inf)
+    return all(lo <= effect_size(ev, p) <= hi for p in ev.estimates) and t_value(ev) >= rule.min_t
+
+
+def best_per_cause(evaluations: list[Evaluation], rule: ChoiceRule | None = None) -> list[Evaluation]:
+    """The best-scoring alternative of each cause, best first.
+
+    With ``rule``, the best of a cause whose alternatives each act on a channel of their own
+    (:data:`MARKER_CHANNEL_CAUSES`: a marker's offset explains that marker's error only) is
+    the best that stands out on its own channel (:func:`stands_out_alone`), else the best
+    that :func:`contends`: a marker whose estimate is no effect, or that improves too few
+    folds, does not stand in the way of another marker's offset."""
     best: dict[str, Evaluation] = {}
     for ev in evaluations:
         if ev.cause not in best or ev.score > best[ev.cause].score:
             best[ev.cause] = ev
+    if rule is not None:
+        for cause in MARKER_CHANNEL_CAUSES:
+            own = [e for e in evaluations if e.cause == cause]
+            eligible = [e for e in own if stands_out_alone(e, rule)] or [e for e in own if contends(e, rule)]
+            if eligible:
+                best[cause] = max(eligible, key=lambda e: e.score)
     return sorted(best.values(), key=lambda e: e.score, reverse=True)
+
+
+def stands_out_alone(ev: Evaluation, rule: ChoiceRule) -> bool:
+    """Whether ``ev`` passes every check of ``rule`` that does not compare it with another
+    cause: it contends (:func:`contends`), its score is positive, and it removes
+    ``rule.min_relative_gain`` of its channels' held-out cost in ``rule.min_folds_improved``
+    of the folds."""
+    return (
+        contends(ev, rule)
+        and ev.score > 0
+        and ev.relative_gain >= rule.min_relative_gain
+        and ev.folds_improved >= rule.min_folds_improved
+    )
+
+
+def also_standing_out(evaluations: list[Evaluation], chosen: Evaluation | None, rule: ChoiceRule) -> list[Evaluation]:
+    """Marker offsets other than ``chosen`` that stand out on their own channel
+    (:func:`stands_out_alone`). Markers do not compete with each other (each explains its
+    own error), so every one of them is a finding; best score first."""
+    out = [e for e in evaluations if e.cause in MARKER_CHANNEL_CAUSES and e is not chosen and stands_out_alone(e, rule)]
+    return sorted(out, key=lambda e: e.score, reverse=True)
 
 
 def make_blocks(n_frames: int, dt: float, block_seconds: float = 0.2) -> IntArray:
@@ -396,12 +444,7 @@ def choose(
         return None, "no candidate cause could be evaluated on this trial"
     # a cause whose estimate is negligible (a 1 ms delay, a 0.3 kg mass change) is no
     # contender: it neither gets named nor stands in the way of one that matters
-    contenders = [
-        e
-        for e in ranked
-        if all(rule.min_effect.get(e.cause, 0.0) <= effect_size(e, p) <= rule.max_effect.get(e.cause, np.inf) for p in e.estimates)
-        and t_value(e) >= rule.min_t
-    ]
+    contenders = [e for e in ranked if contends(e, rule)]
     if not contenders:
         best = ranked[0]
         size = f"{effect_size(best):.3g}"

@@ -350,6 +350,7 @@ def check(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) 
         "choice": hidden.choice,
         "truth": hidden.truth,
         "chosen": chosen,
+        "chosen_choice": (modified.get("chosen_parameters") or {}).get("plate", (modified.get("chosen_parameters") or {}).get("marker")),
         "detected": detected,
         "error": err,
         "within_tolerance": detected and err is not None and err <= TOLERANCE[hidden.cause],

@@ -142,3 +142,32 @@ def test_saving_into_a_read_only_subject_is_refused(walk: Path) -> None:
         assert not (walk / FILE_NAME).exists()
     finally:
         walk.chmod(0o755)
+
+
+def test_marker_offset_entry_moves_the_recordings_by_the_shift_beyond_the_fitted_offset() -> None:
+    """``--apply`` and the refit move a marker's recordings by the shift its error shows
+    beyond the offset the kinematics stage gave the model marker (the whole misplacement
+    counts that offset twice), in the lab frame at each frame."""
+    from types import SimpleNamespace
+
+    from solver.diagnose.core import extension_entry
+    from solver.diagnose.selection import Evaluation
+
+    angle = np.linspace(0.0, 1.0, 5)
+    rot = np.zeros((5, 2, 3, 3))
+    rot[:, :, 0, 0] = np.cos(angle)[:, None]
+    rot[:, :, 0, 2] = np.sin(angle)[:, None]
+    rot[:, :, 1, 1] = 1.0
+    rot[:, :, 2, 0] = -np.sin(angle)[:, None]
+    rot[:, :, 2, 2] = np.cos(angle)[:, None]
+    data = SimpleNamespace(
+        markers=SimpleNamespace(names=["A", "B"], rotation=rot), time=np.arange(5) * 0.01, trial=SimpleNamespace(trial="walk")
+    )
+    residual, fitted = np.array([0.01, -0.02, 0.005]), np.array([0.003, 0.004, 0.0])
+    params = {"value": (fitted + residual).tolist(), "marker": "B", "body": "femur_l", "shift_m": (fitted + residual).tolist(),
+              "residual_shift_m": residual.tolist(), "fitted_offset_m": fitted.tolist()}
+    ev = Evaluation("marker_offset", "B", params, None, 3, 1.0, 1.0, np.ones(5), 1.0)
+    entry = extension_entry(ev, data, data.time)
+    np.testing.assert_allclose(entry["shift_m"], residual)
+    np.testing.assert_allclose(entry["misplacement_m"], fitted + residual)
+    np.testing.assert_allclose(entry["lab_shift_m"], np.einsum("tij,j->ti", rot[:, 1], residual), atol=1e-6)

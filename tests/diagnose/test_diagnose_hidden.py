@@ -29,6 +29,7 @@ RELIABLE = {
     "body_mass": (0, 1, 2, 4),
     "plate_force_offset": (0, 1, 2, 3, 4),
     "plate_force_gain": (0, 2, 4),
+    "marker_offset": (0, 1, 2),  # walk only (the run's model has no landmark markers)
 }
 #: On the treadmill run, whose two plates are the belts under one foot each, a gain of one
 #: plate competes with a body-mass change (both scale the load of every other stance) and
@@ -41,7 +42,6 @@ RUN_GAP = {
 UNRELIABLE = {
     "plate_position_offset": "walk 6 of 10 benchmark draws named (3 within 0.5 cm; the sideways part of a shift is uncertain to 0.9 cm there), run 3 of 10: shifts under 2.5 cm rarely stand out from the run's own residual",
     "segment_mass_distribution": "the fitted motion absorbs a 4-10 % redistribution for a fraction of a mm of marker error (docs/diagnose/RESULTS.md)",
-    "marker_offset": "10 of 20 walk draws named, 6 within 0.5 cm: a shift the arm's joints take up leaves little in the marker's own error",
 }
 
 

@@ -185,3 +185,47 @@ def test_an_estimate_within_two_standard_errors_of_none_is_no_contender() -> Non
     assert choose([gain], ChoiceRule(), make_blocks(T, DT))[0] is None
     gain.uncertainty = 0.01
     assert choose([gain], ChoiceRule(), make_blocks(T, DT))[0] is gain
+
+
+def _marker(name: str, total: list[float], residual: list[float], se: float, gain_per_frame: float) -> Evaluation:
+    ev = _evaluation("marker_offset", {
+        "value": total, "marker": name, "shift_m": total, "residual_shift_m": residual, "visible_shift_m": residual,
+    }, gain_per_frame)
+    ev.choice = name
+    ev.uncertainty = [se, se, se]
+    return ev
+
+
+def test_a_marker_is_judged_by_the_shift_its_error_shows_and_does_not_block_another() -> None:
+    from solver.diagnose.selection import also_standing_out, best_per_cause, contends, t_value
+
+    rule = ChoiceRule()
+    # the model marker carries a fitted offset the trial contradicts: whole shift ~0, shift
+    # beyond the model 1.3 cm at 0.1 cm per component (the walk's L.Shoulder, 2026-11-23)
+    shoulder = _marker("L.Shoulder", [0.0005, -0.0001, -0.0015], [0.004, -0.0126, 0.0047], 0.001, 0.5)
+    assert t_value(shoulder) > 7 and contends(shoulder, rule)
+    # a marker whose estimate is within its noise scores best but does not contend ...
+    noise = _marker("L.Wrist", [0.006, 0.0, 0.0], [0.006, 0.0, 0.0], 0.01, 0.7)
+    knee = _marker("L.Knee", [0.012, 0.005, 0.0], [0.012, 0.005, 0.0], 0.001, 0.3)
+    assert not contends(noise, rule)
+    ranked = best_per_cause([noise, knee, shoulder], rule)
+    # ... and does not hide the others: the best contending marker is the cause's best
+    assert [e.choice for e in ranked] == ["L.Shoulder"]
+    chosen, _ = choose(ranked, rule, make_blocks(T, DT), [noise, knee, shoulder])
+    assert chosen is shoulder
+    # the other marker that stands out on its own error is a finding too
+    assert [e.choice for e in also_standing_out([noise, knee, shoulder], chosen, rule)] == ["L.Knee"]
+    # without the rule the best score stands, whatever its estimate
+    assert best_per_cause([noise, knee, shoulder])[0] is noise
+
+
+def test_a_marker_that_improves_too_few_folds_does_not_block_one_that_stands_out() -> None:
+    from solver.diagnose.selection import best_per_cause
+
+    rule = ChoiceRule()
+    knee = _marker("L.Knee", [0.012, 0.005, 0.0], [0.012, 0.005, 0.0], 0.001, 0.3)
+    toe = _marker("R.MT5", [0.009, 0.006, 0.009], [0.009, 0.006, 0.009], 0.002, 0.6)
+    toe.fold_gains = np.array([1.0, 1.0, 1.0, -1.0, -1.0])  # better in 3 of 5 folds
+    ranked = best_per_cause([toe, knee], rule)
+    assert ranked[0] is knee
+    assert choose(ranked, rule, make_blocks(T, DT), [toe, knee])[0] is knee
