@@ -2,7 +2,8 @@
 
 From a processed real trial: its motion ``q`` and scaled model with the generic model's
 mass distribution at the fitted mass (so that the pipeline, which starts from that
-distribution, can reproduce it); markers are the model markers plus noise (white,
+distribution, can reproduce it); markers are the model markers (landmark markers at their
+landmarks, without the offsets the kinematics stage fitted on the real trials) plus noise (white,
 ``marker_noise`` m per coordinate (optical motion capture: well under 1 mm), and a smooth soft-tissue drift of ``tissue`` m RMS per
 marker, low-passed at 2 Hz); forces are the real plate wrenches corrected on every
 measured frame so that the root residual is zero (the correction is shared among the
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from solver.diagnose.data import load_offsets
 from solver.dynamics.preprocess import moment_about_origin
 from solver.io.mot import write_forces
 from solver.io.trc import write_trc
@@ -106,6 +108,17 @@ def consistent_subject(
     drift = sosfiltfilt(sos, rng.normal(size=pos.shape), axis=0)
     drift *= tissue / np.sqrt(np.mean(drift**2, axis=0, keepdims=True))
     pos = pos + drift + rng.normal(0.0, marker_noise, pos.shape)
+    # landmark (fixed) markers at their landmarks: the processed model's markers carry the
+    # offsets the kinematics stage fitted on the real trials, up to 2 cm on the walk's
+    # shoulders; written into the data, such an offset is a misplaced marker (a cause the
+    # diagnosis names since markers are judged on their own errors, 2026-11-23)
+    offsets = load_offsets(Path(processed.model_path).parent)
+    generic_markers = {m.name: m for m in read_osim(source_subject / "unscaled_generic.osim").markers}
+    rot, _ = sk.body_poses(processed.q)
+    for j, name in enumerate(names):
+        m = generic_markers.get(name)
+        if m is not None and m.fixed and name in offsets:
+            pos[:, j] -= rot[:, sk.body_index(m.body)] @ np.asarray(offsets[name], dtype=float)
     pos[~np.isfinite(processed.observed)] = np.nan
 
     dst.mkdir(parents=True)
