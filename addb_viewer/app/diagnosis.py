@@ -4,7 +4,8 @@ Reads two files and turns them into the markdown of the panel's "Diagnosis" fold
 
 * ``OUT/<trial>/diagnosis.json`` (written by ``addb diagnose``, schema ``addb.diagnosis``):
   the chosen cause (or that none stands out), its estimate, the best-ranked candidates,
-  and the metrics before and after the extension;
+  the other marker offsets that stand out on their own markers' errors, and the metrics
+  before and after the extension;
 * ``<subject>/addb_extensions.json`` (written by ``addb diagnose --apply``): the
   extensions the processing applies to this trial (and to the whole subject).
 
@@ -18,7 +19,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from solver.diagnose.report import candidate_line, held_out_labels, metric_row
+from solver.diagnose.report import candidate_line, held_out_labels, metric_row, standing_out_line
 
 DIAGNOSIS_FILE = "diagnosis.json"
 
@@ -95,6 +96,10 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
     if candidates:
         blocks.append("Candidates (held-out evidence):")
         blocks.append("```\n" + "\n".join(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]) + "\n```")
+    others = report.get("also_standing_out") or []
+    if others:
+        blocks.append("Other markers that stand out on their own errors (findings too; `--apply` saves only the chosen cause):")
+        blocks.append("```\n" + "\n".join(standing_out_line(e) for e in others) + "\n```")
     if chosen:
         held = report.get("held_out") or {}
         rows = [

@@ -192,6 +192,12 @@ def candidate_line(c: dict[str, Any]) -> str:
     )
 
 
+def standing_out_line(e: dict[str, Any]) -> str:
+    """One text line of an ``also_standing_out`` entry of the JSON object (a marker offset
+    that stands out on its own marker's error besides the chosen cause)."""
+    return f"score {e['score']:10.0f}  {_fmt_params(e['cause'], e['parameters'], e['uncertainty'])}"
+
+
 def held_out_labels(held_out: dict[str, Any]) -> tuple[str, str]:
     """Row labels of the held-out "before" and "after" figures (naming the refitted motions
     when used)."""

@@ -65,6 +65,24 @@ def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict])
     assert held["after"]["linear_residual_rms_N"] < 0.5 * held["before"]["linear_residual_rms_N"]
 
 
+def test_review_panel_lists_the_markers_standing_out(walk: tuple[Path, dict]) -> None:
+    """The walk's landmark markers carry real offsets beyond what the kinematics fit places
+    (docs/diagnose/FINDINGS.md); besides the chosen cause the report lists them, and the
+    review app's Diagnosis folder shows each of them with its estimate."""
+    from addb_viewer.app.diagnosis import diagnosis_markdown
+
+    subject, report = walk
+    others = report["also_standing_out"]
+    assert len(others) >= 3  # the shoulders, the elbows, the clavicles...
+    assert all(e["cause"] == "marker_offset" for e in others)
+    text = diagnosis_markdown(subject / "addb_out", subject, "walk")
+    block = text.split("Other markers that stand out", 1)[1].split("```")[1]
+    listed = [line for line in block.splitlines() if line.strip()]
+    assert len(listed) == len(others)
+    for line, e in zip(listed, others):
+        assert f"marker {e['parameters']['marker']} on {e['parameters']['body']}" in line
+
+
 def test_refit_keeps_the_frames_the_solver_left_out(tmp_path: Path) -> None:
     """With no reviewer flags, the refit runs as the next ``addb process`` would: the
     solver's own unmeasured-force proposals stand (OpenCap's walk steps off its plates),
