@@ -47,10 +47,23 @@ UNITS = {
 }
 
 
+def _summary(rows: list[dict[str, Any]], synthetic: list[dict[str, Any]], bases: dict[str, Any], draws: int, keys: list[str]) -> dict[str, Any]:
+    return {"rows": rows, "synthetic": synthetic, "bases": {k: {"applied": [e["cause"] for e in b.applied], "left": b.report["chosen"]} for k, b in bases.items()},
+            "draws": draws, "trials": keys}
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Every draw and synthetic trial; with ``--json`` the results so far are written after
+    each of them (``"complete": false`` until the end), so an interrupted run keeps its rows."""
     work = Path(tempfile.mkdtemp(prefix="addb-bench-diagnose-"))
     rows: list[dict[str, Any]] = []
+    synthetic: list[dict[str, Any]] = []
     bases = {}
+
+    def save() -> None:
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({**_summary(rows, synthetic, bases, args.draws, list(bases)), "complete": False}, indent=1, default=str) + "\n")
     causes = args.causes.split(",") if args.causes else list(CAUSES)
     try:
         for key in args.trials.split(","):
@@ -75,7 +88,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 print(f"{cause:<26s} {key:<9s} seed {seed}: chosen {res.get('chosen')}, detected {res['detected']}, "
                       f"error {res['error']}, within {res['within_tolerance']} ({res['wall_seconds']:.0f} s)", flush=True)
                 shutil.rmtree(dst, ignore_errors=True)
-        synthetic = []
+                save()
         for key in keys:
             folder, trial = TRIALS[key]
             for seed in range(args.synthetic):
@@ -86,10 +99,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                   "diagnose_seconds": report["seconds"]["total"]})
                 print(f"synthetic {key} seed {seed}: chosen {report['chosen']}", flush=True)
                 shutil.rmtree(dst, ignore_errors=True)
+                save()
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    return {"rows": rows, "synthetic": synthetic, "bases": {k: {"applied": [e["cause"] for e in b.applied], "left": b.report["chosen"]} for k, b in bases.items()},
-            "draws": args.draws, "trials": keys}
+    return {**_summary(rows, synthetic, bases, args.draws, keys), "complete": True}
 
 
 def markdown(result: dict[str, Any], command: str) -> str:
@@ -115,7 +128,7 @@ def markdown(result: dict[str, Any], command: str) -> str:
         lines.append(
             f"| {cause} | {len(rs)} | {sum(r['detected'] for r in rs)} ({100 * np.mean([r['detected'] for r in rs]):.0f} %) | "
             f"{sum(bool(r['within_tolerance']) for r in rs)} ({100 * np.mean([bool(r['within_tolerance']) for r in rs]):.0f} %) | {med} | "
-            f"{scale * TOLERANCE[cause]:g} {unit} | {np.median(secs) if secs else float('nan'):.1f} |"
+            f"{scale * TOLERANCE[cause]:g} {unit} | {f'{np.median(secs):.1f}' if secs else '—'} |"
         )
     syn = result["synthetic"]
     if syn:
