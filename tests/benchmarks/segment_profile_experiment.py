@@ -27,6 +27,10 @@ legs share must come back, ``-legs_fraction x fitted mass`` kg (tests/diagnose/e
 Run (bases and draws are processed once and kept in ``--work``)::
 
     .venv/bin/python tests/benchmarks/segment_profile_experiment.py --draws 4 --work /tmp/segment-profile
+
+``--synthetic N`` first estimates on N consistent synthetic trials per base
+(:mod:`tests.diagnose.synthetic`: the base's processed motion and masses with forces computed
+from them, plus noise), where the estimate should be 0.
 """
 
 from __future__ import annotations
@@ -50,7 +54,8 @@ from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import load_processed
 from tests.diagnose.effects import copy_subject, hide
-from tests.diagnose.harness import TRIALS, draw, neutral_base
+from tests.diagnose.harness import SUBJECTS, TRIALS, draw, neutral_base
+from tests.diagnose.synthetic import consistent_subject
 
 CAUSE = "segment_mass_distribution"
 
@@ -173,8 +178,22 @@ def main() -> None:
     p.add_argument("--draws", type=int, default=4)
     p.add_argument("--work", type=Path, required=True)
     p.add_argument("--legs-only", action="store_true", help="one parameter: mass moved between the legs and the rest")
+    p.add_argument("--synthetic", type=int, default=0, help="consistent synthetic trials per base (their estimate should be 0)")
     args = p.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
+    for key in ("walk", "run"):
+        folder, trial = TRIALS[key]
+        for seed in range(args.synthetic):
+            base_dir, dst = args.work / f"base-{key}", args.work / f"synthetic-{key}-{seed}"
+            if not (base_dir / "addb_out").is_dir():
+                neutral_base(key, base_dir)
+            if not (dst / "addb_out").is_dir():
+                consistent_subject(load_processed(base_dir / "addb_out", trial), SUBJECTS / folder, dst, seed=seed)
+                if cli(["process", str(dst), "--out", str(dst / "addb_out")]) != 0:
+                    raise RuntimeError(f"addb process failed on {dst}")
+            est = profiled_estimate(dst, trial, legs_only=args.legs_only)
+            gain = 100 * (1 - est["cost_after"] / est["cost_before"])
+            print(f"synthetic {key} {seed}: {({g: round(v, 2) for g, v in est['mass_change_kg'].items()})} kg, cost gain {gain:.1f} %", flush=True)
     bases: dict[str, dict[str, Any]] = {}
     print("| trial | seed | hidden: legs kg to move back | estimate, relative to the base | error (kg) | cost gain, draw | cost gain, base |")
     print("|---|---:|---:|---:|---:|---:|---:|")
