@@ -88,6 +88,7 @@ class ReviewApp:
         self.panel: ReviewPanel = build_panel(self.server, title=f"addb · {paths.subject_dir.name}")
         self.settings = SceneSettings()
         self._lock = threading.RLock()
+        self._edit_lock = threading.RLock()
         self._quiet = threading.local()
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
@@ -392,7 +393,15 @@ class ReviewApp:
 
     # ================================================================== flags
     def edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
-        """Run one store edit on the current trial and frame; say "saved" once it is durable."""
+        """Run one store edit on the current trial and frame; say "saved" once it is durable.
+
+        viser runs the page's handlers in a thread pool, so two quick clicks (undo, then the
+        reviewed box) would run side by side and the earlier one's message could come last;
+        edits therefore run one at a time, each message final before the next edit starts."""
+        with self._edit_lock:
+            self._edit(what, action)
+
+    def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
         with self._lock:
             editor, pb = self.editor, self.playback
             frame = pb.frame if pb is not None else 0

@@ -126,9 +126,9 @@ def test_page_controls_write_flags_to_the_store_on_disk(demo_paths, make_app) ->
 
         # undo, and the reviewed mark
         client.set_value(p.history, "Undo")
-        wait_for(lambda: "undo" in p.saved.content, what="undo saved")
+        wait_for(lambda: "saved: undo" in p.saved.content, what="undo saved")
         client.set_value(p.reviewed, True)
-        wait_for(lambda: "trial reviewed" in p.saved.content, what="reviewed saved")
+        wait_for(lambda: "saved: trial reviewed" in p.saved.content, what="reviewed saved")
         disk = _disk(demo_paths)
         assert disk.ranges("walk") == [(40, 41)] and disk.flag("walk", 40).foot == "both"
         assert disk.is_reviewed("walk")
