@@ -157,7 +157,7 @@ def main() -> None:
     p.add_argument("--markdown", type=Path)
     p.add_argument(
         "--from-json", type=Path, nargs="+",
-        help="only merge earlier --json results into one table (a later file's rows of a cause replace the earlier files')",
+        help="only merge earlier --json results into one table (a later file's rows of a cause replace the earlier files'; the trials and bases named are the last file's)",
     )
     args = p.parse_args()
     if args.from_json:
@@ -174,9 +174,9 @@ def main() -> None:
         result = {
             "rows": rows,
             "synthetic": synthetic,
-            "bases": parts[0]["bases"],
-            "draws": parts[0]["draws"],
-            "trials": parts[0]["trials"],
+            "bases": parts[-1]["bases"],
+            "draws": parts[-1]["draws"],
+            "trials": parts[-1]["trials"],
         }
     else:
         result = run(args)
