@@ -401,7 +401,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             trial,
             inputs.raw.forces,
             stated_mass=subject.mass_kg,
-            flagged=frame_flags(inputs.flags, marker_time, processed.time),
+            flagged=frame_flags(inputs.flags, marker_time, trial.time),
             generic_model=generic,
             marker_offsets=inputs.marker_offsets,
             feet=subject.foot_body_names,
@@ -480,14 +480,21 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 # corrected forces on the motion refitted with them, against the same refit
                 # without them (the parameters of each frame still fitted without its fold)
                 def on(r: Refit) -> tuple[C.Context, C.Alternative]:
-                    ctx_r, full_r = build_context(prep(r.trial, r.model), ctx.sigmas, (ctx.unmeasured, ctx.unmeasured_reasons))
+                    unmeasured = _folds_at(ctx.unmeasured, data.time, r.trial.time)
+                    ctx_r, full_r = build_context(prep(r.trial, r.model), ctx.sigmas, (unmeasured, ctx.unmeasured_reasons))
                     return ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen)
 
                 (ctx_p, alt_p), (ctx_r, alt_r) = on(plain), on(refit)
-                both = ctx_p.evaluated & ctx_r.evaluated  # the two refits may leave out different frames
+                # the two refits may leave out different frames, and a corrected force delay
+                # moves the span the plates and the cameras share (one frame fewer or more):
+                # frames are matched by time, each keeping the fold of its processed frame
+                in_r, in_p = _same_times(ctx_p.data.time, ctx_r.data.time), _same_times(ctx_r.data.time, ctx_p.data.time)
+                both_p, both_r = ctx_p.evaluated & in_r, ctx_r.evaluated & in_p
+                both_p[in_r] &= both_r[in_p]
+                both_r[in_p] &= both_p[in_r]
                 result.held_out.update(
-                    before=held_out_figures(ctx_p, alt_p, folds, both)["before"],
-                    after=held_out_figures(ctx_r, alt_r, folds, both)["after"],
+                    before=held_out_figures(ctx_p, alt_p, _folds_at(folds, data.time, ctx_p.data.time), both_p)["before"],
+                    after=held_out_figures(ctx_r, alt_r, _folds_at(folds, data.time, ctx_r.data.time), both_r)["after"],
                     motion="refitted",
                     note="translation re-optimized; on the motions refitted without (before) and with (after) the "
                     "extension, each frame corrected with parameters fitted without its fold",
@@ -495,6 +502,20 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     result.seconds["total"] = _time.perf_counter() - t0
     say("done", 1.0)
     return result
+
+
+def _same_times(time: FloatArray, other: FloatArray) -> BoolArray:
+    """``(T,)`` frames of ``time`` that ``other`` has too (within a tenth of a frame)."""
+    if time.size < 2 or other.size < 2:
+        return np.isin(time, other)
+    idx = nearest_frames(other, time)
+    return np.abs(other[idx] - time) < 0.1 * float(np.median(np.diff(time)))
+
+
+def _folds_at(folds: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarray:
+    """Per-frame values on ``time`` (folds, frame masks) taken at the nearest frame of each
+    of ``at``: ``at``'s own frames."""
+    return folds if np.array_equal(time, at) else folds[nearest_frames(time, at)]
 
 
 #: Causes that act on the measured forces (the plates' readings or the body's weight).
