@@ -40,7 +40,7 @@ RUN_GAP = {
 #: Causes not yet named reliably (detection rates in docs/diagnose/RESULTS.md): their first
 #: draw is run as an expected failure, so that the gap stays visible and an improvement shows.
 UNRELIABLE = {
-    "plate_position_offset": "walk 6 of 10 benchmark draws named (3 within 0.5 cm; the sideways part of a shift is uncertain to 0.9 cm there), run 3 of 10: shifts under 2.5 cm rarely stand out from the run's own residual",
+    "plate_position_offset": "walk 6 of 10 benchmark draws named (2 within 0.5 cm; the sideways part of a shift is uncertain to 0.9 cm there), run 3 of 10 (3 within): shifts under 2.5 cm rarely stand out from the run's own residual (2026-11-23)",
     "segment_mass_distribution": "the fitted motion absorbs a 4-10 % redistribution for a fraction of a mm of marker error (docs/diagnose/RESULTS.md)",
 }
 
