@@ -30,6 +30,7 @@ from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
 from solver.model.osim import Body, read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
+from tests.diagnose.effects import fixed_markers
 
 FORCE_RATE = 1000.0
 
@@ -113,12 +114,10 @@ def consistent_subject(
     # shoulders; written into the data, such an offset is a misplaced marker (a cause the
     # diagnosis names since markers are judged on their own errors, 2026-11-23)
     offsets = load_offsets(Path(processed.model_path).parent)
-    generic_markers = {m.name: m for m in read_osim(source_subject / "unscaled_generic.osim").markers}
     rot, _ = sk.body_poses(processed.q)
-    for j, name in enumerate(names):
-        m = generic_markers.get(name)
-        if m is not None and m.fixed and name in offsets:
-            pos[:, j] -= rot[:, sk.body_index(m.body)] @ np.asarray(offsets[name], dtype=float)
+    for name, body in fixed_markers(source_subject):
+        if name in names and name in offsets:
+            pos[:, names.index(name)] -= rot[:, sk.body_index(body)] @ np.asarray(offsets[name], dtype=float)
     pos[~np.isfinite(processed.observed)] = np.nan
 
     dst.mkdir(parents=True)
