@@ -19,7 +19,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from solver.diagnose.report import candidate_line, held_out_labels, metric_row, standing_out_line
+from solver.diagnose.report import (
+    STANDING_OUT_HEADING,
+    candidate_line,
+    held_out_labels,
+    metric_row,
+    standing_out_line,
+)
 
 DIAGNOSIS_FILE = "diagnosis.json"
 
@@ -98,7 +104,7 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
         blocks.append("```\n" + "\n".join(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]) + "\n```")
     others = report.get("also_standing_out") or []
     if others:
-        blocks.append("Other markers that stand out on their own errors (findings too; `--apply` saves only the chosen cause):")
+        blocks.append(STANDING_OUT_HEADING)
         blocks.append("```\n" + "\n".join(standing_out_line(e) for e in others) + "\n```")
     if chosen:
         held = report.get("held_out") or {}

@@ -192,6 +192,10 @@ def candidate_line(c: dict[str, Any]) -> str:
     )
 
 
+#: Heading of the ``also_standing_out`` list in the text report and the review app.
+STANDING_OUT_HEADING = "Other markers that stand out on their own errors (findings too; `--apply` saves only the chosen cause):"
+
+
 def standing_out_line(e: dict[str, Any]) -> str:
     """One text line of an ``also_standing_out`` entry of the JSON object (a marker offset
     that stands out on its own marker's error besides the chosen cause)."""
@@ -260,7 +264,7 @@ def to_text(diag: Diagnosis) -> str:
         lines.append("  " + candidate_line(candidate_json(ev, [])))
     lines += ["", diag.reason]
     if diag.also_standing_out:
-        lines.append("Other markers that stand out on their own errors (findings too; `--apply` saves only the chosen cause):")
+        lines.append(STANDING_OUT_HEADING)
         lines += [f"  {_fmt_params(e.cause, _params(e.parameters), _uncertainty(e))}" for e, _ in diag.also_standing_out]
     if diag.chosen is not None:
         lines.append(f"Estimate: {_fmt_params(diag.chosen.cause, _params(diag.parameters), _uncertainty(diag.chosen))}")
