@@ -480,7 +480,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 # corrected forces on the motion refitted with them, against the same refit
                 # without them (the parameters of each frame still fitted without its fold)
                 def on(r: Refit) -> tuple[C.Context, C.Alternative]:
-                    unmeasured = _folds_at(ctx.unmeasured, data.time, r.trial.time)
+                    unmeasured = _at_times(ctx.unmeasured, data.time, r.trial.time)
                     ctx_r, full_r = build_context(prep(r.trial, r.model), ctx.sigmas, (unmeasured, ctx.unmeasured_reasons))
                     return ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen)
 
@@ -489,12 +489,12 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 # moves the span the plates and the cameras share (one frame fewer or more):
                 # frames are matched by time, each keeping the fold of its processed frame
                 in_r, in_p = _same_times(ctx_p.data.time, ctx_r.data.time), _same_times(ctx_r.data.time, ctx_p.data.time)
-                both_p, both_r = ctx_p.evaluated & in_r, ctx_r.evaluated & in_p
-                both_p[in_r] &= both_r[in_p]
-                both_r[in_p] &= both_p[in_r]
+                shared = ctx_p.evaluated[in_r] & ctx_r.evaluated[in_p]  # the shared frames, in time order
+                both_p, both_r = np.zeros_like(in_r), np.zeros_like(in_p)
+                both_p[in_r], both_r[in_p] = shared, shared
                 result.held_out.update(
-                    before=held_out_figures(ctx_p, alt_p, _folds_at(folds, data.time, ctx_p.data.time), both_p)["before"],
-                    after=held_out_figures(ctx_r, alt_r, _folds_at(folds, data.time, ctx_r.data.time), both_r)["after"],
+                    before=held_out_figures(ctx_p, alt_p, _at_times(folds, data.time, ctx_p.data.time), both_p)["before"],
+                    after=held_out_figures(ctx_r, alt_r, _at_times(folds, data.time, ctx_r.data.time), both_r)["after"],
                     motion="refitted",
                     note="translation re-optimized; on the motions refitted without (before) and with (after) the "
                     "extension, each frame corrected with parameters fitted without its fold",
@@ -512,10 +512,10 @@ def _same_times(time: FloatArray, other: FloatArray) -> BoolArray:
     return np.abs(other[idx] - time) < 0.1 * float(np.median(np.diff(time)))
 
 
-def _folds_at(folds: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarray:
+def _at_times(values: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarray:
     """Per-frame values on ``time`` (folds, frame masks) taken at the nearest frame of each
     of ``at``: ``at``'s own frames."""
-    return folds if np.array_equal(time, at) else folds[nearest_frames(time, at)]
+    return values if np.array_equal(time, at) else values[nearest_frames(time, at)]
 
 
 #: Causes that act on the measured forces (the plates' readings or the body's weight).
