@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -235,6 +235,17 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scor
     """
     d = ctx.data
     t = d.n_frames
+    frames = np.ones(t, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
+    if isinstance(alt, C.MotionAlternative):  # rows of the whole-motion profile
+        after = np.array(alt.rho0)
+        for f in range(int(folds.max()) + 1):
+            test = folds == f
+            after[test] = alt.rows(alt.solve(~test))[test]
+        return {
+            "before": alt.figures(alt.rho0, frames),
+            "after": alt.figures(after, frames),
+            "note": "fixed processed motion, every coordinate re-optimized (linearized); after: parameters fitted without the frame's fold",
+        }
     after_rows = np.array(ctx.ref_rows)
     lab = np.zeros((t, 3))
     j = None
@@ -246,7 +257,6 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scor
             lab[test] = np.einsum("tij,j->ti", d.markers.rotation[test, j], theta)
         else:
             after_rows[test] = alt.rows(theta)[test]
-    frames = np.ones(t, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
     before_eval = ~d.flagged if alt.cause == "unmeasured_force" else ctx.evaluated
     before_rows = ctx.ref_rows
     if alt.cause == "unmeasured_force":
@@ -416,7 +426,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     # parameters from the marker-only motion (not pulled toward the forces by the fit)
     # (same frames U as the fitted motion: the marker-only motion is noisier, and its own
     # residual would call far more frames unmeasured)
-    ctx_ik, alts_ik, evaluations_ik, _ = evaluate(data_ik, options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
+    ik_options = replace(options, causes=tuple(c for c in options.causes if c not in FITTED_MOTION_ONLY))
+    ctx_ik, alts_ik, evaluations_ik, _ = evaluate(data_ik, ik_options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
     for ev in evaluations_ik:
         ev.motion = "marker-only"
     for ev in evaluations:
@@ -563,6 +574,12 @@ def choice_on_marker_motion(
     if pick is None or pick.cause not in MARKER_MOTION_CHOICES:
         return None
     return pick, why
+
+
+#: Causes not evaluated on the marker-only motion at all: a mass distribution is judged with
+#: the whole motion re-optimized (:mod:`.motion_profile`), so the motion it starts from only
+#: sets the linearization point, and the fitted one is consistent with the forces.
+FITTED_MOTION_ONLY = ("segment_mass_distribution",)
 
 
 #: Causes whose parameters are estimated on the marker-only motion (see :func:`_diagnose`):

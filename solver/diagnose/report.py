@@ -90,8 +90,8 @@ def _uncertainty(ev: Evaluation) -> dict[str, Any] | None:
         return None
     key = MAIN_PARAMETER[ev.cause]
     unc = ev.uncertainty
-    if ev.cause == "segment_mass_distribution":
-        unc = dict(zip(ev.parameters["mass_change_kg"], unc))
+    if ev.cause == "segment_mass_distribution":  # one parameter: the legs' change (the rest follows)
+        unc = {"legs": unc}
     return {key: unc}
 
 
