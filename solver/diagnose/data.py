@@ -249,6 +249,9 @@ class DiagnosisData:
         contact or a loaded plate under them) and ``foot_loaded`` ``(F, T)`` whether a
         loaded plate is under them (:func:`solver.dynamics.contact.assign_contacts` on the
         raw plates).
+    model
+        The model the trial was prepared with (the processed, mass-fitted one, or a
+        refit's), or None (then ``trial.model_path``'s).
     """
 
     trial: ProcessedTrial
@@ -267,6 +270,7 @@ class DiagnosisData:
     feet: tuple[str, ...] = ()
     foot_contact: BoolArray | None = None
     foot_loaded: BoolArray | None = None
+    model: OsimModel | None = None
 
     @property
     def n_frames(self) -> int:
@@ -517,6 +521,7 @@ def prepare(
         feet=tuple(feet),
         foot_contact=None if contact is None else contact.foot_in_contact | contact.foot_loaded,
         foot_loaded=None if contact is None else contact.foot_loaded,
+        model=model,
     )
 
 

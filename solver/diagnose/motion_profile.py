@@ -71,7 +71,8 @@ class MotionProfile:
     sigmas
         Channel standard deviations.
     model
-        The processed (mass-fitted) model; default: read from ``data.trial.model_path``.
+        The processed (mass-fitted) model; default: ``data.model``, else read from
+        ``data.trial.model_path``.
     accel_sigma
         s_a, the fit's acceleration prior (rad/s² or m/s² per coordinate); default: the
         trial's ``settings['fit']['accel_sigma']``, else 500.
@@ -96,7 +97,9 @@ class MotionProfile:
             raise ValueError(f"trial {trial.trial}: the whole-motion profile needs at least 3 frames, got {t_n}")
         fit = (trial.settings or {}).get("fit", {}) or {}
         s_a = float(fit.get("accel_sigma", 500.0)) if accel_sigma is None else float(accel_sigma)
-        sk = Skeleton(read_osim(trial.model_path) if model is None else model)
+        if model is None:
+            model = data.model if data.model is not None else read_osim(trial.model_path)
+        sk = Skeleton(model)
         free = np.flatnonzero(sk.is_independent & ~sk.locked)
         nf = free.size
         h = data.dt
