@@ -171,7 +171,8 @@ def _fmt_params(cause: str, p: dict[str, Any] | None, unc: dict[str, Any] | None
     if cause == "plate_position_offset":
         return f"plate {p['plate']}: centre of pressure shifted by {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm{pm(u, 100, 'cm', 2)}"
     if cause == "segment_mass_distribution":
-        return "mass moved: " + ", ".join(f"{g} {v:+.2f} kg" for g, v in p["mass_change_kg"].items())
+        legs = f" (legs{pm(u.get('legs'), 1, 'kg', 2)})" if isinstance(u, dict) and u.get("legs") is not None else ""
+        return "mass moved: " + ", ".join(f"{g} {v:+.2f} kg" for g, v in p["mass_change_kg"].items()) + legs
     if cause == "marker_offset":
         return (
             f"marker {p['marker']} on {p['body']}: {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm from the model's landmark "
