@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                   f"left: {bases[key].report['chosen']} ({time.perf_counter() - t0:.0f} s)", flush=True)
         keys = list(bases)
         for ci, cause in enumerate(causes):
-            for draw in range(args.draws):
+            for draw in range(args.first, args.first + args.draws):
                 key, seed = draw_of(cause, draw, tuple(keys))
                 dst = work / f"{cause}-{draw}"
                 t0 = time.perf_counter()
@@ -150,6 +150,7 @@ def markdown(result: dict[str, Any], command: str) -> str:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--draws", type=int, default=20)
+    p.add_argument("--first", type=int, default=0, help="index of the first draw (draws are numbered per cause; see tests.diagnose.harness.draw)")
     p.add_argument("--synthetic", type=int, default=10, help="consistent synthetic trials per real trial")
     p.add_argument("--trials", default="walk,run")
     p.add_argument("--causes", default="", help="comma-separated subset (default: all)")
@@ -159,6 +160,10 @@ def main() -> None:
         "--from-json", type=Path, nargs="+",
         help="only merge earlier --json results into one table (a later file's rows of a cause replace the earlier files'; the trials and bases named are the last file's)",
     )
+    p.add_argument(
+        "--pool", action="store_true",
+        help="with --from-json: pool the files' rows of a cause (a later file's row of the same seed replaces an earlier one), for draws measured in parts with --first",
+    )
     args = p.parse_args()
     if args.from_json:
         parts = [json.loads(f.read_text()) for f in args.from_json]
@@ -167,10 +172,14 @@ def main() -> None:
         rows: list[dict[str, Any]] = []
         synthetic: list[dict[str, Any]] = []
         for x in parts:
-            redone = {r["cause"] for r in x["rows"]}
-            rows = [r for r in rows if r["cause"] not in redone] + list(x["rows"])
+            if args.pool:
+                redone_seeds = {(r["cause"], r["seed"]) for r in x["rows"]}
+                rows = [r for r in rows if (r["cause"], r["seed"]) not in redone_seeds] + list(x["rows"])
+            else:
+                redone = {r["cause"] for r in x["rows"]}
+                rows = [r for r in rows if r["cause"] not in redone] + list(x["rows"])
             synthetic = list(x["synthetic"]) if x["synthetic"] else synthetic
-        rows.sort(key=lambda r: CAUSES.index(r["cause"]) if r["cause"] in CAUSES else len(CAUSES))
+        rows.sort(key=lambda r: (CAUSES.index(r["cause"]) if r["cause"] in CAUSES else len(CAUSES), r.get("seed", 0)))
         result = {
             "rows": rows,
             "synthetic": synthetic,
