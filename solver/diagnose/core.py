@@ -236,17 +236,8 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scor
     d = ctx.data
     t = d.n_frames
     frames = np.ones(t, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
-    if isinstance(alt, C.MotionAlternative):  # rows of the whole-motion profile
-        after = np.array(alt.rho0)
-        for f in range(int(folds.max()) + 1):
-            test = folds == f
-            after[test] = alt.rows(alt.solve(~test))[test]
-        return {
-            "before": alt.figures(alt.rho0, frames),
-            "after": alt.figures(after, frames),
-            "note": "fixed processed motion, every coordinate re-optimized (linearized); after: parameters fitted without the frame's fold",
-        }
-    after_rows = np.array(ctx.ref_rows)
+    motion = isinstance(alt, C.MotionAlternative)  # rows of the whole-motion profile
+    after_rows = np.array(alt.rho0 if motion else ctx.ref_rows)
     lab = np.zeros((t, 3))
     j = None
     for f in range(int(folds.max()) + 1):
@@ -257,6 +248,12 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scor
             lab[test] = np.einsum("tij,j->ti", d.markers.rotation[test, j], theta)
         else:
             after_rows[test] = alt.rows(theta)[test]
+    if motion:
+        return {
+            "before": alt.figures(alt.rho0, frames),
+            "after": alt.figures(after_rows, frames),
+            "note": "fixed processed motion, every coordinate re-optimized (linearized); after: parameters fitted without the frame's fold",
+        }
     before_eval = ~d.flagged if alt.cause == "unmeasured_force" else ctx.evaluated
     before_rows = ctx.ref_rows
     if alt.cause == "unmeasured_force":

@@ -39,7 +39,7 @@ from scipy.sparse.linalg import splu
 
 from solver.diagnose.data import DiagnosisData
 from solver.diagnose.profile import Sigmas
-from solver.model.osim import OsimModel, read_osim
+from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -70,9 +70,6 @@ class MotionProfile:
         (their central differences need both neighbours).
     sigmas
         Channel standard deviations.
-    model
-        The processed (mass-fitted) model; default: ``data.model``, else read from
-        ``data.trial.model_path``.
     accel_sigma
         s_a, the fit's acceleration prior (rad/s² or m/s² per coordinate); default: the
         trial's ``settings['fit']['accel_sigma']``, else 500.
@@ -88,7 +85,6 @@ class MotionProfile:
         data: DiagnosisData,
         evaluated: BoolArray,
         sigmas: Sigmas,
-        model: OsimModel | None = None,
         accel_sigma: float | None = None,
     ) -> None:
         trial = data.trial
@@ -97,9 +93,8 @@ class MotionProfile:
             raise ValueError(f"trial {trial.trial}: the whole-motion profile needs at least 3 frames, got {t_n}")
         fit = (trial.settings or {}).get("fit", {}) or {}
         s_a = float(fit.get("accel_sigma", 500.0)) if accel_sigma is None else float(accel_sigma)
-        if model is None:
-            model = data.model if data.model is not None else read_osim(trial.model_path)
-        sk = Skeleton(model)
+        # the model the trial was prepared with (the processed one, or a refit's)
+        sk = Skeleton(data.model if data.model is not None else read_osim(trial.model_path))
         free = np.flatnonzero(sk.is_independent & ~sk.locked)
         nf = free.size
         h = data.dt
@@ -112,7 +107,7 @@ class MotionProfile:
                 args[which][:, k] += FD_STEP
                 jac[which, :, :, c] = (_wrench_about_ground(sk, *args)[0] - w0) / FD_STEP
         # moments back about the pelvis origin, held fixed: dM_p = dM_g - p x dF
-        jac[:, :, 3:, :] -= np.cross(pelvis[None, :, None, :], jac[:, :, :3, :].transpose(0, 1, 3, 2)).transpose(0, 1, 3, 2)
+        jac[:, :, 3:, :] -= np.cross(pelvis[None, :, :, None], jac[:, :, :3, :], axisa=2, axisb=2, axisc=2)
         sig = np.array([sigmas.force] * 3 + [sigmas.moment] * 3)
         ev = np.asarray(evaluated, dtype=bool).copy()
         ev[[0, -1]] = False
@@ -160,7 +155,7 @@ class MotionProfile:
         self._lu = splu(ata + sp.identity(t_n * nf, format="csc") * 1e-6 * float(ata.diagonal().mean()))
         self.sigmas, self.data = sigmas, data
         # the reference rows: residual at the fitted mass, marker errors, no prior
-        residual = data.inertial - data.external()[1]
+        residual = data.residual(mass=data.fitted_mass)
         z0 = np.zeros(r)
         n_res = 6 * int(ev.sum())
         z0[:n_res] = (residual[ev] / sig).ravel()
@@ -194,7 +189,3 @@ class MotionProfile:
         out = np.zeros(shape)
         out[self._frame, self._slot] = z
         return out
-
-    def motion_step(self, z: FloatArray) -> FloatArray:
-        """The best step dq ``(T, n_free)`` for unprofiled rows ``z`` (rad or m)."""
-        return -self._lu.solve(np.asarray(self.a.T @ z)).reshape(self.t, -1)

@@ -171,13 +171,11 @@ def main() -> None:
         # earlier files' (a cause re-measured after a change to it)
         rows: list[dict[str, Any]] = []
         synthetic: list[dict[str, Any]] = []
+        # what a later file's row replaces: the rows of its cause, or with --pool of its seed
+        key = (lambda r: (r["cause"], r["seed"])) if args.pool else (lambda r: r["cause"])
         for x in parts:
-            if args.pool:
-                redone_seeds = {(r["cause"], r["seed"]) for r in x["rows"]}
-                rows = [r for r in rows if (r["cause"], r["seed"]) not in redone_seeds] + list(x["rows"])
-            else:
-                redone = {r["cause"] for r in x["rows"]}
-                rows = [r for r in rows if r["cause"] not in redone] + list(x["rows"])
+            redone = {key(r) for r in x["rows"]}
+            rows = [r for r in rows if key(r) not in redone] + list(x["rows"])
             synthetic = list(x["synthetic"]) if x["synthetic"] else synthetic
         rows.sort(key=lambda r: (CAUSES.index(r["cause"]) if r["cause"] in CAUSES else len(CAUSES), r.get("seed", 0)))
         result = {
