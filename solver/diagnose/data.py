@@ -327,6 +327,46 @@ def _scaled_bodies(model: OsimModel, factors: Mapping[str, float]) -> OsimModel:
     return replace(model, bodies=bodies)
 
 
+def generic_mass_distribution(model: OsimModel, generic: OsimModel) -> OsimModel:
+    """``model`` (scaled, mass-fitted) with the mass distribution of ``generic``, total kept.
+
+    The dynamics stage fits each body's mass factor to the measured forces, so a force
+    error leaves part of itself in the processed model's masses (a shifted centre of
+    pressure moves mass sideways, for example). The marker-only motion of the diagnosis
+    is evaluated with masses the forces did not touch: each body gets the generic model's
+    share of the processed total, and its inertia scales with its mass (the scaling keeps
+    inertia proportional to mass, :func:`solver.model.scaling.scale_model`). Bodies the
+    generic model lacks, or that have no mass in the processed model, keep theirs.
+
+    Parameters
+    ----------
+    model
+        The processed (scaled, mass-fitted) model.
+    generic
+        The subject's unscaled model, with any saved mass redistribution applied.
+
+    Returns
+    -------
+    OsimModel
+        Same geometry, markers and total mass as ``model``.
+    """
+    share = {b.name: b.mass for b in generic.bodies}
+    total = sum(b.mass for b in model.bodies)
+    known = [b for b in model.bodies if b.name in share and b.mass > 0]
+    keep = total - sum(b.mass for b in known)
+    denominator = sum(share[b.name] for b in known)
+    if denominator <= 0 or not known:
+        return model
+    k = (total - keep) / denominator
+    bodies = []
+    for b in model.bodies:
+        if b.name in share and b.mass > 0:
+            f = share[b.name] * k / b.mass
+            b = Body(b.name, b.mass * f, b.com, tuple(map(tuple, np.array(b.inertia) * f)), b.meshes)
+        bodies.append(b)
+    return replace(model, bodies=tuple(bodies))
+
+
 def body_group(name: str) -> str:
     """The :data:`BODY_GROUPS` group of an OpenSim body name (default ``trunk``)."""
     low = name.lower()

@@ -16,38 +16,22 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from solver.diagnose.data import load_offsets
+from solver.diagnose.data import generic_mass_distribution, load_offsets
 from solver.dynamics.preprocess import moment_about_origin
 from solver.io.mot import write_forces
 from solver.io.trc import write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
-from solver.model.osim import Body, read_osim
+from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
 from tests.diagnose.effects import fixed_markers
 
 FORCE_RATE = 1000.0
-
-
-def generic_distribution(model_path: str | Path, generic_path: str | Path):
-    """The scaled model at ``model_path`` with the generic model's mass shares (same total)."""
-    model = read_osim(model_path)
-    generic = read_osim(generic_path)
-    share = {b.name: b.mass for b in generic.bodies}
-    g_total = sum(share.values())
-    total = sum(b.mass for b in model.bodies)
-    bodies = []
-    for b in model.bodies:
-        m = share[b.name] / g_total * total
-        k = m / b.mass if b.mass > 0 else 0.0
-        bodies.append(Body(b.name, m, b.com, tuple(map(tuple, np.array(b.inertia) * k)), b.meshes))
-    return replace(model, bodies=tuple(bodies))
 
 
 def consistent_subject(
@@ -68,7 +52,7 @@ def consistent_subject(
         The subject folder (with ``annotations.json`` flagging the unmeasured frames).
     """
     rng = np.random.default_rng(seed)
-    model = generic_distribution(processed.model_path, source_subject / "unscaled_generic.osim")
+    model = generic_mass_distribution(read_osim(processed.model_path), read_osim(source_subject / "unscaled_generic.osim"))
     sk = Skeleton(model)
     time = processed.time
     dt = float(np.median(np.diff(time)))
