@@ -229,3 +229,120 @@ def test_a_marker_that_improves_too_few_folds_does_not_block_one_that_stands_out
     ranked = best_per_cause([toe, knee], rule)
     assert ranked[0] is knee
     assert choose(ranked, rule, make_blocks(T, DT), [toe, knee])[0] is knee
+
+
+# --------------------------------------------------------------------------- joint fits
+
+
+def _linear(cause: str, rho0: np.ndarray, g: np.ndarray, choice: str | None = None) -> LinearAlternative:
+    def physical(theta: np.ndarray) -> dict:
+        return {"value": float(theta[0])}
+
+    return LinearAlternative(cause, choice, rho0, g[:, :, None], physical, ("p",))
+
+
+def _two_effects(shared: float, seed: int = 0) -> tuple[LinearAlternative, LinearAlternative, np.ndarray]:
+    """Residual rows with two effects (columns a and b); ``shared`` in [0, 1] mixes a into b
+    (0: they explain different residuals, 1: the same)."""
+    rng = np.random.default_rng(seed)
+    t, r = 400, 3
+    ga, gb = rng.standard_normal((t, r)), rng.standard_normal((t, r))
+    gb = shared * ga + (1 - shared) * gb
+    rho0 = rng.standard_normal((t, r)) - 0.6 * ga - 0.55 * gb
+    return _linear("force_time_offset", rho0, ga), _linear("plate_position_offset", rho0, gb, "R"), make_folds(t, DT)
+
+
+def test_a_rival_that_explains_another_part_of_the_residual_does_not_stand_in_the_way() -> None:
+    from solver.diagnose.selection import JointGains
+
+    rule = ChoiceRule(min_relative_gain=0.0)
+    a, b, folds = _two_effects(shared=0.0)
+    evs = [cross_validate(a, folds), cross_validate(b, folds)]
+    for ev in evs:
+        ev.parameters["delay_s"], ev.parameters["shift_m"] = 0.03, [0.02, 0.0, 0.0]
+    ranked = sorted(evs, key=lambda e: e.score, reverse=True)
+    assert ranked[1].score > rule.runner_up_ratio * ranked[0].score  # close scores
+    joint = JointGains([a, b], evs, folds)
+    # fitted together, each keeps (nearly) all of its held-out gain: both effects are real
+    assert joint.kept_share(evs[0], evs[1]) > 0.9 and joint.kept_share(evs[1], evs[0]) > 0.9
+    assert choose(ranked, rule, make_blocks(400, DT), evs)[0] is None  # scores alone: ambiguous
+    assert choose(ranked, rule, make_blocks(400, DT), evs, joint.kept_share)[0] is ranked[0]
+    # the same residual explained twice: fitted together, the second adds little
+    a, b, folds = _two_effects(shared=0.9)
+    evs = [cross_validate(a, folds), cross_validate(b, folds)]
+    for ev in evs:
+        ev.parameters["delay_s"], ev.parameters["shift_m"] = 0.03, [0.02, 0.0, 0.0]
+    joint = JointGains([a, b], evs, folds)
+    assert joint.kept_share(evs[0], evs[1]) < 0.3
+    ranked = sorted(evs, key=lambda e: e.score, reverse=True)
+    chosen, reason = choose(ranked, rule, make_blocks(400, DT), evs, joint.kept_share)
+    assert chosen is None and "fitted together it keeps" in reason
+
+
+def test_a_best_that_fails_its_own_checks_does_not_hide_a_separate_effect() -> None:
+    # the treadmill run's own 6 ms force delay on the marker-only motion scores high but
+    # removes 7 % of the cost (under the 10 % worth naming); a hidden plate shift removes 24 %
+    # of its plate's cost and keeps its gain on top of the delay's: the shift is named
+    from solver.diagnose.selection import JointGains
+
+    a, b, folds = _two_effects(shared=0.0, seed=1)
+    delay, shift = cross_validate(a, folds), cross_validate(b, folds)
+    delay.parameters["delay_s"], shift.parameters["shift_m"] = 0.006, [0.02, 0.0, 0.0]
+    delay.score, shift.score = 1.1 * shift.score, shift.score
+    delay.reference = 14 * delay.gain  # 7 %
+    joint = JointGains([a, b], [delay, shift], folds)
+    chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(400, DT), [delay, shift])
+    assert chosen is None and "force_time_offset" in reason
+    chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(400, DT), [delay, shift], joint.kept_share)
+    assert chosen is shift, reason
+
+
+def test_a_delay_fitted_with_a_linear_cause_matches_the_stacked_fit() -> None:
+    # rows affine in the delay: the grid search of the joint fit lands on the linear optimum
+    from solver.diagnose.candidates import GridAlternative
+    from solver.diagnose.selection import joint_held_out
+
+    a, b, folds = _two_effects(shared=0.3, seed=2)
+    grid = np.round(np.arange(-0.05, 0.0505, 0.0005), 4)
+    g = a.g[:, :, 0] / 0.03  # one unit of theta = 30 ms
+    rows_at = lambda tau: a.rho0 + tau * g
+    costs = np.stack([np.sum(rows_at(tau) ** 2, axis=1) for tau in grid], axis=1)
+    delay = GridAlternative("force_time_offset", grid, costs, a.ref_costs, lambda tau: {"value": tau, "delay_s": tau}, rows_at)
+    stacked = joint_held_out(a, b, folds)
+    searched = joint_held_out(delay, b, folds, window=0.05)
+    assert searched is not None and stacked is not None
+    assert np.sum(searched) == pytest.approx(np.sum(stacked), rel=2e-3)
+    # other channels do not combine
+    other = _linear("marker_offset", np.zeros((400, 5)), np.ones((400, 5)), "L.Knee")
+    assert joint_held_out(other, b, folds) is None
+
+
+def test_an_estimate_told_from_noise_on_the_fitted_motion_contends() -> None:
+    # the walk's left plate: a hidden shift 4.3 errors from zero on the fitted motion, 1.6 on
+    # the marker-only one (one stance; a foot strike's transient swings its folds)
+    from solver.diagnose.selection import contends, significance
+
+    rule = ChoiceRule()
+    shift = _evaluation("plate_position_offset", {"value": [-0.015, 0.0, -0.010], "shift_m": [-0.015, 0.0, -0.010]}, 0.3)
+    shift.uncertainty = [0.0095, 0.0, 0.0045]
+    assert not contends(shift, rule)
+    shift.parameters_fitted_motion = {"value": [-0.012, 0.0, -0.006], "shift_m": [-0.012, 0.0, -0.006]}
+    shift.uncertainty_fitted_motion = [0.0028, 0.0, 0.0012]
+    assert significance(shift) == pytest.approx(np.hypot(0.012, 0.006) / np.hypot(0.0028, 0.0012))
+    assert contends(shift, rule)
+    # both estimates must still be worth naming
+    shift.parameters_fitted_motion = {"value": [-0.003, 0.0, 0.0], "shift_m": [-0.003, 0.0, 0.0]}
+    shift.uncertainty_fitted_motion = [0.0005, 0.0, 0.0005]
+    assert not contends(shift, rule)
+
+
+def test_a_force_error_held_back_by_a_rival_is_not_named_a_mass_distribution() -> None:
+    # a force delay and a plate shift explain the residuals alike (neither named), and the
+    # whole-motion channels show a large redistribution: that is the force error's trace
+    ranked = [_evaluation("plate_position_offset", SHIFT, 0.3), _evaluation("force_time_offset", DELAY, 0.3)]
+    segment = _evaluation("segment_mass_distribution", {"value": 12.0, "mass_change_kg": {"legs": 12.0, "trunk": -12.0}}, 0.1, 1.0)
+    ranked = sorted(ranked, key=lambda e: e.score, reverse=True) + [segment]
+    chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT))
+    assert chosen is None and "held back by a rival" in reason
+    # alone, the redistribution is named
+    assert choose([segment], ChoiceRule(), make_blocks(T, DT))[0] is segment
