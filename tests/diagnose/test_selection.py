@@ -295,6 +295,7 @@ def test_a_best_that_fails_its_own_checks_does_not_hide_a_separate_effect() -> N
     assert chosen is None and "force_time_offset" in reason
     chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(400, DT), [delay, shift], joint.kept_share)
     assert chosen is shift, reason
+    assert "force_time_offset" in reason and "explains another part of the residual" in reason
 
 
 def test_a_delay_fitted_with_a_linear_cause_matches_the_stacked_fit() -> None:
