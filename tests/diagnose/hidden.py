@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from tests.diagnose.effects import TOLERANCE, check
-from tests.diagnose.harness import Base, draw, hidden_run
+from tests.diagnose.harness import Base, draw, hidden_run, neutral_base
 
 #: Causes named reliably: their first benchmark draws are tested (even indices on the walk,
 #: odd ones on the run; see :func:`tests.diagnose.harness.draw`).
@@ -91,3 +91,20 @@ def assert_named_and_recovered(cause: str, seed: int, base: Base, tmp_path: Path
         assert after["linear_residual_rms_N"] ** 2 + after["angular_residual_rms_Nm"] ** 2 < (
             before["linear_residual_rms_N"] ** 2 + before["angular_residual_rms_Nm"] ** 2
         )
+
+
+def trial_tests(key: str) -> tuple[object, object]:
+    """The module-scoped fixture ``base`` (trial ``key``'s neutral base) and the test of
+    every case of that trial, for a test module to bind at its top level."""
+
+    @pytest.fixture(scope="module", name="base")
+    def base_fixture(tmp_path_factory: pytest.TempPathFactory) -> Base:
+        return neutral_base(key, tmp_path_factory.mktemp("base") / key)
+
+    @pytest.mark.slow
+    @pytest.mark.parametrize(("cause", "seed"), cases(key))
+    def test_hidden_cause_is_named_and_recovered(cause: str, seed: int, base: Base, tmp_path: Path) -> None:
+        assert_named_and_recovered(cause, seed, base, tmp_path)
+
+    return base_fixture, test_hidden_cause_is_named_and_recovered
+
