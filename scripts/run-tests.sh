@@ -5,7 +5,7 @@
 # The tests run in ADDB_TEST_WORKERS processes (default 2, this machine's cores; pytest-xdist),
 # each test file on one worker (--dist loadfile: module and session fixtures, such as the
 # diagnosis's neutral bases, are built once). Serially the suite took 28 min on 2026-11-23,
-# with two workers 20.5 min; ADDB_TEST_WORKERS=0 runs it serially.
+# with two workers 20.5 min (14 min on 2026-11-23, ninth session); ADDB_TEST_WORKERS=0 runs it serially.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
