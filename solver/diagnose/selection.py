@@ -182,9 +182,10 @@ class ChoiceRule:
         ... or when, fitted together with that rival (:class:`JointGains`), it keeps at
         least this share of its own held-out gain: the two explain different parts of the
         residual, so both may be true and the rival does not stand in its way (on the
-        treadmill run's marker-only motion a hidden 2-4 cm plate shift and the trial's own
-        6 ms force delay each keep 92-110 % of their gains on top of the other, while a
-        plate's zero drift keeps 3-8 % of its gain on top of that plate's shift).
+        treadmill run's marker-only motion a hidden 2-4 cm plate shift keeps 93-109 % of its
+        gain on top of the trial's own 6 ms force delay, and the delay 85-115 % on top of the
+        shift, while a plate's zero drift keeps 3-8 % of its gain on top of that plate's
+        shift; 2026-11-23).
         Not used for :attr:`distinct_choice`: a centre of mass misplaced in the model moves
         the moment under each plate on that plate's own stances, so the two plates' shifts
         explain different frames and would both be kept.
