@@ -118,4 +118,6 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
             rows += [metric_row(before, held.get("before")), metric_row(after, held.get("after"))]
         blocks.append("Before and after the extension:")
         blocks.append("```\n" + "\n".join(r.strip() for r in rows) + "\n```")
+        if held.get("note"):
+            blocks.append(f"Held-out figures: {held['note']}.")
     return blocks

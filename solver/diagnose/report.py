@@ -277,4 +277,6 @@ def to_text(diag: Diagnosis) -> str:
             before, after = held_out_labels(diag.held_out)
             lines.append(metric_row(before, diag.held_out["before"]))
             lines.append(metric_row(after, diag.held_out["after"]))
+            if diag.held_out.get("note"):
+                lines.append(f"  (held-out: {diag.held_out['note']})")
     return "\n".join(lines)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 from numpy.typing import NDArray
@@ -531,7 +531,7 @@ class Failed(str):
 
     key: str
 
-    def __new__(cls, key: str, text: str) -> Failed:
+    def __new__(cls, key: str, text: str) -> Self:
         out = super().__new__(cls, text)
         out.key = key
         return out

@@ -63,6 +63,13 @@ def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict])
     assert (found & ~proposed).sum() <= 0.2 * found.sum()
     held = report["held_out"]
     assert held["after"]["linear_residual_rms_N"] < 0.5 * held["before"]["linear_residual_rms_N"]
+    # the "before" marker RMS is that of the body translated to balance the missing force
+    # (centimetres): the report says so beside the figures, in the text and the review app
+    from addb_viewer.app.diagnosis import diagnosis_markdown
+
+    assert held["before"]["marker_rms_m"] > 2 * held["after"]["marker_rms_m"]
+    assert "moves the body off its markers" in held["note"]
+    assert "moves the body off its markers" in diagnosis_markdown(subject / "addb_out", subject, "walk")
 
 
 def test_review_panel_lists_the_markers_standing_out(walk: tuple[Path, dict]) -> None:
