@@ -351,20 +351,13 @@ def generic_mass_distribution(model: OsimModel, generic: OsimModel) -> OsimModel
         Same geometry, markers and total mass as ``model``.
     """
     share = {b.name: b.mass for b in generic.bodies}
-    total = sum(b.mass for b in model.bodies)
     known = [b for b in model.bodies if b.name in share and b.mass > 0]
-    keep = total - sum(b.mass for b in known)
-    denominator = sum(share[b.name] for b in known)
-    if denominator <= 0 or not known:
+    generic_total = sum(share[b.name] for b in known)
+    if generic_total <= 0:
         return model
-    k = (total - keep) / denominator
-    bodies = []
-    for b in model.bodies:
-        if b.name in share and b.mass > 0:
-            f = share[b.name] * k / b.mass
-            b = Body(b.name, b.mass * f, b.com, tuple(map(tuple, np.array(b.inertia) * f)), b.meshes)
-        bodies.append(b)
-    return replace(model, bodies=tuple(bodies))
+    k = sum(b.mass for b in known) / generic_total  # the known bodies keep their total
+    factors = {b.name: 1.0 for b in model.bodies} | {b.name: share[b.name] * k / b.mass for b in known}
+    return _scaled_bodies(model, factors)
 
 
 def body_group(name: str) -> str:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -439,11 +439,14 @@ def joint_held_out(a: Alternative, b: Alternative, folds: IntArray, window: floa
     held = np.empty(t)
     if isinstance(a, GridAlternative) != isinstance(b, GridAlternative):
         grid, lin = (a, b) if isinstance(a, GridAlternative) else (b, a)
-        if not isinstance(lin, LinearAlternative) or lin.rho0.shape[1] != grid.rows_at(float(grid.grid[0])).shape[1]:
+        if not isinstance(lin, LinearAlternative):
             return None
         centre = float(grid.solve(np.ones(t, dtype=bool))[0])
         rows = [grid.rows_at(float(tau)) for tau in grid.grid[np.abs(grid.grid - centre) <= window + 1e-9]]
-        probe = LinearAlternative(lin.cause, lin.choice, rows[0], lin.g, lin.physical, lin.names)
+        if lin.rho0.shape != rows[0].shape:
+            return None
+        # (lin.g and lin.prior already carry its basis)
+        probe = LinearAlternative(lin.cause, lin.choice, rows[0], lin.g, lin.physical, lin.names, prior=lin.prior)
         for f in range(k):
             fit = folds != f
             best_cost, best_rows = np.inf, None
@@ -524,17 +527,18 @@ def _stands_out(
     return clear, t_pair, frac_pair, share
 
 
-class Failed(str):
-    """A failed check of :class:`ChoiceRule`: its sentence, with ``key`` naming the check
-    (``score``, ``relative_gain``, ``folds``, ``rival``: another cause explains the
-    residuals nearly as well, ``sibling``: the same cause on another plate does)."""
+class Failed(NamedTuple):
+    """A failed check of :class:`ChoiceRule`: ``key`` names the check (``score``,
+    ``relative_gain``, ``folds``, ``rival``: another cause explains the residuals nearly as
+    well, ``sibling``: the same cause on another plate does), ``text`` says it."""
 
     key: str
+    text: str
 
-    def __new__(cls, key: str, text: str) -> Self:
-        out = super().__new__(cls, text)
-        out.key = key
-        return out
+
+def _sentences(failed: list[Failed]) -> str:
+    """The failed checks' sentences, joined."""
+    return "; ".join(f.text for f in failed)
 
 
 def _checks(
@@ -693,13 +697,13 @@ def choose(
     if passed and channels(passed[0][0].cause) == "motion" and held_back:
         best, _, failed = held_back[0]
         return None, (
-            f"No cause stands out: {best.cause} is not chosen because " + "; ".join(failed) + f", and "
+            f"No cause stands out: {best.cause} is not chosen because " + _sentences(failed) + f", and "
             f"{passed[0][0].cause} is not named while a force error is held back by a rival (it leaves a trace on "
             "the whole-motion channels too)."
         )
     if not passed:
         best, _, failed = verdicts[0]
-        return None, f"No cause stands out: the best candidate, {best.cause}, is not chosen because " + "; ".join(failed) + "."
+        return None, f"No cause stands out: the best candidate, {best.cause}, is not chosen because " + _sentences(failed) + "."
     best, second, _ = passed[0]
     if second is None:
         against = "and no rival acting on the same channels."
