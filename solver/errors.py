@@ -104,3 +104,33 @@ class DynamicsError(AddbError):
 
 class DiagnosisError(AddbError):
     """The diagnosis stage failed."""
+
+
+class DatasetError(AddbError):
+    """A dataset folder holds no subject, or a dataset run could not start or finish."""
+
+
+class B3dFormatError(FileFormatError):
+    """An AddBiomechanics binary subject file (.b3d) is damaged, truncated or of an unknown version.
+
+    ``offset`` is the byte offset in the file where the problem was found (also shown in
+    the message as ``byte N``), or None when it concerns the whole file.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        offset: int | None = None,
+        where: str | None = None,
+    ) -> None:
+        self.offset = offset
+        parts = [p for p in (None if offset is None else f"byte {offset}", where) if p]
+        super().__init__(message, path=path, where=", ".join(parts) or None)
+
+    def to_dict(self) -> dict[str, Any]:
+        """As :meth:`AddbError.to_dict`, plus ``offset``."""
+        out = super().to_dict()
+        out["offset"] = self.offset
+        return out
