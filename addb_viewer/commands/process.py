@@ -1,8 +1,14 @@
-"""``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics, OpenSim-ready outputs."""
+"""``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics, OpenSim-ready outputs.
+
+``addb process DATASET_DIR --out OUT`` (a folder of subject folders at any depth) runs
+every subject as a Dask task (:mod:`solver.dataset.runner`) and mirrors the tree in OUT.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 
 def _masks(path: str, subject_dir: str) -> dict:
@@ -33,7 +39,60 @@ def _masks(path: str, subject_dir: str) -> dict:
     return masks
 
 
+def run_dataset(args: argparse.Namespace) -> int:
+    """A dataset folder: every subject on the Dask cluster, the summary, failures listed."""
+    from addb_viewer.progress import ProgressBar, table
+    from addb_viewer.review_masks import review_record, subject_masks
+    from solver.dataset.runner import REPORT_NAME, SUMMARY_NAME, DatasetOptions, process_dataset
+
+    if args.trial or args.annotations:
+        raise SystemExit("addb process: --trial and --annotations apply to one subject folder, not a dataset")
+    opts = DatasetOptions(
+        workers=args.workers, scheduler=args.scheduler, retries=args.retries, force=args.force,
+        memory_limit=args.memory_limit,
+    )  # fmt: skip
+    run = process_dataset(
+        args.subject, args.out, options=opts, masks=subject_masks, review_record=review_record,
+        progress=ProgressBar(), log=lambda m: print(f"addb process: {m}", file=sys.stderr),
+    )  # fmt: skip
+    rows = []
+    for s in run.subjects:
+        trials = s.get("trials") or []
+        frames = sum(r["frames"] for r in trials)
+        measured = sum(r["measured_frames"] for r in trials)
+        status = s["status"] + (f" ({s['result_status']})" if s.get("result_status") else "")
+        status += " (unchanged)" if s.get("unchanged") else ""
+        rms = [r["marker_rms_m"] for r in trials if r.get("marker_rms_m") is not None]
+        lin = [r["linear_residual_rms_N"] for r in trials if r.get("linear_residual_rms_N") is not None]
+        rows.append([
+            s["rel"], status, str(len(trials)), f"{measured}/{frames}",
+            f"{100 * max(rms):.2f}" if rms else "-", f"{max(lin):.1f}" if lin else "-",
+            f"{s['seconds']:.1f}" if s.get("seconds") is not None else "-",
+        ])  # fmt: skip
+    print(table(rows, ["subject", "status", "trials", "frames (measured/all)", "worst marker RMS (cm)",
+                       "worst linear residual (N)", "wall (s)"]))  # fmt: skip
+    t = run.totals
+    print(
+        f"{t['n_subjects']} subjects, {t['trials']} trials, {t['frames']} frames "
+        f"({t['hours']:.4f} h, {t['hours_with_measured_force']:.4f} h with measured force) in {run.seconds:.1f} s"
+    )
+    if run.failed:
+        print(f"\n{len(run.failed)} subject(s) failed:", file=sys.stderr)
+        for s in run.failed:
+            e = s.get("error") or {}
+            where = ":".join(str(x) for x in (e.get("path"), e.get("line")) if x is not None)
+            print(f"  {s['rel']}: {e.get('type')}: {e.get('message')}" + (f" ({where})" if where else ""), file=sys.stderr)
+    print(f"wrote {run.out_dir / SUMMARY_NAME} and {run.out_dir / REPORT_NAME}")
+    return 1 if run.failed else 0
+
+
 def run(args: argparse.Namespace) -> int:
+    from solver.dataset.discover import is_subject_folder
+
+    if not is_subject_folder(args.subject) and Path(args.subject).is_dir():
+        return run_dataset(args)
+    if any(x is not None for x in (args.workers, args.scheduler)) or args.force:
+        raise SystemExit("addb process: --workers, --scheduler and --force apply to a dataset folder")
     from addb_viewer.progress import ProgressBar, table
     from solver.pipeline import ProcessOptions, process_subject
 
@@ -66,9 +125,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("process", help="scaling, inverse kinematics and the dynamics fit; writes OpenSim files")
-    p.add_argument("subject", help="AddBiomechanics subject folder")
-    p.add_argument("--out", required=True, help="output folder (replaced atomically)")
+    p = sub.add_parser(
+        "process",
+        help="scaling, inverse kinematics and the dynamics fit; writes OpenSim files (one subject or a dataset)",
+        description=(
+            "Process one AddBiomechanics subject folder, or a dataset folder holding subject folders at "
+            "any depth: then every subject runs as a Dask task (a local cluster, or --scheduler), OUT "
+            "mirrors the tree, unchanged subjects are skipped, failures are listed and make the exit "
+            "code 1, and OUT/dataset_summary.json and OUT/dataset_report.html summarize the dataset."
+        ),
+    )
+    p.add_argument("subject", help="AddBiomechanics subject folder, or a dataset folder of subject folders")
+    p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument("--annotations", help="annotations file (frames with unmeasured force) or an AddBiomechanics review.json")
+    d = p.add_argument_group("dataset folders")
+    d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")
+    d.add_argument("--scheduler", help="submit to a running Dask scheduler, tcp://HOST:PORT, instead")
+    d.add_argument("--retries", type=int, default=1, help="resubmissions of a subject whose worker died (default 1)")
+    d.add_argument("--force", action="store_true", help="reprocess subjects whose output is up to date")
+    d.add_argument("--memory-limit", default="auto", help="memory limit per local worker, e.g. 4GB (default: RAM / workers)")
     p.set_defaults(handler=run)

@@ -1,0 +1,17 @@
+"""Processing a whole dataset: many subject folders, in parallel, on Dask distributed.
+
+Modules, in the order a run uses them:
+
+* :mod:`solver.dataset.discover`: the subject folders under a dataset folder (any depth)
+  and where each one's output goes (the output tree mirrors the input tree).
+* :mod:`solver.dataset.manifest`: what an output was made from (hashes of the inputs,
+  addb version, settings, review record) so that a rerun skips what is unchanged.
+* :mod:`solver.dataset.task`: one subject on one worker: the pipeline, its log, the
+  manifest, the summary rows, all moved into place atomically.
+* :mod:`solver.dataset.summary`: per-trial rows and the dataset totals in the terms of the
+  AddBiomechanics Dataset paper (Werling et al.): hours, hours with measured force,
+  contact classes, clinical-grade frames, residual distributions.
+* :mod:`solver.dataset.report`: the static HTML report (inline SVG, no server).
+* :mod:`solver.dataset.runner`: the Dask cluster (local or remote), submission, retries
+  of subjects whose worker died, progress, and the summary files.
+"""

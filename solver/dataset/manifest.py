@@ -1,0 +1,120 @@
+"""What a subject's output was made from, so that a rerun skips unchanged subjects.
+
+Every subject output of a dataset run carries ``manifest.json``::
+
+    {"key": {"schema": 1, "addb_version": "0.1.0",
+             "inputs": {"_subject.json": "<sha256>", "trials/walk/markers.trc": "<sha256>", ...},
+             "settings": {...}, "annotations": {"path": "...", "sha256": "..."} | null},
+     "status": "ok" | "kinematics_only" | "failed", "error": {...} (failed only),
+     "subject": {...}, "trials": [...]}          (the summary rows, solver.dataset.summary)
+
+A rerun compares the stored ``key`` with the one computed from the inputs now: equal
+keys mean the output is up to date. A subject whose data failed keeps its failure the
+same way (its manifest has ``"status": "failed"`` and the error), so an unchanged broken
+subject is reported again without being run again; a subject whose worker died has no
+such record and runs again. The inputs are every file of the subject folder
+except hidden files, addb's output folder, bone meshes (``Geometry/``, they do not change
+the solution) and the review record, which enters as ``annotations`` instead.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+SCHEMA = 1
+MANIFEST_NAME = "manifest.json"
+
+#: Folder names inside a subject folder that are not inputs of the solution.
+NOT_INPUTS = frozenset({"addb_out", "Geometry", "__pycache__"})
+
+#: Review record names inside a subject folder (entered as ``annotations``, not inputs).
+REVIEW_RECORDS = frozenset({"annotations.json"})
+
+
+def addb_version() -> str:
+    """The installed addb version (``importlib.metadata``), ``"unknown"`` outside an install."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("addb")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes (read in 1 MiB blocks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def input_files(subject_dir: str | Path) -> dict[str, Path]:
+    """The input files of a subject folder: relative posix path -> file (see module doc)."""
+    base = Path(subject_dir).resolve()
+    out: dict[str, Path] = {}
+    for folder, dirs, files in os.walk(base, followlinks=True):
+        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d not in NOT_INPUTS and not d.endswith(".annotations"))
+        here = Path(folder)
+        for name in sorted(files):
+            if name.startswith(".") or (here == base and name in REVIEW_RECORDS):
+                continue
+            if name.endswith((".annotations.json", ".journal", ".lock")):
+                continue
+            out[(here / name).relative_to(base).as_posix()] = here / name
+    return out
+
+
+def manifest_key(
+    subject_dir: str | Path, settings: dict[str, Any], annotations: str | Path | None = None
+) -> dict[str, Any]:
+    """The ``key`` of a subject's manifest, computed from its files now.
+
+    Parameters
+    ----------
+    subject_dir
+        The subject folder.
+    settings
+        The run's settings that change the solution (JSON-serializable).
+    annotations
+        The review record whose flags the run applies, or None.
+
+    Raises
+    ------
+    OSError
+        A file cannot be read (the caller records it as the subject's failure).
+    """
+    review = None
+    if annotations is not None and Path(annotations).is_file():
+        review = {"path": str(Path(annotations).resolve()), "sha256": file_sha256(annotations)}
+    return {
+        "schema": SCHEMA,
+        "addb_version": addb_version(),
+        "inputs": {rel: file_sha256(p) for rel, p in input_files(subject_dir).items()},
+        "settings": json.loads(json.dumps(settings, sort_keys=True)),
+        "annotations": review,
+    }
+
+
+def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
+    """The manifest stored in a subject's output folder, or None (absent or unreadable)."""
+    path = Path(out_dir) / MANIFEST_NAME
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and isinstance(data.get("key"), dict) else None
+
+
+def current_manifest(out_dir: str | Path, key: dict[str, Any]) -> dict[str, Any] | None:
+    """The stored manifest when its key equals ``key`` (the output, or the failure it
+    records, is up to date with the inputs), else None."""
+    stored = read_manifest(out_dir)
+    if stored is None or stored["key"] != key or stored.get("status") not in ("ok", "kinematics_only", "failed"):
+        return None
+    return stored

@@ -1,0 +1,191 @@
+"""``dataset_report.html``: the summary of a dataset run as one static page.
+
+Opens from disk without a server or a network: the figures are inline SVG (bar charts
+drawn here from the summary's counts), no scripts. Sections: dataset totals in the
+paper's terms, failures (subject, error, file and line), the distributions of marker RMS
+error and of per-frame residual force and moment (with the Hicks thresholds), and one
+table row per subject and trial.
+"""
+
+from __future__ import annotations
+
+import html
+from typing import Any
+
+import numpy as np
+
+_CSS = """
+body{font:14px/1.4 system-ui,sans-serif;margin:24px;color:#222}
+table{border-collapse:collapse;margin:8px 0 20px}
+th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
+th{background:#f3f3f3} td.l,th.l{text-align:left}
+tr.failed td{background:#fde8e8} tr.skipped td{color:#666}
+.figs{display:flex;flex-wrap:wrap;gap:24px} figure{margin:0} figcaption{font-size:12px;color:#444}
+"""
+
+
+def _esc(x: Any) -> str:
+    return html.escape("" if x is None else str(x))
+
+
+def _num(x: Any, fmt: str = "{:.2f}", scale: float = 1.0) -> str:
+    return "-" if x is None else fmt.format(x * scale)
+
+
+def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int | None = None,
+              width: int = 420, height: int = 180) -> str:
+    """An inline SVG bar chart.
+
+    Parameters
+    ----------
+    counts
+        Bar heights (any unit), one per bar.
+    labels
+        One label per bar (the first, a middle and the last are drawn under the axis).
+    title
+        Caption under the figure.
+    mark
+        Index of the bar where a threshold starts (a dashed line is drawn before it).
+    """
+    n = max(len(counts), 1)
+    top = max(max(counts, default=0), 1)
+    pad, bw = 30, (width - 40) / n
+    bars = []
+    for i, c in enumerate(counts):
+        h = (height - pad - 10) * c / top
+        x = 35 + i * bw
+        bars.append(
+            f'<rect x="{x:.1f}" y="{height - pad - h:.1f}" width="{max(bw - 1, 1):.1f}" height="{h:.1f}" '
+            f'fill="#4a7bb7"><title>{_esc(labels[i])}: {c:g}</title></rect>'
+        )
+    ticks = sorted({0, n // 2, n - 1}) if labels else []
+    text = [
+        f'<text x="{35 + i * bw + bw / 2:.1f}" y="{height - pad + 14}" font-size="10" text-anchor="middle">'
+        f"{_esc(labels[i])}</text>"
+        for i in ticks
+    ]
+    line = ""
+    if mark is not None:
+        x = 35 + mark * bw
+        line = f'<line x1="{x:.1f}" x2="{x:.1f}" y1="5" y2="{height - pad}" stroke="#c33" stroke-dasharray="4 3"/>'
+    axis = f'<line x1="35" x2="{width - 5}" y1="{height - pad}" y2="{height - pad}" stroke="#333"/>'
+    ymax = f'<text x="30" y="14" font-size="10" text-anchor="end">{top:g}</text>'
+    svg = (
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" role="img">'
+        + "".join(bars) + axis + line + ymax + "".join(text) + "</svg>"
+    )
+    return f"<figure>{svg}<figcaption>{_esc(title)}</figcaption></figure>"
+
+
+def _totals_table(t: dict[str, Any]) -> str:
+    share = t.get("contact_share") or {}
+    rows = [
+        ("subjects", ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items())) + f" ({t['n_subjects']} in all)"),
+        ("trials (with dynamics)", f"{t['trials']} ({t['dynamics_trials']})"),
+        ("frames (with measured force)", f"{t['frames']} ({t['measured_frames']})"),
+        ("hours", _num(t["hours"], "{:.4f}")),
+        ("hours with measured force", _num(t["hours_with_measured_force"], "{:.4f}")),
+        ("flight / single support / double support (share of measured frames)",
+         " / ".join(_num(share.get(k), "{:.1%}") for k in ("flight", "single_support", "double_support"))),
+        ("clinical-grade frames (both Hicks thresholds met)", _num(t["clinical_grade_share"], "{:.1%}")),
+        ("trials meeting the Hicks linear / angular threshold",
+         f"{_num(t['hicks_linear_share'], '{:.1%}')} / {_num(t['hicks_angular_share'], '{:.1%}')}"),
+        ("marker RMS per trial, mean / median (cm)",
+         f"{_num(t['marker_rms_mean_m'], scale=100)} / {_num(t['marker_rms_median_m'], scale=100)}"),
+    ]  # fmt: skip
+    body = "".join(f'<tr><th class="l">{_esc(k)}</th><td class="l">{_esc(v)}</td></tr>' for k, v in rows)
+    return f"<table>{body}</table>"
+
+
+def _figures(summary: dict[str, Any]) -> str:
+    t = summary["totals"]
+    rms = [
+        r["marker_rms_m"] * 100
+        for s in summary["subjects"] if s["status"] != "failed"
+        for r in s.get("trials") or [] if r.get("marker_rms_m") is not None
+    ]  # fmt: skip
+    figs = []
+    if rms:
+        edges = np.arange(0.0, max(4.0, np.ceil(max(rms) * 2) / 2) + 0.25, 0.25)
+        counts, _ = np.histogram(np.clip(rms, 0, edges[-1] - 1e-9), bins=edges)
+        figs.append(bar_chart(counts.tolist(), [f"{e:.2f}" for e in edges[:-1]],
+                              f"marker RMS per trial (cm), {len(rms)} trials"))  # fmt: skip
+    for key, bins, unit in (
+        ("residual_force_hist_BW", "residual_force_bins_BW", "BW"),
+        ("residual_moment_hist_BWh", "residual_moment_bins_BWh", "BW·h"),
+    ):
+        counts = t.get(key) or []
+        if sum(counts):
+            edges = t[bins]
+            labels = [f"{e:g}" for e in edges] + [f">{edges[-1]:g}"]
+            what = "force" if unit == "BW" else "moment"
+            figs.append(bar_chart(counts, labels[: len(counts)],
+                                  f"per-frame residual {what} ({unit}), measured frames; "
+                                  f"dashed: Hicks threshold {edges[-1]:g} {unit}", mark=len(edges) - 1))  # fmt: skip
+    share = t.get("contact_share") or {}
+    if any(v for v in share.values()):
+        names = ["flight", "single_support", "double_support"]
+        figs.append(bar_chart([100 * (share.get(k) or 0) for k in names], ["flight", "single", "double"],
+                              "contact classes, % of measured frames"))  # fmt: skip
+    return f'<div class="figs">{"".join(figs)}</div>' if figs else "<p>No processed trial to plot.</p>"
+
+
+def _error_text(err: dict[str, Any] | None) -> str:
+    if not err:
+        return ""
+    where = ":".join(str(x) for x in (err.get("path"), err.get("line")) if x is not None)
+    return f"{err.get('type')}: {err.get('message')}" + (f" ({where})" if where else "")
+
+
+def _subject_table(subjects: list[dict[str, Any]]) -> str:
+    head = ("subject", "status", "trial", "frames", "measured", "duration s", "marker RMS cm",
+            "linear residual N (BW)", "angular residual N·m (BW·h)", "Hicks lin", "Hicks ang",
+            "fitted mass kg", "stage s")  # fmt: skip
+    out = ["<table><tr>" + "".join(f'<th class="l">{_esc(h)}</th>' for h in head) + "</tr>"]
+    for s in subjects:
+        status = s["status"] + (f" ({s['result_status']})" if s.get("result_status") else "")
+        status += " (unchanged)" if s.get("unchanged") else ""
+        rows = s.get("trials") or []
+        if not rows:
+            out.append(
+                f'<tr class="{_esc(s["status"])}"><td class="l">{_esc(s["rel"])}</td><td class="l">{_esc(status)}</td>'
+                f'<td class="l" colspan="11">{_esc(_error_text(s.get("error")))}</td></tr>'
+            )
+            continue
+        for r in rows:
+            yn = {True: "yes", False: "no", None: "-"}
+            stage = r.get("stage_seconds") or {}
+            out.append(
+                f'<tr class="{_esc(s["status"])}"><td class="l">{_esc(s["rel"])}</td><td class="l">{_esc(status)}</td>'
+                f'<td class="l">{_esc(r["trial"])}</td><td>{r["frames"]}</td><td>{r["measured_frames"]}</td>'
+                f'<td>{_num(r["duration_s"])}</td><td>{_num(r.get("marker_rms_m"), scale=100)}</td>'
+                f'<td>{_num(r.get("linear_residual_rms_N"), "{:.1f}")} ({_num(r.get("linear_residual_rms_BW"), "{:.3f}")})</td>'
+                f'<td>{_num(r.get("angular_residual_rms_Nm"), "{:.1f}")} ({_num(r.get("angular_residual_rms_BWh"), "{:.3f}")})</td>'
+                f'<td>{yn[r.get("hicks_linear_ok")]}</td><td>{yn[r.get("hicks_angular_ok")]}</td>'
+                f'<td>{_num(r.get("mass_kg"))}</td><td>{_num(stage.get("total"), "{:.1f}")}</td></tr>'
+            )
+    out.append("</table>")
+    return "".join(out)
+
+
+def render_report(summary: dict[str, Any]) -> str:
+    """The HTML page of a ``dataset_summary.json`` (as parsed JSON)."""
+    failed = [s for s in summary["subjects"] if s["status"] == "failed"]
+    fail_html = ""
+    if failed:
+        items = "".join(
+            f'<tr class="failed"><td class="l">{_esc(s["rel"])}</td><td class="l">{_esc(_error_text(s.get("error")))}</td></tr>'
+            for s in failed
+        )
+        fail_html = f'<h2>Failures ({len(failed)})</h2><table><tr><th class="l">subject</th><th class="l">error</th></tr>{items}</table>'
+    return (
+        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>addb dataset report</title>"
+        f"<style>{_CSS}</style></head><body>"
+        f"<h1>Dataset report</h1><p>{_esc(summary['dataset'])} &rarr; {_esc(summary['out'])}<br>"
+        f"addb {_esc(summary['addb_version'])}, finished {_esc(summary['finished'])} "
+        f"in {summary['seconds']:.1f} s</p>"
+        f"<h2>Totals</h2>{_totals_table(summary['totals'])}{fail_html}"
+        f"<h2>Distributions</h2>{_figures(summary)}"
+        f"<h2>Subjects and trials</h2>{_subject_table(summary['subjects'])}"
+        "</body></html>\n"
+    )

@@ -1,0 +1,320 @@
+"""A dataset run on Dask distributed: every subject folder of a dataset as one task.
+
+By default the run starts a ``distributed.LocalCluster`` sized to the machine: one
+process per worker (``workers``, default the number of cores), one thread each, a memory
+limit per worker (default: the machine's memory divided among the workers), and the
+numeric libraries limited to one thread inside each worker (Dask's
+``distributed.nanny.pre-spawn-environ`` sets ``OMP_NUM_THREADS`` and friends to 1, and the
+pipeline limits BLAS with threadpoolctl), so N workers do not oversubscribe the cores.
+With ``scheduler`` it submits to a running cluster instead (``tcp://HOST:PORT``): any
+machine with addb installed that can read the dataset and write the output folder.
+
+Failures: a subject whose data or solve fails is recorded by its task
+(:func:`solver.dataset.task.run_subject`) and the batch goes on. A subject whose worker
+dies (killed, out of memory) is submitted again, up to ``retries`` more times; on the
+local cluster the scheduler gives up on a task at its first worker death
+(``distributed.scheduler.allowed-failures = 0``) so that ``retries`` counts every death.
+A remote scheduler applies its own ``allowed-failures`` (Dask's default 3) before ours.
+
+Resume: a subject whose output carries a manifest with the same key as now (same input
+files, addb version, settings and review record) is skipped without starting a cluster,
+and so is a subject whose unchanged data failed before (reported failed again, with its
+stored error); ``force`` reprocesses both. One run at a time per output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from solver.dataset.discover import DatasetSubject, find_subjects
+from solver.dataset.manifest import addb_version, current_manifest, manifest_key
+from solver.dataset.summary import dataset_totals
+from solver.dataset.task import MaskLoader, SubjectJob, remove_stale_work, run_subject
+from solver.errors import DatasetError
+from solver.outputs import write_json
+
+SUMMARY_NAME = "dataset_summary.json"
+REPORT_NAME = "dataset_report.html"
+
+Progress = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class DatasetOptions:
+    """Options of :func:`process_dataset`.
+
+    Attributes
+    ----------
+    workers
+        Worker processes of the local cluster (default: the machine's cores); ignored
+        with ``scheduler``.
+    scheduler
+        Address of a running Dask scheduler (``tcp://HOST:PORT``); None: a local cluster.
+    retries
+        How many more times a subject is submitted after its worker died.
+    force
+        Reprocess subjects whose output is up to date.
+    memory_limit
+        Memory limit per local worker (``"4GB"``, bytes, or ``"auto"``: the machine's
+        memory divided among the workers).
+    settings
+        Settings recorded in each manifest (a change reprocesses every subject).
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    retries: int = 1
+    force: bool = False
+    memory_limit: str | int = "auto"
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class DatasetRun:
+    """What :func:`process_dataset` did.
+
+    Attributes
+    ----------
+    out_dir
+        The output tree.
+    subjects
+        One entry per subject (the ``subjects`` of ``dataset_summary.json``).
+    totals
+        Dataset totals (:func:`solver.dataset.summary.dataset_totals`).
+    seconds
+        Wall time of the run, s.
+    dashboard
+        The Dask dashboard address, when the cluster had one.
+    """
+
+    out_dir: Path
+    subjects: tuple[dict[str, Any], ...]
+    totals: dict[str, Any]
+    seconds: float
+    dashboard: str | None = None
+
+    @property
+    def failed(self) -> tuple[dict[str, Any], ...]:
+        """The failed subjects' entries."""
+        return tuple(s for s in self.subjects if s["status"] == "failed")
+
+
+def _local_cluster(options: DatasetOptions) -> Any:
+    """A LocalCluster of one-thread worker processes (see the module docstring)."""
+    import logging
+
+    import dask
+    from distributed import LocalCluster
+
+    n = options.workers or os.cpu_count() or 1
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        return LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=options.memory_limit,
+            dashboard_address=":0",  # any free port: two runs on one machine do not collide
+            silence_logs=logging.ERROR,
+        )
+
+
+def _failure(entry: DatasetSubject, kind: str, message: str, **extra: Any) -> dict[str, Any]:
+    return {
+        "rel": entry.rel,
+        "status": "failed",
+        "error": {"type": kind, "message": message, "path": str(entry.path), "line": None, "where": None},
+        "trials": [],
+        **extra,
+    }
+
+
+def process_dataset(
+    dataset_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    options: DatasetOptions | None = None,
+    masks: MaskLoader | None = None,
+    review_record: Callable[[str, str], Path | None] | None = None,
+    progress: Progress | None = None,
+    log: Callable[[str], None] | None = None,
+) -> DatasetRun:
+    """Process every subject folder below ``dataset_dir`` into the mirrored tree ``out_dir``.
+
+    Parameters
+    ----------
+    dataset_dir
+        A folder holding subject folders at any depth (:mod:`solver.dataset.discover`).
+    out_dir
+        The output tree: ``out_dir/<rel>/`` per subject, in the one-subject layout plus
+        ``manifest.json`` and ``process.log``; ``dataset_summary.json`` and
+        ``dataset_report.html`` at its root.
+    options
+        Cluster, retries, resume.
+    masks, review_record
+        ``(subject_dir, out_dir) ->`` the reviewer's unmeasured-force masks of a subject,
+        and the review record file they come from (hashed into the manifest);
+        module-level functions (Dask sends them to the workers by name).
+    progress
+        Called with (message, fraction of subjects finished).
+    log
+        Called with one-line messages for the user (the dashboard address, retries).
+
+    Returns
+    -------
+    DatasetRun
+
+    Raises
+    ------
+    DatasetError
+        No subject below ``dataset_dir``, or the scheduler cannot be reached.
+    """
+    opts = options or DatasetOptions()
+    say = progress or (lambda m, f: None)
+    tell = log or (lambda m: None)
+    t0 = time.perf_counter()
+    out = Path(out_dir).resolve()
+    subjects = find_subjects(dataset_dir, exclude=(out,))
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_work(out)
+    settings = {"addb_process": "default", **opts.settings}
+    results: dict[str, dict[str, Any]] = {}
+    jobs: list[SubjectJob] = []
+    for entry in subjects:
+        target = entry.out_dir(out)
+        try:
+            record = review_record(str(entry.path), str(target)) if review_record else None
+            key = manifest_key(entry.path, settings, record)
+        except OSError as exc:
+            results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
+            continue
+        stored = None if opts.force else current_manifest(target, key)
+        if stored is not None:
+            stored.pop("key")
+            if stored["status"] == "failed":  # the same inputs failed before: not run again
+                results[entry.rel] = {**stored, "rel": entry.rel, "unchanged": True}
+            else:
+                results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
+            continue
+        jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
+    done = len(results)
+    total = len(subjects)
+    say(f"{done} of {total} subjects up to date, {len(jobs)} to process", done / total)
+    dashboard = None
+    if jobs:
+        dashboard = _run_jobs(jobs, opts, results, lambda d, frames: say(
+            f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell)
+    ordered = tuple(results[s.rel] for s in subjects)
+    totals = dataset_totals(list(ordered))
+    seconds = time.perf_counter() - t0
+    run = DatasetRun(out, ordered, totals, seconds, dashboard)
+    write_summary(run, Path(dataset_dir).resolve(), opts)
+    return run
+
+
+def _run_jobs(
+    jobs: list[SubjectJob],
+    opts: DatasetOptions,
+    results: dict[str, dict[str, Any]],
+    step: Callable[[int, int], None],
+    tell: Callable[[str], None],
+) -> str | None:
+    """Submit ``jobs`` to the cluster, collect their outcomes into ``results``."""
+    from distributed import Client, as_completed
+    from distributed.scheduler import KilledWorker
+
+    cluster = None
+    try:
+        if opts.scheduler:
+            client = Client(opts.scheduler, timeout="20s")
+        else:
+            cluster = _local_cluster(opts)
+            client = Client(cluster)
+    except OSError as exc:
+        if cluster is not None:
+            cluster.close()
+        raise DatasetError(f"cannot reach the Dask scheduler: {exc}", where=opts.scheduler or "local cluster") from None
+    dashboard = None
+    try:
+        info = client.scheduler_info()
+        if info.get("services", {}).get("dashboard"):
+            import importlib.util
+
+            dashboard = client.dashboard_link
+            if importlib.util.find_spec("bokeh") is not None:
+                tell(f"Dask dashboard: {dashboard}")
+            else:
+                tell(f"Dask dashboard: {dashboard} (its plots need `pip install bokeh`)")
+        tell(f"{len(info.get('workers', {}))} Dask workers, scheduler {client.scheduler.address}")
+        run_id = uuid.uuid4().hex[:8]
+        attempts: dict[str, int] = {}
+        by_key: dict[str, SubjectJob] = {}
+
+        def submit(job: SubjectJob) -> Any:
+            attempts[job.rel] = attempts.get(job.rel, 0) + 1
+            key = f"addb-subject-{job.rel}-{run_id}-{attempts[job.rel]}"
+            by_key[key] = job
+            return client.submit(run_subject, job, key=key, pure=False, retries=0)
+
+        pending = as_completed([submit(j) for j in jobs])
+        finished, frames = 0, 0
+        for future in pending:
+            job = by_key[future.key]
+            try:
+                outcome = future.result()
+            except KilledWorker:
+                if attempts[job.rel] <= opts.retries:
+                    tell(f"{job.rel}: its worker died; retrying (attempt {attempts[job.rel] + 1})")
+                    pending.add(submit(job))
+                    continue
+                outcome = _failure(
+                    DatasetSubject(job.rel, Path(job.subject_dir)),
+                    "WorkerDied",
+                    f"the worker processing this subject died {attempts[job.rel]} time(s) "
+                    "(killed, or over its memory limit)",
+                )
+            except Exception as exc:  # a failure outside the pipeline (e.g. sending the task)
+                outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), type(exc).__name__, str(exc))
+            outcome["attempts"] = attempts[job.rel]
+            results[job.rel] = outcome
+            finished += 1
+            frames += sum(r["frames"] for r in outcome.get("trials") or [])
+            step(finished, frames)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return dashboard
+
+
+def write_summary(run: DatasetRun, dataset_dir: Path, opts: DatasetOptions) -> tuple[Path, Path]:
+    """Write ``dataset_summary.json`` and ``dataset_report.html`` at the root of the tree
+    (each written to a temporary file first, then renamed into place)."""
+    from solver.dataset.report import render_report
+
+    summary = {
+        "dataset": str(dataset_dir),
+        "out": str(run.out_dir),
+        "addb_version": addb_version(),
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "seconds": run.seconds,
+        "workers": opts.workers if not opts.scheduler else None,
+        "scheduler": opts.scheduler,
+        "totals": run.totals,
+        "subjects": list(run.subjects),
+    }
+    json_path = run.out_dir / SUMMARY_NAME
+    tmp = run.out_dir / f".{SUMMARY_NAME}.tmp"
+    write_json(tmp, summary)
+    os.replace(tmp, json_path)
+    html_path = run.out_dir / REPORT_NAME
+    tmp = run.out_dir / f".{REPORT_NAME}.tmp"
+    tmp.write_text(render_report(json.loads(json_path.read_text())), encoding="utf-8")
+    os.replace(tmp, html_path)
+    return json_path, html_path

@@ -1,0 +1,186 @@
+"""One subject of a dataset run, as it runs on a Dask worker.
+
+:func:`run_subject` processes one subject folder into a private work folder beside its
+final output folder, writes ``process.log`` (progress messages, warnings, the error
+with its traceback) and ``manifest.json`` (:mod:`solver.dataset.manifest`, with the
+summary rows of :mod:`solver.dataset.summary`), and only then moves the work folder into
+place, in two renames, as :func:`solver.outputs.staged_output` does. So a worker killed
+at any moment leaves the subject's output either complete (with its manifest) or as it
+was before; the stale work folder of a killed worker is removed by the next run.
+
+A failure caused by the data or the solver (any exception in the pipeline) is returned
+as the subject's outcome, never raised, and recorded in the subject's output folder
+(``process.log`` and a manifest with the error; an earlier run's output files stay): a
+deterministic failure is not worth a retry, and the batch goes on. Only the death of the worker itself (killed, out of memory)
+reaches the runner, which then retries the subject on another worker.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+import traceback
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from solver.errors import AddbError
+from solver.outputs import write_json
+
+LOG_NAME = "process.log"
+#: Prefix of a subject's private work folder (beside its final output folder).
+WORK_PREFIX = ".addb-work-"
+
+#: ``(subject_dir, out_dir) -> {trial: (T,) bool mask}`` or None: the reviewer's
+#: unmeasured-force flags of a subject whose output goes to ``out_dir`` (a module-level
+#: function, so that Dask sends it to the workers by name).
+MaskLoader = Callable[[str, str], "dict[str, Any] | None"]
+
+
+@dataclass(frozen=True)
+class SubjectJob:
+    """What a worker needs to process one subject of a dataset.
+
+    Attributes
+    ----------
+    rel
+        The subject's relative path in the dataset (``labA/s01``).
+    subject_dir, out_dir
+        The subject folder and its final output folder (absolute paths as text).
+    key
+        The manifest key computed by the runner (:func:`solver.dataset.manifest.manifest_key`).
+    masks
+        Loader of the reviewer's unmeasured-force masks, or None (automatic proposals).
+    """
+
+    rel: str
+    subject_dir: str
+    out_dir: str
+    key: dict[str, Any]
+    masks: MaskLoader | None = None
+
+
+class _Log:
+    """``process.log``: timestamped lines, flushed as they come (readable while running)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.t0 = time.perf_counter()
+        self._f = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        self._last = ""
+
+    def __call__(self, message: str, fraction: float | None = None) -> None:
+        if message == self._last:
+            return
+        self._last = message
+        pct = "" if fraction is None else f"[{100 * fraction:5.1f}%] "
+        self._f.write(f"{time.perf_counter() - self.t0:8.2f}s {pct}{message}\n")
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def _error_record(exc: BaseException) -> dict[str, Any]:
+    """JSON form of an exception: our errors carry file / line / where."""
+    if isinstance(exc, AddbError):
+        return exc.to_dict()
+    return {"type": type(exc).__name__, "message": str(exc), "path": None, "line": None, "where": None}
+
+
+def _replace_dir(src: Path, dst: Path) -> None:
+    """Move folder ``src`` to ``dst``, replacing ``dst`` in two renames."""
+    old = None
+    if dst.exists():
+        old = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}old-{dst.name}-", dir=dst.parent))
+        os.replace(dst, old / "previous")
+    os.replace(src, dst)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _record_failure(final: Path, log: Path, manifest: dict[str, Any]) -> None:
+    """Put a failed subject's log and manifest into ``final`` (each file renamed into
+    place), keeping whatever output an earlier run left there."""
+    from solver.dataset.manifest import MANIFEST_NAME
+
+    final.mkdir(parents=True, exist_ok=True)
+    tmp = final / f".{LOG_NAME}.tmp"
+    shutil.copyfile(log, tmp)
+    os.replace(tmp, final / LOG_NAME)
+    tmp = final / f".{MANIFEST_NAME}.tmp"
+    write_json(tmp, manifest)
+    os.replace(tmp, final / MANIFEST_NAME)
+
+
+def run_subject(job: SubjectJob) -> dict[str, Any]:
+    """Process one subject; never raises for a failure of the data or the solver.
+
+    Returns
+    -------
+    dict
+        ``rel``, ``status`` (``"ok"``, ``"kinematics_only"`` or ``"failed"``), ``error``
+        (:meth:`AddbError.to_dict` form, failed only), ``trials`` (summary rows),
+        ``mass_kg`` (given) and ``fitted_mass_kg``, ``seconds`` (wall time of the
+        subject), ``worker_pid``.
+    """
+    from solver.dataset.manifest import MANIFEST_NAME
+    from solver.dataset.summary import subject_rows
+    from solver.pipeline import process_subject
+
+    t0 = time.perf_counter()
+    final = Path(job.out_dir)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{final.name}-", dir=final.parent))
+    log = _Log(work / LOG_NAME)
+    log(f"subject {job.rel}: {job.subject_dir} -> {job.out_dir} (pid {os.getpid()})")
+    outcome: dict[str, Any] = {"rel": job.rel, "worker_pid": os.getpid()}
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            masks = job.masks(job.subject_dir, job.out_dir) if job.masks is not None else None
+            if masks:
+                log(f"reviewer flags used for {', '.join(sorted(masks))}")
+            result = process_subject(job.subject_dir, work / "out", unmeasured=masks, progress=log)
+        for w in caught:
+            log(f"warning: {w.message}")
+        rows = subject_rows(work / "out")
+        status = "ok" if any(r["status"] == "ok" for r in rows) else "kinematics_only"
+        outcome.update(
+            status=status,
+            trials=rows,
+            mass_kg=result.kinematics.subject.mass_kg,
+            fitted_mass_kg=result.dynamics.mass_kg if result.dynamics is not None else None,
+            seconds=time.perf_counter() - t0,
+        )
+        log(f"done: {status}, {sum(r['frames'] for r in rows)} frames in {outcome['seconds']:.1f} s")
+        log.close()
+        os.replace(work / LOG_NAME, work / "out" / LOG_NAME)
+        write_json(work / "out" / MANIFEST_NAME, {"key": job.key, **outcome})
+        _replace_dir(work / "out", final)
+    except Exception as exc:  # the data's or the solver's failure: recorded, the batch goes on
+        log(f"failed: {exc}")
+        log(traceback.format_exc().rstrip())
+        log.close()
+        outcome.update(status="failed", error=_error_record(exc), trials=[], seconds=time.perf_counter() - t0)
+        _record_failure(final, work / LOG_NAME, {"key": job.key, **outcome})
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return outcome
+
+
+def remove_stale_work(out_root: str | Path) -> int:
+    """Remove work folders left below ``out_root`` by killed workers; returns how many."""
+    n = 0
+    root = Path(out_root)
+    if not root.is_dir():
+        return 0
+    for path in list(root.rglob(f"{WORK_PREFIX}*")):
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+            n += 1
+    return n
