@@ -80,12 +80,13 @@ def _dispatch(p: Path) -> dict[str, Any]:
         ".osim": _osim,
         ".xml": _xml,
         ".json": _json,
+        ".b3d": _b3d,
     }
     reader = readers.get(p.suffix.lower())
     if reader is None:
         raise FileFormatError(
             f"unknown file type {p.suffix!r}; expected .trc, .mot, .sto, .c3d, .osim, .xml, "
-            ".json or a subject folder",
+            ".json, .b3d or a subject folder",
             path=p,
         )
     return reader(p)
@@ -339,6 +340,68 @@ def _data_lines(d: dict[str, Any], indent: str = "  ") -> list[str]:
     return lines
 
 
+def _b3d(p: Path) -> dict[str, Any]:
+    from solver.io.b3d import open_b3d
+
+    b3d = open_b3d(p)
+    h = b3d.header
+    trials = []
+    for t in h.trials:
+        reasons: dict[str, int] = {}
+        for r in t.missing_grf:
+            if r != "notMissingGRF":
+                reasons[r] = reasons.get(r, 0) + 1
+        trials.append({
+            "name": t.name,
+            "original_name": t.original_name,
+            "split_index": t.split_index,
+            "frames": t.n_frames,
+            "rate_hz": t.rate_hz,
+            "duration_s": t.n_frames * t.timestep_s,
+            "force_plates": t.n_force_plates,
+            "passes": [tp.type for tp in t.passes],
+            "tags": list(t.tags),
+            "missing_grf_frames": sum(reasons.values()),
+            "missing_grf_by_reason": reasons,
+        })
+    return {
+        "kind": "b3d",
+        "path": str(p),
+        "version": h.version,
+        "bytes": b3d.file_bytes,
+        "mass_kg": h.mass_kg,
+        "height_m": h.height_m,
+        "sex": h.sex,
+        "age_years": h.age_years,
+        "subject_tags": list(h.tags),
+        "notes_text": h.notes,
+        "dofs": h.n_dofs,
+        "markers": len(h.marker_names),
+        "ground_contact_bodies": list(h.ground_contact_bodies),
+        "passes": [ps.type for ps in h.passes],
+        "frames": sum(t.n_frames for t in h.trials),
+        "trials": trials,
+    }
+
+
+def _b3d_lines(d: dict[str, Any]) -> list[str]:
+    lines = [
+        f"  version {d['version']}, {d['bytes']:,} bytes; subject: {d['sex']}, age {d['age_years']}, "
+        f"{_fmt(d['mass_kg'])} kg, {_fmt(d['height_m'])} m, tags {d['subject_tags']}",
+        f"  {d['dofs']} DOFs, {d['markers']} markers, contact bodies {', '.join(d['ground_contact_bodies'])}",
+        f"  processing passes: {', '.join(d['passes']) or 'none'}",
+        f"  {len(d['trials'])} trials, {d['frames']} frames:",
+    ]
+    for t in d["trials"]:
+        missing = ", ".join(f"{k} {v}" for k, v in sorted(t["missing_grf_by_reason"].items())) or "none"
+        lines.append(
+            f"    {t['name']} ({t['original_name']} part {t['split_index']}): {t['frames']} frames at "
+            f"{_fmt(t['rate_hz'])} Hz ({_fmt(t['duration_s'])} s), {t['force_plates']} plates, "
+            f"passes {', '.join(t['passes'])}; missing GRF frames: {t['missing_grf_frames']} ({missing})"
+        )
+    return lines
+
+
 def format_summary(d: dict[str, Any]) -> str:
     """Readable multi-line text of a :func:`summarize` result."""
     kind = d.get("kind", "?")
@@ -356,6 +419,8 @@ def format_summary(d: dict[str, Any]) -> str:
         lines += [f"  {f['name']}: {f['force']} -> {f['body']}" for f in d["forces"]]
     if kind == "opensim_xml":
         lines.append(f"  <{d['element']}> {d['name']}")
+    if kind == "b3d":
+        lines = lines[:1] + _b3d_lines(d)
     if kind == "review":
         lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
     if kind == "subject":
