@@ -26,6 +26,7 @@ COMMANDS = (
     "addb_viewer.commands.export",
     "addb_viewer.commands.benchmark",
     "addb_viewer.commands.diagnose",
+    "addb_viewer.commands.convert",
 )
 
 

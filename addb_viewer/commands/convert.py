@@ -1,0 +1,75 @@
+"""``addb convert FILE.b3d --out SUBJECT_DIR``: an AddBiomechanics binary subject -> a subject folder.
+
+The folder is one ``addb process`` solves (:func:`solver.io.b3d_convert.b3d_to_subject`);
+the file's missing-GRF labels become the subject's review record (``annotations.json``,
+provenance ``imported``): frames with a reason other than ``notMissingGRF`` are flagged
+``unmeasured_force``, and each run of one reason carries a note naming it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Path:
+    """Store a converted subject's missing-GRF labels as its review record.
+
+    Parameters
+    ----------
+    converted
+        A :class:`solver.io.b3d_convert.ConvertedSubject`.
+    reviewer
+        Author recorded on the edits.
+
+    Returns
+    -------
+    Path
+        The review record (where :mod:`addb_viewer.locations` says the subject's record lives).
+    """
+    from annotations import AnnotationStore
+    from annotations.masks import mask_to_ranges
+    from addb_viewer.locations import annotations_path, default_output_dir
+
+    path = annotations_path(converted.path, default_output_dir(converted.path))
+    with AnnotationStore.open(path, reviewer=reviewer) as store:
+        for t in converted.trials:
+            store.set_trial_info(t.name, n_frames=t.n_frames, rate_hz=t.rate_hz)
+            store.set_mask(t.name, t.missing_mask, kind="unmeasured_force", source="imported", overwrite=True)
+            reasons = t.missing_grf
+            for reason in sorted(set(reasons) - {"notMissingGRF"}):
+                mask = [r == reason for r in reasons]
+                for start, stop in mask_to_ranges(mask):
+                    store.add_note(t.name, f"AddBiomechanics: missing GRF ({reason})", start=start, stop=stop, source="imported")
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    from solver.io.b3d_convert import b3d_to_subject
+
+    converted = b3d_to_subject(args.file, args.out, pass_index=args.pass_index, overwrite=args.force)
+    record = write_review_record(converted)
+    for t in converted.trials:
+        n_missing = int(t.missing_mask.sum())
+        print(f"  {t.name}: {t.n_frames} frames at {t.rate_hz:g} Hz, {n_missing} frames with missing GRF")
+    print(f"wrote {converted.path} (review record {record})")
+    print(f"next: addb process {converted.path} --out OUT --annotations {record}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "convert",
+        help="convert an AddBiomechanics .b3d file to a subject folder that addb process solves",
+        description=(
+            "Write the .b3d file's markers (markers.trc), raw force plates (grf.mot), subject (_subject.json) "
+            "and embedded model (unscaled_generic.osim) as an AddBiomechanics subject folder, and its "
+            "missing-GRF labels as the subject's review record (provenance: imported)."
+        ),
+    )
+    p.add_argument("file", help="the .b3d file")
+    p.add_argument("--out", required=True, help="subject folder to write")
+    p.add_argument("--pass", dest="pass_index", type=int, default=0, help="processing pass whose model to use (default 0)")
+    p.add_argument("--force", action="store_true", help="replace an existing converted subject in --out")
+    p.set_defaults(handler=run)
