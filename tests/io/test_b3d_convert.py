@@ -1,0 +1,121 @@
+"""``addb convert``: results.b3d -> a subject folder (markers, forces, model, review record);
+end to end, the converted subject processed by ``addb process`` and compared with
+AddBiomechanics' own pass (marked slow)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.cli import main
+from solver.io.b3d import dof_names, open_b3d
+from solver.io.b3d_writer import write_b3d
+from solver.io.mot import read_forces
+from solver.io.subject import load_subject
+from solver.io.trc import read_trc
+
+B3D = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "b3d" / "results.b3d"
+
+pytestmark = pytest.mark.skipif(not B3D.exists(), reason="shared results.b3d not present")
+
+
+def test_converted_subject_holds_the_file_data(tmp_path: Path) -> None:
+    out = tmp_path / "subject"
+    assert main(["convert", str(B3D), "--out", str(out)]) == 0
+    f = open_b3d(B3D)
+    subject = load_subject(out)
+    assert subject.mass_kg == f.header.mass_kg and subject.height_m == f.header.height_m
+    assert subject.foot_body_names == f.header.ground_contact_bodies
+    assert (out / "unscaled_generic.osim").read_text() == f.model_text(0)
+    assert [t.name for t in subject.trials] == sorted(t.name for t in f.header.trials)
+    for k, info in enumerate(f.header.trials):
+        fr = f.read_trial(k)
+        markers = read_trc(out / "trials" / info.name / "markers.trc")
+        assert markers.n_frames == info.n_frames and markers.rate_hz == info.rate_hz
+        for j, name in enumerate(markers.names):
+            src = fr.markers[:, f.header.marker_names.index(name)]
+            absent = np.isnan(src).any(axis=1) | (src == 0).all(axis=1)
+            np.testing.assert_array_equal(markers.positions[~absent, j], src[~absent])
+            assert np.isnan(markers.positions[absent, j]).all()
+        assert "" not in markers.names
+        forces = read_forces(out / "trials" / info.name / "grf.mot")
+        assert len(forces.plates) == info.n_force_plates
+        for p, plate in enumerate(forces.plates):
+            np.testing.assert_array_equal(plate.force, fr.plate_force[:, p])
+            np.testing.assert_array_equal(plate.cop, fr.plate_cop[:, p])
+            np.testing.assert_array_equal(plate.free_moment, fr.plate_moment[:, p])
+    # a second convert into the same folder needs --force
+    assert main(["convert", str(B3D), "--out", str(out)]) == 1
+    assert main(["convert", str(B3D), "--out", str(out), "--force"]) == 0
+
+
+def test_missing_grf_labels_become_the_review_record(tmp_path: Path) -> None:
+    from annotations import AnnotationStore
+
+    f = open_b3d(B3D)
+    info = f.header.trials[1]
+    reasons = list(info.missing_grf)
+    reasons[3:9] = ["notOverForcePlate"] * 6
+    reasons[50:52] = ["manualReview"] * 2
+    trials = list(f.header.trials)
+    trials[1] = dataclasses.replace(info, missing_grf=tuple(reasons))
+    header = dataclasses.replace(f.header, trials=tuple(trials))
+    labelled = tmp_path / "labelled.b3d"
+    write_b3d(labelled, header, [f.read_trial(k) for k in range(len(trials))])
+    out = tmp_path / "subject"
+    assert main(["convert", str(labelled), "--out", str(out)]) == 0
+    with AnnotationStore.open(out / "annotations.json", reviewer="test") as store:
+        mask = store.mask(info.name, info.n_frames, kind="unmeasured_force")
+        np.testing.assert_array_equal(mask, [r != "notMissingGRF" for r in reasons])
+        assert store.flag(info.name, 4).provenance.source == "imported"
+        notes = sorted((n.start, n.stop, n.text) for n in store.notes(info.name))
+        assert notes == [
+            (3, 9, "AddBiomechanics: missing GRF (notOverForcePlate)"),
+            (50, 52, "AddBiomechanics: missing GRF (manualReview)"),
+        ]
+        assert not store.mask(f.header.trials[0].name, f.header.trials[0].n_frames, kind="unmeasured_force").any()
+
+
+def test_our_fk_of_the_file_coordinates_gives_the_file_com(tmp_path: Path) -> None:
+    """Why the comparison's AddBiomechanics marker error is fair: our forward kinematics of
+    the file's coordinates with the embedded model gives the file's centre of mass (nimble
+    leaves the two 0.06 kg patella bodies out, hence the 1 mm tolerance)."""
+    from solver.model.osim import read_osim
+    from solver.model.skeleton import Skeleton
+
+    f = open_b3d(B3D)
+    p = tmp_path / "m.osim"
+    p.write_text(f.model_text(0))
+    model = read_osim(p)
+    skel = Skeleton(model)
+    cols = [skel.coordinate_index(n) for n in dof_names(model)]
+    for k, info in enumerate(f.header.trials):
+        fr = f.read_trial(k)
+        q = np.zeros((info.n_frames, skel.n))
+        q[:, cols] = fr.passes[0].pos
+        com = skel.center_of_mass(skel.cmap.complete(q))
+        # the file's comPos is 0 on frame 0 (README_b3d.md)
+        np.testing.assert_allclose(com[1:], fr.passes[0].com_pos[1:], atol=1e-3)
+
+
+@pytest.mark.slow
+def test_convert_process_compare(tmp_path: Path) -> None:
+    """results.b3d converted and processed: our marker RMS is below AddBiomechanics' pass,
+    our residuals are within the Hicks thresholds on the frames with measured force."""
+    from solver.io.b3d_compare import compare_with_b3d
+
+    subject, out = tmp_path / "subject", tmp_path / "out"
+    assert main(["convert", str(B3D), "--out", str(subject)]) == 0
+    assert main(["process", str(subject), "--out", str(out)]) == 0
+    rows = compare_with_b3d(B3D, out)
+    assert len(rows) == 2
+    for r in rows:
+        assert r["addb_marker_rms_m"] < r["b3d_marker_rms_m"]
+        assert r["addb_observed_frames"] > 0.8 * r["measured_frames"]
+        assert r["linear_residual_rms_N"] <= r["hicks_linear_threshold_N"]
+        assert r["angular_residual_rms_Nm"] <= r["hicks_angular_threshold_Nm"]
+    (tmp_path / "rows.json").write_text(json.dumps(rows))
