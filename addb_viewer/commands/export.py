@@ -1,19 +1,112 @@
-"""``addb export SUBJECT_DIR --trial NAME --format mcap -o FILE.mcap``."""
+"""``addb export SUBJECT_DIR --trial NAME --format mcap -o FILE.mcap``, and
+``addb export DIR --format b3d -o FILE.b3d`` (a whole processed subject as an
+AddBiomechanics binary file; on a dataset output tree, one file per subject)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
+
+
+def _manual_masks(record: Path | None, out_dir: Path) -> dict[str, Any] | None:
+    """Trial -> (T,) bool: frames a reviewer flagged (review record flags not imported)."""
+    if record is None or not record.is_file():
+        return None
+    import numpy as np
+
+    from annotations import AnnotationStore
+    from solver.results import load_processed, processed_trials
+
+    masks = {}
+    with AnnotationStore.open(record, reviewer="addb export") as store:
+        known = set(store.trials())
+        for name in processed_trials(out_dir):
+            if name not in known:
+                continue
+            n = load_processed(out_dir, name).n_frames
+            mask = np.zeros(n, dtype=bool)
+            for run in store.flag_runs(name):
+                if run.provenance.source != "imported":
+                    mask[run.start:min(run.stop, n)] = True
+            masks[name] = mask
+    return masks
+
+
+def _subject_info(subject_dir: Path | None) -> dict[str, Any]:
+    if subject_dir is None or not (subject_dir / "_subject.json").is_file():
+        return {}
+    from solver.io.subject import load_subject
+
+    s = load_subject(subject_dir)
+    info: dict[str, Any] = {"sex": s.sex, "foot_bodies": list(s.foot_body_names), "tags": list(s.raw.get("subjectTags", []))}
+    age = s.raw.get("ageYears")
+    if isinstance(age, (int, float)) and age > 0:
+        info["age_years"] = int(age)
+    return info
+
+
+def _record_beside(out_dir: Path) -> tuple[Path | None, Path | None]:
+    """(subject folder, review record) of an output folder given on its own, when they can be found."""
+    from addb_viewer.locations import ANNOTATIONS_NAME, OUTPUT_NAME
+
+    if out_dir.name == OUTPUT_NAME and (out_dir.parent / "_subject.json").is_file():
+        return out_dir.parent, out_dir.parent / ANNOTATIONS_NAME
+    beside = out_dir.parent / f"{out_dir.name}.annotations.json"
+    return None, beside if beside.is_file() else None
+
+
+def export_b3d(args: argparse.Namespace) -> int:
+    """``--format b3d``: a processed output folder, a subject folder, or a dataset output tree."""
+    from solver.errors import SubjectFolderError
+    from solver.io.b3d_convert import processed_to_b3d
+    from solver.results import processed_trials
+
+    src = Path(args.subject)
+    output = Path(args.output)
+    if (src / "dataset_summary.json").is_file():
+        outs = sorted(p.parent for p in src.rglob("subject.json") if processed_trials(p.parent))
+        if not outs:
+            raise SubjectFolderError("a dataset output tree without processed subjects (subject.json)", path=src)
+        for out_dir in outs:
+            rel = out_dir.relative_to(src)
+            target = output / rel.parent / f"{out_dir.name}.b3d"
+            target.parent.mkdir(parents=True, exist_ok=True)
+            subject_dir, record = _record_beside(out_dir)
+            processed_to_b3d(out_dir, target, manual=_manual_masks(record, out_dir), subject_info=_subject_info(subject_dir))
+            print(f"wrote {target} ({target.stat().st_size / 1e6:.1f} MB)")
+        print(f"{len(outs)} subjects written under {output}")
+        return 0
+    if (src / "subject.json").is_file() and processed_trials(src):
+        out_dir = src
+        subject_dir, record = _record_beside(out_dir)
+    else:
+        from addb_viewer.locations import annotations_path
+        from addb_viewer.progress import ProgressBar
+        from addb_viewer.recording.jobs import ensure_processed
+
+        out_dir = ensure_processed(src, args.out, progress=ProgressBar())
+        subject_dir, record = src, annotations_path(src, out_dir)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    processed_to_b3d(out_dir, output, manual=_manual_masks(record, out_dir), subject_info=_subject_info(subject_dir))
+    print(f"wrote {output} (b3d, {output.stat().st_size / 1e6:.1f} MB)")
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
-    from addb_viewer.progress import ProgressBar
-    from addb_viewer.recording.jobs import FORMATS, record_subject_trial
-
     fmt = args.format
     if fmt is None:
         suffix = Path(args.output).suffix.lower()
-        fmt = next((name for name, s in FORMATS.items() if s == suffix), "mcap")
+        from addb_viewer.recording.jobs import FORMATS
+
+        fmt = "b3d" if suffix == ".b3d" else next((name for name, s in FORMATS.items() if s == suffix), "mcap")
+    if fmt == "b3d":
+        return export_b3d(args)
+    if not args.trial:
+        raise SystemExit(f"addb export: --trial is required for --format {fmt}")
+    from addb_viewer.progress import ProgressBar
+    from addb_viewer.recording.jobs import record_subject_trial
+
     path = record_subject_trial(
         args.subject, args.trial, args.output, fmt=fmt, out_dir=args.out, progress=ProgressBar()
     )
@@ -24,22 +117,26 @@ def run(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="export a processed trial for other tools (MCAP with Foxglove transforms, or Rerun)",
+        help="export a processed trial (MCAP, Rerun) or a processed subject (.b3d) for other tools",
         description=(
             "Write one trial as MCAP (JSON channels: markers, plate wrenches, body poses as "
             "foxglove.FrameTransforms, residuals, joint torques, flags and annotations; zstd "
-            "chunks with summary and index) or as a Rerun .rrd. The subject is processed first "
-            "if it has no output yet."
+            "chunks with summary and index) or as a Rerun .rrd; or, with --format b3d, a whole "
+            "processed subject as an AddBiomechanics .b3d file (sensor data, a kinematics and a "
+            "dynamics pass, missing-GRF reasons from addb's flags, the scaled model). DIR is a "
+            "subject folder (processed first if it has no output yet), a processed output folder, "
+            "or for b3d a dataset output tree (dataset_summary.json): then -o is a folder and each "
+            "subject output folder REL/NAME becomes OUT/REL/NAME.b3d."
         ),
     )
-    p.add_argument("subject", help="AddBiomechanics subject folder")
-    p.add_argument("--trial", required=True, help="trial name")
+    p.add_argument("subject", help="subject folder, processed output folder, or (b3d) dataset output tree")
+    p.add_argument("--trial", help="trial name (mcap, rrd)")
     p.add_argument(
         "--format",
-        choices=("mcap", "rrd"),
+        choices=("mcap", "rrd", "b3d"),
         help="file format (default: from the output suffix, else mcap)",
     )
-    p.add_argument("-o", "--output", required=True, help="the file to write")
+    p.add_argument("-o", "--output", required=True, help="the file to write (a folder for a dataset tree)")
     p.add_argument(
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",

@@ -193,3 +193,241 @@ def b3d_to_subject(
 
 
 ReviewWriter = Callable[[ConvertedSubject], Any]
+
+
+# --------------------------------------------------------------------------- processed -> .b3d
+
+
+def _missing_reason(unobserved: bool, manual: bool, reason: str) -> str:
+    """Our per-frame flag -> a .b3d missing-GRF reason name."""
+    if manual:
+        return "manualReview"
+    if not unobserved:
+        return "notMissingGRF"
+    if reason.endswith("in contact with no plate force"):
+        return "notOverForcePlate"
+    if reason.startswith("measured vertical force differs"):
+        return "forceDiscrepancy"
+    return "unmeasuredExternalForceDetected"
+
+
+def _rotation_wxyz(wxyz: np.ndarray) -> np.ndarray:
+    """``(T, 4)`` unit quaternions (w, x, y, z) -> ``(T, 3, 3)`` rotation matrices."""
+    w, x, y, z = (wxyz[:, i] for i in range(4))
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)  # fmt: skip
+
+
+def _contact(trial: Any, bodies: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per contact body the sum of the plate wrenches assigned to it: (T, B, 6) wrench
+    [moment about the origin, force], (T, B, 3) CoP, free moment about it, force."""
+    t, nb = trial.n_frames, len(bodies)
+    force = np.zeros((t, nb, 3))
+    moment_o = np.zeros((t, nb, 3))
+    cop_num = np.zeros((t, nb, 3))
+    cop_den = np.zeros((t, nb))
+    for plate in trial.plates:
+        if plate.body is None:
+            continue
+        f = np.nan_to_num(plate.force)
+        c = np.nan_to_num(plate.cop)
+        m = np.cross(c, f) + np.nan_to_num(plate.free_moment)
+        for b, name in enumerate(bodies):
+            if name not in trial.body_names:
+                continue
+            on = plate.body == trial.body_names.index(name)
+            force[on, b] += f[on]
+            moment_o[on, b] += m[on]
+            weight = np.abs(f[on, 1])
+            cop_num[on, b] += c[on] * weight[:, None]
+            cop_den[on, b] += weight
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cop = np.where(cop_den[..., None] > 0, cop_num / cop_den[..., None], 0.0)
+    torque = moment_o - np.cross(cop, force)
+    return np.concatenate([moment_o, force], axis=2), cop, torque, force
+
+
+def processed_to_b3d(
+    out_dir: str | Path,
+    path: str | Path,
+    *,
+    manual: dict[str, np.ndarray] | None = None,
+    subject_info: dict[str, Any] | None = None,
+) -> Path:
+    """Write a processed subject (an ``addb process`` output folder) as a .b3d file.
+
+    Contents: per trial the sensor data addb used (observed markers, m; the plates on the
+    trial's frames: force N, CoP m (0 where unloaded), free moment N·m), then two passes
+    with addb's coordinates (the independent coordinates of the scaled model, in the order
+    of :func:`solver.io.b3d.dof_names`; velocities and accelerations):
+
+    * ``kinematics``: coordinates, centre of mass, the contact wrenches, per-frame marker
+      RMS and max; joint torques and residual wrench 0 (the kinematics pass computes
+      none; every pass frame of a file must have the same size);
+    * ``dynamics``: the same plus joint torques, the residual norms (linear N, angular N·m)
+      per frame, and the residual wrench in the root body frame ([moment, force]) as
+      ``root_frame_residual``.
+
+    The contact wrench of a contact body is the sum of the plates addb assigned to it:
+    [moment about the origin, force] in the world frame, and as CoP (vertical-force
+    weighted), free moment and force. The centre of mass velocity is the central
+    difference of addb's centre of mass. Missing-GRF reasons come from addb's flags:
+    ``manualReview`` where ``manual`` marks the frame (reviewer flags), else
+    ``notOverForcePlate`` / ``forceDiscrepancy`` / ``unmeasuredExternalForceDetected`` by
+    addb's proposal reason for frames excluded from the dynamic fit, else ``notMissingGRF``.
+    Both passes embed the scaled model (``<subject>_scaled.osim``).
+
+    Parameters
+    ----------
+    out_dir
+        The processed output folder (``subject.json`` and ``<trial>/trial.npz``).
+    path
+        The .b3d file to write.
+    manual
+        Trial name -> ``(T,)`` bool frames a reviewer flagged (from the review record).
+    subject_info
+        Optional ``sex``, ``age_years``, ``tags``, ``notes``, ``foot_bodies`` (contact
+        bodies, in order).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    SubjectFolderError
+        ``out_dir`` holds no processed trial, or its scaled model is missing.
+    """
+    from solver.io.b3d import B3dFrames, B3dHeader, B3dPass, B3dPassFrames, B3dTrial, B3dTrialPass
+    from solver.io.b3d_writer import write_b3d
+    from solver.model.osim import read_osim
+    from solver.results import load_processed, processed_trials
+
+    out = Path(out_dir)
+    names = processed_trials(out)
+    if not names:
+        raise SubjectFolderError("holds no processed trial (<trial>/trial.npz)", path=out)
+    info = dict(subject_info or {})
+    trials = [load_processed(out, n) for n in names]
+    model_path = Path(trials[0].model_path)
+    if not model_path.is_absolute():
+        model_path = out / model_path
+    if not model_path.exists():
+        candidates = sorted(out.glob("*_scaled.osim"))
+        if not candidates:
+            raise SubjectFolderError(f"the scaled model {model_path.name} is missing", path=out)
+        model_path = candidates[0]
+    model_text = model_path.read_text(encoding="utf-8")
+    model = read_osim(model_path)
+    from solver.io.b3d import dof_names
+
+    dofs = dof_names(model)
+    bodies = tuple(info.get("foot_bodies") or ())
+    if not bodies:
+        assigned: set[str] = set()
+        for tr in trials:
+            for plate in tr.plates:
+                if plate.body is not None:
+                    assigned |= {tr.body_names[i] for i in np.unique(plate.body) if i >= 0}
+        order = ("calcn_r", "calcn_l")
+        bodies = tuple(sorted(assigned, key=lambda n: (order.index(n) if n in order else len(order), n)))
+    marker_names: list[str] = []
+    for tr in trials:
+        marker_names += [m for m in tr.marker_names if m not in marker_names]
+    header_trials, blocks = [], []
+    subject_json = out / "subject.json"
+    summary = json.loads(subject_json.read_text()) if subject_json.exists() else {}
+    for k, tr in enumerate(trials):
+        t = tr.n_frames
+        dt = float(np.median(np.diff(tr.time))) if t > 1 else 0.01
+        cols = [tr.coordinate_names.index(n) for n in dofs]
+        q, qd, qdd = tr.q[:, cols], tr.qd[:, cols], tr.qdd[:, cols]
+        has_dyn = tr.has_dynamics
+        tau = np.nan_to_num(tr.tau[:, cols]) if has_dyn else np.zeros_like(q)
+        markers = np.full((t, len(marker_names), 3), np.nan)
+        for j, m in enumerate(tr.marker_names):
+            markers[:, marker_names.index(m)] = tr.observed[:, j]
+        plates = tr.plates
+        pf = np.stack([np.nan_to_num(p.force) for p in plates], axis=1) if plates else np.zeros((t, 0, 3))
+        pc = np.stack([np.nan_to_num(p.cop) for p in plates], axis=1) if plates else np.zeros((t, 0, 3))
+        pm = np.stack([np.nan_to_num(p.free_moment) for p in plates], axis=1) if plates else np.zeros((t, 0, 3))
+        wrench, cop, torque, force = _contact(tr, bodies)
+        com = np.nan_to_num(tr.com)
+        com_vel = np.gradient(com, tr.time, axis=0) if t > 1 else np.zeros_like(com)
+        com_acc = np.nan_to_num(tr.com_acc)
+        rms = np.nan_to_num(tr.marker_rms_per_frame)
+        err = tr.marker_errors
+        mmax = np.where(np.isfinite(err), err, 0.0).max(axis=1) if err.size else np.zeros(t)
+        lin = np.nan_to_num(np.linalg.norm(tr.residual_force, axis=1)) if has_dyn else np.zeros(t)
+        ang = np.nan_to_num(np.linalg.norm(tr.residual_moment, axis=1)) if has_dyn else np.zeros(t)
+        rot = [i for i, c in enumerate(model.coordinates) if c.name in dofs and c.motion_type != "translational"]
+        rot_cols = [tr.coordinate_names.index(model.coordinates[i].name) for i in rot]
+        max_vel = np.abs(tr.qd[:, rot_cols]).max(axis=1) if rot_cols else np.zeros(t)
+        flagged = np.zeros(t, bool) if manual is None or tr.trial not in manual else np.asarray(manual[tr.trial], bool)[:t]
+        if flagged.size < t:
+            flagged = np.concatenate([flagged, np.zeros(t - flagged.size, bool)])
+        reasons = tuple(
+            _missing_reason(bool(tr.unobserved[i]), bool(flagged[i]), tr.proposal_reasons[i] if i < len(tr.proposal_reasons) else "")
+            for i in range(t)
+        )
+        root = tr.body_names.index(model.joints[0].child) if model.joints and model.joints[0].child in tr.body_names else 0
+        r = _rotation_wxyz(tr.body_wxyz[:, root])
+        res_f = np.einsum("tji,tj->ti", r, np.nan_to_num(tr.residual_force))
+        res_m = np.einsum("tji,tj->ti", r, np.nan_to_num(tr.residual_moment))
+        ones = np.ones(len(dofs), bool)
+
+        def trial_pass(kind: str, dyn: bool) -> B3dTrialPass:
+            return B3dTrialPass(
+                type=kind, marker_rms=rms, marker_max=mmax,
+                linear_residual=lin if dyn else np.zeros(t), angular_residual=ang if dyn else np.zeros(t),
+                joints_max_velocity=max_vel, dof_positions_observed=ones,
+                dof_velocities_finite_differenced=ones, dof_accelerations_finite_differenced=ones,
+            )  # fmt: skip
+
+        def pass_frames(kind: str, torques: np.ndarray, extra: dict[str, np.ndarray]) -> B3dPassFrames:
+            return B3dPassFrames(
+                type=kind, pos=q, vel=qd, acc=qdd, tau=torques,
+                ground_contact_wrench=wrench, ground_contact_cop=cop, ground_contact_torque=torque,
+                ground_contact_force=force, com_pos=com, com_vel=com_vel, com_acc=com_acc, extra=extra,
+            )  # fmt: skip
+
+        header_trials.append(
+            B3dTrial(
+                name=tr.trial, original_name=tr.trial, split_index=0, timestep_s=dt, n_frames=t,
+                tags=(), missing_grf=reasons, n_force_plates=len(plates),
+                force_plate_corners=np.stack([p.corners for p in plates]) if plates and all(p.corners is not None for p in plates) else np.zeros((0, 4, 3)),
+                marker_names_guessed=False,
+                passes=(trial_pass("kinematics", False), trial_pass("dynamics", True)),
+            )  # fmt: skip
+        )
+        blocks.append(
+            B3dFrames(
+                trial=k, start=0, time_s=np.arange(t) * dt, missing_grf=reasons, markers=markers,
+                plate_force=pf, plate_cop=pc, plate_moment=pm,
+                passes=(
+                    pass_frames("kinematics", np.zeros_like(q), {"root_frame_residual": np.zeros((t, 6))}),
+                    pass_frames("dynamics", tau, {"root_frame_residual": np.concatenate([res_m, res_f], axis=1)}),
+                ),
+            )  # fmt: skip
+        )
+    header = B3dHeader(
+        version=4,
+        n_dofs=len(dofs),
+        mass_kg=float(trials[0].mass_kg),
+        height_m=float(trials[0].height_m or summary.get("height_m") or 0.0),
+        sex=str(info.get("sex", "unknown")),
+        age_years=int(info.get("age_years", -1)),
+        tags=tuple(info.get("tags", ())),
+        notes=str(info.get("notes", f"Written by addb from {out.name}")),
+        href="",
+        ground_contact_bodies=bodies,
+        marker_names=tuple(marker_names),
+        passes=(B3dPass("kinematics", model_text), B3dPass("dynamics", model_text)),
+        trials=tuple(header_trials),
+    )
+    write_b3d(path, header, blocks)
+    return Path(path)

@@ -1,0 +1,127 @@
+"""``addb export DIR --format b3d``: a processed subject (results.b3d converted and processed
+by addb, dynamics pass included) written as .b3d holds exactly addb's values, and
+write -> read -> write -> read is exact on every field. Also the dataset-tree form and the
+reviewer flags as ``manualReview``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.cli import main
+from solver.io.b3d import dof_names, open_b3d
+from solver.io.b3d_writer import write_b3d
+from solver.results import load_processed, processed_trials
+from tests.io.test_b3d_roundtrip import assert_same
+
+B3D = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "b3d" / "results.b3d"
+
+pytestmark = [pytest.mark.skipif(not B3D.exists(), reason="shared results.b3d not present"), pytest.mark.slow]
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("b3d_export")
+    assert main(["convert", str(B3D), "--out", str(root / "subject")]) == 0
+    assert main(["process", str(root / "subject"), "--out", str(root / "out")]) == 0
+    return root / "out"
+
+
+def test_export_holds_addb_values(processed: Path, tmp_path: Path) -> None:
+    out_file = tmp_path / "ours.b3d"
+    assert main(["export", str(processed), "--format", "b3d", "-o", str(out_file)]) == 0
+    f = open_b3d(out_file)
+    h = f.header
+    assert [p.type for p in h.passes] == ["kinematics", "dynamics"]
+    scaled = next(processed.glob("*_scaled.osim"))
+    assert f.model_text(1) == scaled.read_text()
+    from solver.model.osim import read_osim
+
+    dofs = dof_names(read_osim(scaled))
+    assert h.n_dofs == len(dofs)
+    assert [t.name for t in h.trials] == processed_trials(processed)
+    for k, info in enumerate(h.trials):
+        ours = load_processed(processed, info.name)
+        assert h.mass_kg == ours.mass_kg
+        fr = f.read_trial(k)
+        cols = [ours.coordinate_names.index(n) for n in dofs]
+        dyn = fr.passes[1]
+        np.testing.assert_array_equal(dyn.pos, ours.q[:, cols])
+        np.testing.assert_array_equal(dyn.vel, ours.qd[:, cols])
+        np.testing.assert_array_equal(dyn.acc, ours.qdd[:, cols])
+        np.testing.assert_array_equal(dyn.tau, ours.tau[:, cols])
+        np.testing.assert_array_equal(dyn.com_pos, ours.com)
+        np.testing.assert_array_equal(dyn.com_acc, ours.com_acc)
+        np.testing.assert_array_equal(fr.passes[0].pos, dyn.pos)
+        assert not fr.passes[0].tau.any()
+        for j, m in enumerate(ours.marker_names):
+            np.testing.assert_array_equal(fr.markers[:, h.marker_names.index(m)], ours.observed[:, j])
+        for p, plate in enumerate(ours.plates):
+            np.testing.assert_array_equal(fr.plate_force[:, p], np.nan_to_num(plate.force))
+            np.testing.assert_array_equal(fr.plate_moment[:, p], np.nan_to_num(plate.free_moment))
+        # per-frame summaries, stored as float32
+        tp = info.passes[1]
+        np.testing.assert_array_equal(tp.linear_residual, np.linalg.norm(ours.residual_force, axis=1).astype(np.float32))
+        np.testing.assert_array_equal(tp.angular_residual, np.linalg.norm(ours.residual_moment, axis=1).astype(np.float32))
+        np.testing.assert_array_equal(tp.marker_rms, ours.marker_rms_per_frame.astype(np.float32))
+        # contact: the sum of the body wrenches is the sum of the plate wrenches addb applied
+        total_plate = sum(np.nan_to_num(p.force) * (p.body >= 0)[:, None] for p in ours.plates)
+        np.testing.assert_allclose(dyn.ground_contact_force.sum(axis=1), total_plate, atol=1e-9)
+        np.testing.assert_allclose(
+            dyn.ground_contact_wrench[:, :, :3],
+            np.cross(dyn.ground_contact_cop, dyn.ground_contact_force) + dyn.ground_contact_torque,
+            atol=1e-9,
+        )
+        # missing GRF exactly on the frames addb left out of the dynamic fit
+        missing = np.array([r != "notMissingGRF" for r in info.missing_grf])
+        np.testing.assert_array_equal(missing, ours.unobserved)
+        assert set(info.missing_grf) <= {"notMissingGRF", "notOverForcePlate", "forceDiscrepancy", "unmeasuredExternalForceDetected"}
+
+
+def test_write_read_write_is_exact(processed: Path, tmp_path: Path) -> None:
+    first = tmp_path / "first.b3d"
+    assert main(["export", str(processed), "--format", "b3d", "-o", str(first)]) == 0
+    a = open_b3d(first)
+    frames = [a.read_trial(k) for k in range(len(a.header.trials))]
+    second = tmp_path / "second.b3d"
+    write_b3d(second, a.header, frames)
+    b = open_b3d(second)
+    assert_same(a.header, b.header, "header")
+    for k, fr in enumerate(frames):
+        assert_same(fr, b.read_trial(k), f"trial {k}")
+    assert first.read_bytes() == second.read_bytes()
+
+
+def test_reviewer_flags_become_manual_review(processed: Path, tmp_path: Path) -> None:
+    from annotations import AnnotationStore
+
+    out = tmp_path / "out"
+    shutil.copytree(processed, out)
+    trial = processed_trials(out)[0]
+    n = load_processed(out, trial).n_frames
+    with AnnotationStore.open(tmp_path / "out.annotations.json", reviewer="tester") as store:
+        store.set_trial_info(trial, n_frames=n, rate_hz=100.0)
+        store.set_unmeasured(trial, range(60, 64), source="manual")
+    target = tmp_path / "flagged.b3d"
+    assert main(["export", str(out), "--format", "b3d", "-o", str(target)]) == 0
+    reasons = open_b3d(target).header.trials[0].missing_grf
+    assert reasons[60:64] == ("manualReview",) * 4
+    assert "manualReview" not in reasons[:60] + reasons[64:]
+
+
+def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path) -> None:
+    tree = tmp_path / "tree"
+    (tree / "lab_a").mkdir(parents=True)
+    shutil.copytree(processed, tree / "lab_a" / "s01")
+    shutil.copytree(processed, tree / "s02")
+    (tree / "dataset_summary.json").write_text(json.dumps({"subjects": 2}))
+    dest = tmp_path / "b3d_out"
+    assert main(["export", str(tree), "--format", "b3d", "-o", str(dest)]) == 0
+    written = sorted(str(p.relative_to(dest)) for p in dest.rglob("*.b3d"))
+    assert written == ["lab_a/s01.b3d", "s02.b3d"]
+    for p in dest.rglob("*.b3d"):
+        assert len(open_b3d(p).header.trials) == 2
