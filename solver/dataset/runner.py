@@ -210,6 +210,7 @@ def process_dataset(
     if jobs:
         dashboard = _run_jobs(jobs, opts, results, lambda d, frames: say(
             f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell)
+        remove_stale_work(out)  # work folders of attempts whose worker was killed
     ordered = tuple(results[s.rel] for s in subjects)
     totals = dataset_totals(list(ordered))
     seconds = time.perf_counter() - t0

@@ -126,7 +126,8 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         ``rel``, ``status`` (``"ok"``, ``"kinematics_only"`` or ``"failed"``), ``error``
         (:meth:`AddbError.to_dict` form, failed only), ``trials`` (summary rows),
         ``mass_kg`` (given) and ``fitted_mass_kg``, ``seconds`` (wall time of the
-        subject), ``worker_pid``.
+        subject), ``worker_pid`` and ``worker_peak_rss_mb`` (the worker process's peak
+        resident memory so far, MB, from ``getrusage``).
     """
     from solver.dataset.manifest import MANIFEST_NAME
     from solver.dataset.summary import subject_rows
@@ -170,7 +171,17 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         _record_failure(final, work / LOG_NAME, {"key": job.key, **outcome})
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    outcome["worker_peak_rss_mb"] = _peak_rss_mb()
     return outcome
+
+
+def _peak_rss_mb() -> float | None:
+    """Peak resident memory of this process, MB (Linux ``ru_maxrss`` is in KiB)."""
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return None
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def remove_stale_work(out_root: str | Path) -> int:

@@ -1,0 +1,129 @@
+"""``addb process DATASET_DIR --scheduler tcp://...`` on a real multi-process cluster: a
+``dask scheduler`` and two ``dask worker`` processes started here on 127.0.0.1. The results
+equal a serial one-subject run's; then a worker running a subject is killed with SIGKILL
+on the first attempt: the subject is retried on another worker process and completes,
+and nothing half-written is left in the output tree."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.dataset.manifest import read_manifest
+from tests.dataset.dataset_tree import (
+    KINEMATICS_ONLY,
+    SUBJECTS,
+    assert_same_results,
+    build_tree,
+    no_work_folders,
+)
+
+pytestmark = pytest.mark.slow
+REPO = Path(__file__).resolve().parents[2]
+WALK = "labA/rajagopal2016_walk"
+
+
+def _dask_command(tool: str) -> list[str]:
+    exe = Path(sys.executable).parent / "dask"
+    assert exe.exists(), f"the dask command line is not installed beside {sys.executable}"
+    return [str(exe), tool]
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory: pytest.TempPathFactory):
+    """``dask scheduler`` + two ``dask worker`` processes (one thread each) on 127.0.0.1.
+
+    The scheduler gives up on a task at its first worker death (allowed-failures 0), so
+    the retry seen by the test is addb's own, not the scheduler's."""
+    work = tmp_path_factory.mktemp("cluster")
+    env = dict(os.environ, PYTHONPATH=str(REPO), DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="0")
+    sched_file = work / "scheduler.json"
+    procs = [subprocess.Popen(
+        [*_dask_command("scheduler"), "--host", "127.0.0.1", "--port", "0", "--dashboard-address", ":0",
+         "--scheduler-file", str(sched_file)],
+        env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=open(work / "scheduler.log", "w"),
+    )]  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not sched_file.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert sched_file.exists(), (work / "scheduler.log").read_text()
+    address = json.loads(sched_file.read_text())["address"]
+    for k in range(2):
+        procs.append(subprocess.Popen(
+            [*_dask_command("worker"), address, "--nthreads", "1", "--nworkers", "1", "--name", f"w{k}",
+             "--host", "127.0.0.1", "--dashboard-address", ":0"],
+            env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=open(work / f"worker{k}.log", "w"),
+        ))  # fmt: skip
+    from distributed import Client
+
+    with Client(address, timeout="30s") as client:
+        client.wait_for_workers(2, timeout=120)
+    yield address, work
+    for p in procs:
+        p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            p.kill()
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_tree(tmp_path_factory.mktemp("tree") / "in", {WALK: "rajagopal2016_walk"}, kinematics_only=True)
+
+
+@pytest.fixture(scope="module")
+def serial_walk(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("serial") / "walk"
+    assert cli(["process", str(SUBJECTS / "rajagopal2016_walk"), "--out", str(out)]) == 0
+    return out
+
+
+def test_scheduler_run_equals_a_serial_run(scheduler, tree, serial_walk, tmp_path: Path) -> None:
+    address, _ = scheduler
+    out = tmp_path / "out"
+    assert cli(["process", str(tree), "--out", str(out), "--scheduler", address]) == 0
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    assert {s["rel"]: s["status"] for s in summary["subjects"]} == {WALK: "ok", KINEMATICS_ONLY: "kinematics_only"}
+    assert summary["scheduler"] == address
+    assert assert_same_results(out / WALK, serial_walk) == 9 + 3
+
+
+def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(scheduler, tree, serial_walk, tmp_path: Path) -> None:
+    from distributed import Client
+
+    from tests.dataset.kill_plugin import KillOnFirstAttempt
+
+    address, work = scheduler
+    marker = tmp_path / "killed.pid"
+    out = tmp_path / "out"
+    with Client(address, timeout="30s") as client:
+        client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
+        try:
+            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, "--retries", "1"])
+        finally:
+            client.unregister_worker_plugin(KillOnFirstAttempt.name)
+        client.wait_for_workers(2, timeout=120)  # the nanny restarted the killed worker
+    assert marker.exists(), "the plugin never killed a worker"
+    killed_pid = int(marker.read_text())
+    assert code == 0
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    walk = next(s for s in summary["subjects"] if s["rel"] == WALK)
+    assert walk["status"] == "ok" and walk["attempts"] == 2
+    assert walk["worker_pid"] != killed_pid  # another worker process finished it
+    assert read_manifest(out / WALK)["worker_pid"] == walk["worker_pid"]
+    assert assert_same_results(out / WALK, serial_walk) == 9 + 3
+    assert not no_work_folders(out), no_work_folders(out)
+    assert not [p for p in out.rglob("*.tmp*")]
+    shutil.rmtree(out)

@@ -1,0 +1,128 @@
+"""``addb process DATASET_DIR`` on a real two-worker LocalCluster: the three shared subjects
+nested under two lab folders, a broken subject and a kinematics-only one. The good
+subjects' results equal a serial one-subject run's; the broken one is listed with its
+file and line and makes the exit code 1; the summary and the report name every subject;
+a second run skips everything; editing one input file reprocesses that subject only."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.dataset.manifest import MANIFEST_NAME, read_manifest
+from solver.dataset.summary import CONTACT_CLASSES
+from tests.dataset.dataset_tree import (
+    BROKEN,
+    BROKEN_LINE,
+    COMPARED,
+    FULL_TREE,
+    KINEMATICS_ONLY,
+    SUBJECTS,
+    assert_same_results,
+    build_tree,
+    no_work_folders,
+    results,
+)
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_tree(tmp_path_factory.mktemp("dataset") / "in", FULL_TREE, broken=True, kinematics_only=True)
+
+
+@pytest.fixture(scope="module")
+def first_run(tree: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict]:
+    out = tmp_path_factory.mktemp("dataset_out") / "out"
+    code = cli(["process", str(tree), "--out", str(out), "--workers", "2"])
+    return out, code, json.loads((out / "dataset_summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One-subject runs of the three shared subjects (the command as it was before)."""
+    base = tmp_path_factory.mktemp("serial")
+    outs = {}
+    for rel, name in FULL_TREE.items():
+        outs[rel] = base / name
+        assert cli(["process", str(SUBJECTS / name), "--out", str(outs[rel])]) == 0
+    return outs
+
+
+def test_good_subjects_equal_a_serial_one_subject_run(first_run, serial) -> None:
+    out, _, _ = first_run
+    compared = sum(assert_same_results(out / rel, serial[rel]) for rel in FULL_TREE)
+    # walk, run, DJ1 and walking1 with dynamics (every metric), the two statics (3 kinematic ones)
+    assert compared == 4 * len(COMPARED) + 2 * 3
+    for rel in FULL_TREE:  # the one-subject layout, plus the manifest and the log
+        mine = {p.relative_to(out / rel).as_posix() for p in (out / rel).rglob("*")}
+        theirs = {p.relative_to(serial[rel]).as_posix() for p in serial[rel].rglob("*")}
+        assert mine - theirs == {MANIFEST_NAME, "process.log"}, rel
+        assert theirs <= mine
+
+
+def test_broken_subject_is_listed_with_file_and_line_and_fails_the_run(first_run) -> None:
+    out, code, summary = first_run
+    assert code == 1
+    entry = next(s for s in summary["subjects"] if s["rel"] == BROKEN)
+    assert entry["status"] == "failed" and entry["error"]["type"] == "TrcFormatError"
+    assert entry["error"]["path"].endswith(f"{BROKEN}/trials/walk/markers.trc")
+    assert entry["error"]["line"] == BROKEN_LINE
+    log = (out / BROKEN / "process.log").read_text()
+    assert f"markers.trc:{BROKEN_LINE}" in log and "Traceback" in log
+    others = [s for s in summary["subjects"] if s["rel"] != BROKEN]
+    assert all(s["status"] in ("ok", "kinematics_only") for s in others)
+
+
+def test_summary_and_report_name_every_subject_in_the_papers_terms(first_run) -> None:
+    out, _, summary = first_run
+    rels = sorted([*FULL_TREE, BROKEN, KINEMATICS_ONLY])
+    assert sorted(s["rel"] for s in summary["subjects"]) == rels
+    kin = next(s for s in summary["subjects"] if s["rel"] == KINEMATICS_ONLY)
+    assert kin["status"] == "kinematics_only" and all(r["measured_frames"] == 0 for r in kin["trials"])
+    t = summary["totals"]
+    assert t["subjects"] == {"ok": 3, "failed": 1, "kinematics_only": 1}
+    # totals add up from the per-trial results.json files of the output tree
+    frames = sum(r["n_frames"] for rel in [*FULL_TREE, KINEMATICS_ONLY] for r in results(out / rel).values())
+    measured = sum(r.get("n_observed_frames", 0) for rel in FULL_TREE for r in results(out / rel).values())
+    assert t["frames"] == frames and t["measured_frames"] == measured
+    rate = 100.0  # every trial here is solved at 100 Hz
+    assert t["hours"] == pytest.approx(frames / rate / 3600, rel=1e-6)
+    assert t["hours_with_measured_force"] == pytest.approx(measured / rate / 3600, rel=1e-6)
+    assert sum(t["contact_share"][c] for c in CONTACT_CLASSES) == pytest.approx(1.0)
+    assert t["contact_share"]["flight"] > 0.0  # the run has flight phases
+    assert sum(t["residual_force_hist_BW"]) == measured == sum(t["residual_moment_hist_BWh"])
+    html = (out / "dataset_report.html").read_text()
+    assert all(rel in html for rel in rels) and "<svg" in html and f"markers.trc:{BROKEN_LINE}" in html
+    assert not no_work_folders(out)
+
+
+def test_second_run_skips_everything_and_an_edited_input_reprocesses_one_subject(first_run, tree) -> None:
+    out, _, _ = first_run
+    before = {rel: read_manifest(out / rel) for rel in [*FULL_TREE, KINEMATICS_ONLY]}
+    t0 = time.perf_counter()
+    code = cli(["process", str(tree), "--out", str(out), "--workers", "2"])
+    seconds = time.perf_counter() - t0
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    status = {s["rel"]: s["status"] for s in summary["subjects"]}
+    assert code == 1  # the broken subject is still broken (reported, not run again)
+    assert status == {**dict.fromkeys([*FULL_TREE, KINEMATICS_ONLY], "skipped"), BROKEN: "failed"}
+    assert next(s for s in summary["subjects"] if s["rel"] == BROKEN)["unchanged"] is True
+    assert seconds < 10.0, seconds
+    assert summary["totals"]["frames"] > 0  # skipped subjects still count in the totals
+    # edit one input file of the kinematics-only subject: only that subject runs again
+    meta = tree / KINEMATICS_ONLY / "_subject.json"
+    meta.write_text(meta.read_text() + "\n")
+    cli(["process", str(tree), "--out", str(out), "--workers", "2"])
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    status = {s["rel"]: s["status"] for s in summary["subjects"]}
+    assert status[KINEMATICS_ONLY] == "kinematics_only"
+    assert all(status[rel] == "skipped" for rel in FULL_TREE)
+    for rel in FULL_TREE:
+        assert read_manifest(out / rel) == before[rel]
+    assert read_manifest(out / KINEMATICS_ONLY)["key"] != before[KINEMATICS_ONLY]["key"]
