@@ -69,7 +69,7 @@ def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int |
         x = 35 + mark * bw
         line = f'<line x1="{x:.1f}" x2="{x:.1f}" y1="5" y2="{height - pad}" stroke="#c33" stroke-dasharray="4 3"/>'
     axis = f'<line x1="35" x2="{width - 5}" y1="{height - pad}" y2="{height - pad}" stroke="#333"/>'
-    ymax = f'<text x="30" y="14" font-size="10" text-anchor="end">{top:g}</text>'
+    ymax = f'<text x="32" y="14" font-size="10" text-anchor="end">{top:.3g}</text>'
     svg = (
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" role="img">'
         + "".join(bars) + axis + line + ymax + "".join(text) + "</svg>"
