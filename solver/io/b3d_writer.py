@@ -104,11 +104,11 @@ def _frames(fr: B3dFrames, max_plates: int) -> Any:
         s.raw_force_plate_cop.extend(_padded_plates(fr.plate_cop, i, max_plates))
         s.raw_force_plate_torque.extend(_padded_plates(fr.plate_moment, i, max_plates))
         s.raw_force_plate_force.extend(_padded_plates(fr.plate_force, i, max_plates))
-        s.acc_obs.extend(_flat(fr.acc_obs, i) if fr.acc_obs.shape[0] else [])
-        s.gyro_obs.extend(_flat(fr.gyro_obs, i) if fr.gyro_obs.shape[0] else [])
-        s.emg_obs.extend(_flat(fr.emg, i) if fr.emg.shape[0] else [])
-        s.exo_obs.extend(_flat(fr.exo, i) if fr.exo.shape[0] else [])
-        s.custom_values.extend(_flat(fr.custom, i) if fr.custom.shape[0] else [])
+        s.acc_obs.extend(_flat(fr.acc_obs, i) if fr.acc_obs.size else [])
+        s.gyro_obs.extend(_flat(fr.gyro_obs, i) if fr.gyro_obs.size else [])
+        s.emg_obs.extend(_flat(fr.emg, i) if fr.emg.size else [])
+        s.exo_obs.extend(_flat(fr.exo, i) if fr.exo.size else [])
+        s.custom_values.extend(_flat(fr.custom, i) if fr.custom.size else [])
         passes = []
         for p in fr.passes:
             f = schema.PassFrame()
@@ -167,6 +167,10 @@ def write_b3d(path: str | Path, header: B3dHeader, frames: Sequence[B3dFrames]) 
             raise ValueError(f"trial {t.name!r}: markers of shape {fr.markers.shape}, expected (F, {nm}, 3)")
         if fr.plate_force.shape[1:] != (t.n_force_plates, 3):
             raise ValueError(f"trial {t.name!r}: plate forces of shape {fr.plate_force.shape}, expected (F, {t.n_force_plates}, 3)")
+        for name in ("acc_obs", "gyro_obs", "emg", "exo", "custom"):
+            arr = getattr(fr, name)
+            if arr.size and arr.shape[0] != t.n_frames:
+                raise ValueError(f"trial {t.name!r}: {name} has {arr.shape[0]} frames, expected {t.n_frames}")
         for pf in fr.passes:
             if pf.pos.shape[1:] != (d,) or pf.tau.shape[1:] != (d,):
                 raise ValueError(f"trial {t.name!r}: pass coordinates of shape {pf.pos.shape}, expected (F, {d})")
