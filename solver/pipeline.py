@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from solver import single_threaded_blas
-from solver.diagnose.extensions import apply_extensions, extend_subject, extension_masks
+from solver.corrections import apply_extensions, extend_subject, extension_masks
 from solver.errors import KinematicsError
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
@@ -28,6 +28,7 @@ from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.stage import KinematicsOptions, run_kinematics
 from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
+from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
 from solver.results import PlateData, ProcessedTrial, save_processed
@@ -72,7 +73,7 @@ class SubjectKinematics:
 
 def load_trials(subject: Subject) -> tuple[Trial, ...]:
     """Read every trial of ``subject`` (markers and, when present, forces), with the
-    corrections saved by ``addb diagnose --apply`` (:mod:`solver.diagnose.extensions`)."""
+    corrections saved by ``addb diagnose --apply`` (:mod:`solver.corrections`)."""
     return apply_extensions(subject, tuple(load_trial(t) for t in subject.trials))
 
 
@@ -472,19 +473,6 @@ def build_processed(
         geometry_dir=str(geometry_dir(sk.subject.model_path)),
         settings=dyn.get("settings", {}),
     )
-
-
-def rotations_to_wxyz(rot: np.ndarray) -> np.ndarray:
-    """``(..., 3, 3)`` rotation matrices -> ``(..., 4)`` unit quaternions (w, x, y, z), w >= 0
-    (pinocchio's conversion; scipy.spatial would cost more to import than to run)."""
-    import pinocchio as pin
-
-    flat = rot.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for k in range(flat.shape[0]):
-        x, y, z, w = pin.Quaternion(flat[k]).coeffs()
-        out[k] = (w, x, y, z) if w >= 0 else (-w, -x, -y, -z)
-    return out.reshape(rot.shape[:-2] + (4,))
 
 
 def geometry_dir(model_path: Path) -> Path:

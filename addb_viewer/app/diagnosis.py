@@ -42,7 +42,7 @@ def _read_json(path: Path) -> tuple[Any, str | None]:
 
 def _applied(subject_dir: Path, trial: str) -> list[str]:
     """One line per saved extension that acts on ``trial`` (or on the whole subject)."""
-    from solver.diagnose.extensions import extensions_path, read_extensions
+    from solver.corrections import extensions_path, read_extensions
     from solver.errors import SubjectFolderError
 
     if not extensions_path(subject_dir).is_file():

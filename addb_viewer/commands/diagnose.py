@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
-    from solver.diagnose.extensions import save_extension
+    from solver.corrections import save_extension
     from solver.diagnose.report import to_json, to_text
     from solver.errors import DiagnosisError, SubjectFolderError
     from solver.io.subject import load_subject, load_trial

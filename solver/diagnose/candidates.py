@@ -338,7 +338,7 @@ def plate_force_offset(ctx: Context) -> list[Alternative]:
     """``plate_force_offset``: plate p reads F + offset, the zero drift of its force
     channels; the offset acts at the plate's centre (``RawPlates.centre``), where the plate
     refers its moment, not at the moving centre of pressure
-    (:func:`solver.diagnose.extensions.offset_plate`)."""
+    (:func:`solver.corrections.offset_plate`)."""
     d = ctx.data
     idle = d.plates.on(d.time)[2]
     out: list[Alternative] = []

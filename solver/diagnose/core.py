@@ -40,7 +40,7 @@ from solver.diagnose.data import (
     marker_kinematics,
     prepare,
 )
-from solver.diagnose.extensions import correct_forces, extend_subject, extension_masks, join_masks
+from solver.corrections import correct_forces, extend_subject, extension_masks, join_masks
 from solver.diagnose.profile import Profile, Sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
@@ -124,7 +124,7 @@ class Diagnosis:
     held_out
         ``{"before": {...}, "after": {...}}`` held-out figures of the chosen cause.
     extension
-        The entry ``--apply`` saves (:mod:`solver.diagnose.extensions`), or None.
+        The entry ``--apply`` saves (:mod:`solver.corrections`), or None.
     also_standing_out
         Marker offsets other than the chosen cause that stand out on their own markers'
         errors (:func:`solver.diagnose.selection.also_standing_out`), each with the entry
@@ -364,7 +364,7 @@ class TrialInputs:
 
 def load_inputs(subject_dir: str | Path, trial: str, out_dir: str | Path, flags: BoolArray | None = None) -> TrialInputs:
     """Load the subject, the raw trial (saved extensions applied) and the flags."""
-    from solver.diagnose.extensions import apply_extensions
+    from solver.corrections import apply_extensions
 
     subject = load_subject(subject_dir)
     raw = apply_extensions(subject, (load_trial(subject.trial(trial)),))[0]

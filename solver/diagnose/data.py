@@ -33,20 +33,13 @@ from numpy.typing import NDArray
 
 from solver.dynamics.preprocess import lowpass, moment_about_origin, resample, true_runs
 from solver.io.types import ForcePlate, ForceRecording
+from solver.model.mass_groups import BODY_GROUPS, body_group, group_masses  # noqa: F401 (re-exported)
 from solver.model.osim import Body, OsimModel, read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-#: Body groups of ``segment_mass_distribution`` (name prefixes of OpenSim bodies; a body
-#: that matches none joins the trunk).
-BODY_GROUPS: dict[str, tuple[str, ...]] = {
-    "trunk": ("torso", "head", "neck", "humerus", "ulna", "radius", "hand", "lunate", "arm", "thorax"),
-    "pelvis": ("pelvis", "sacrum"),
-    "legs": ("femur", "patella", "thigh", "tibia", "fibula", "shank", "talus", "calcn", "toes", "foot"),
-}
 
 
 @dataclass(frozen=True)
@@ -360,23 +353,6 @@ def generic_mass_distribution(model: OsimModel, generic: OsimModel) -> OsimModel
     return _scaled_bodies(model, factors)
 
 
-def body_group(name: str) -> str:
-    """The :data:`BODY_GROUPS` group of an OpenSim body name (default ``trunk``)."""
-    low = name.lower()
-    for group, prefixes in BODY_GROUPS.items():
-        if any(low.startswith(p) for p in prefixes):
-            return group
-    return "trunk"
-
-
-def group_masses(model: OsimModel) -> dict[str, float]:
-    """Mass of each :data:`BODY_GROUPS` group of ``model`` (groups without a body left out), kg."""
-    out: dict[str, float] = {}
-    for b in model.bodies:
-        out[body_group(b.name)] = out.get(body_group(b.name), 0.0) + b.mass
-    return out
-
-
 def root_wrench(sk: Skeleton, trial: ProcessedTrial) -> FloatArray:
     """``(T, 6)`` gravity + inertia root wrench of ``trial``'s motion (no external load)."""
     idr = sk.inverse_dynamics(trial.q, trial.qd, trial.qdd)
@@ -590,7 +566,7 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
     from solver.dynamics.preprocess import lowpass
     from solver.dynamics.spline import differentiate
     from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory_from_best_frame
-    from solver.pipeline import rotations_to_wxyz
+    from solver.model.rotations import rotations_to_wxyz
 
     sk = Skeleton(model)
     idx = sk.marker_index(list(trial.marker_names))

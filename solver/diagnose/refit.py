@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.diagnose.data import body_group, group_masses
+from solver.model.mass_groups import redistribute  # noqa: F401 (re-exported)
 from solver.dynamics.fit import FitSettings
 from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
 from solver.io.types import ForceRecording, MarkerTrajectories
@@ -55,19 +55,6 @@ class Refit:
     metrics: dict[str, Any]
     model: OsimModel
     seconds: float
-
-
-def redistribute(model: OsimModel, change_kg: Mapping[str, float]) -> OsimModel:
-    """``model`` with each body group's mass (and inertia) changed by ``change_kg[group]`` kg,
-    shared among its bodies in proportion to their masses."""
-    group_mass = group_masses(model)
-    bodies = []
-    for b in model.bodies:
-        g = body_group(b.name)
-        f = 1.0 + float(change_kg.get(g, 0.0)) / group_mass[g] if group_mass[g] > 0 else 1.0
-        f = max(f, 0.05)
-        bodies.append(Body(b.name, b.mass * f, b.com, tuple(map(tuple, np.array(b.inertia) * f)), b.meshes))
-    return replace(model, bodies=tuple(bodies))
 
 
 def refit_trial(
@@ -155,7 +142,7 @@ def refit_trial(
 
 def processed_from_dynamics(template: ProcessedTrial, td: TrialDynamics, dyn: DynamicsResult) -> ProcessedTrial:
     """A :class:`ProcessedTrial` from a dynamics result, other fields from ``template``."""
-    from solver.pipeline import rotations_to_wxyz
+    from solver.model.rotations import rotations_to_wxyz
 
     sk = Skeleton(dyn.model)
     rot, pos = sk.body_poses(td.q)

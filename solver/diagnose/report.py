@@ -30,7 +30,7 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
                   with parameters fitted without its fold; fixed kinematics: the motion the
                   chosen cause was decided on; for a plate-reading correction decided on the
                   fitted motion, the motions refitted without and with it: "refitted")
-    extension     the entry ``--apply`` saves (:mod:`solver.diagnose.extensions`)
+    extension     the entry ``--apply`` saves (:mod:`solver.corrections`)
     also_standing_out  marker offsets other than the chosen cause that stand out on their
                   own markers' errors, each {cause, parameters, uncertainty, score,
                   extension}: findings too (markers do not compete), not saved by ``--apply``

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import butter, sosfiltfilt
 
 from solver.errors import DynamicsError
 
@@ -44,6 +43,8 @@ def lowpass(x: FloatArray, rate_hz: float, cutoff_hz: float, order: int = 3) -> 
     nyquist = 0.5 * rate_hz
     if cutoff_hz >= nyquist or x.shape[0] < 4:
         return x.copy()
+    from scipy.signal import butter, sosfiltfilt  # ~0.5 s to import: only when filtering
+
     sos = butter(order, cutoff_hz / nyquist, btype="low", output="sos")
     padlen = min(3 * (2 * len(sos) + 1), x.shape[0] - 1)
     return sosfiltfilt(sos, x, axis=0, padlen=padlen)

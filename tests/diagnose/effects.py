@@ -8,7 +8,7 @@ Conventions (what each cause's parameter means, as :mod:`solver.diagnose` report
 * ``body_mass``: ``massKg`` - change (the true mass is the stated one + change);
 * ``plate_force_offset``: force + offset on every sample, acting at the plate's centre
   (median loaded CoP): the moment about that point as recorded, the centre of pressure and
-  free moment derived again (:func:`solver.diagnose.extensions.offset_plate`; where the
+  free moment derived again (:func:`solver.corrections.offset_plate`; where the
   plate is unloaded the centre of pressure is its centre);
 * ``plate_force_gain``: force and free moment x gain;
 * ``plate_position_offset``: centre of pressure + a horizontal shift;
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from solver.diagnose.data import plate_centre, wxyz_to_matrix
-from solver.diagnose.extensions import offset_plate
+from solver.corrections import offset_plate
 from solver.io.mot import read_forces, write_forces
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
@@ -206,7 +206,7 @@ def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, proc
 def hide_segment_mass(subject: Path, trial: str, rng: np.random.Generator) -> Hidden:
     """Move mass between the trunk group and the legs in the generic model (total kept)."""
     from solver.diagnose.data import group_masses
-    from solver.diagnose.extensions import extend_subject
+    from solver.corrections import extend_subject
     from solver.diagnose.refit import redistribute
     from solver.io.subject import load_subject
     from solver.model.osim import read_osim
@@ -251,7 +251,7 @@ def hide_unmeasured(subject: Path, trial: str, rng: np.random.Generator) -> Hidd
 def known_unmeasured(subject: Path, trial: str) -> list[list[float]]:
     """Time spans (s) the subject's saved extensions already leave out of the dynamics (the
     base's own steps off the plates): an erased step found there cannot be found again."""
-    from solver.diagnose.extensions import read_extensions
+    from solver.corrections import read_extensions
 
     spans: list[list[float]] = []
     for e in read_extensions(subject):

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from addb_viewer.cli import main as cli
-from solver.diagnose.extensions import append_extension
+from solver.corrections import append_extension
 from solver.results import ProcessedTrial, load_processed
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import Hidden, copy_subject, hide

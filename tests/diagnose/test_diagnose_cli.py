@@ -14,7 +14,7 @@ import pytest
 
 from addb_viewer.cli import main as cli
 from solver.diagnose.candidates import CAUSES
-from solver.diagnose.extensions import read_extensions
+from solver.corrections import read_extensions
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import copy_subject, hide_body_mass

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from solver.diagnose.data import plate_centre
-from solver.diagnose.extensions import (
+from solver.corrections import (
     append_extension,
     correct_forces,
     correct_markers,
@@ -132,7 +132,7 @@ def test_extension_naming_an_unknown_plate_is_refused(walk: Path) -> None:
 def test_saving_into_a_read_only_subject_is_refused(walk: Path) -> None:
     """A subject folder marked read-only (the shared data) gets no extension file, and the
     error names the folder, even for root, whom ``os.access`` lets write anywhere."""
-    from solver.diagnose.extensions import FILE_NAME, save_extension
+    from solver.corrections import FILE_NAME, save_extension
 
     walk.chmod(0o555)
     try:
