@@ -1,0 +1,95 @@
+"""The parts of a dataset run that need no cluster: finding subject folders, the manifest
+key that decides what a rerun skips, and the report page."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from solver.dataset.discover import find_subjects
+from solver.dataset.manifest import current_manifest, input_files, manifest_key
+from solver.dataset.report import render_report
+from solver.dataset.summary import dataset_totals
+from solver.errors import DatasetError
+from tests.dataset.dataset_tree import SUBJECTS
+from tests.conftest import writable_copy
+
+
+@pytest.fixture
+def tree(tmp_path: Path) -> Path:
+    root = tmp_path / "data"
+    writable_copy(SUBJECTS / "rajagopal2016_walk", root / "labA" / "s01")
+    writable_copy(SUBJECTS / "rajagopal2016_walk", root / "labB" / "deeper" / "s02")
+    (root / "labA" / "s01" / "addb_out" / "copy").mkdir(parents=True)  # an output folder is no subject
+    (root / "labA" / "s01" / "addb_out" / "copy" / "_subject.json").write_text("{}")
+    (root / ".hidden" / "s03").mkdir(parents=True)
+    (root / ".hidden" / "s03" / "_subject.json").write_text("{}")
+    return root
+
+
+def test_subjects_are_found_at_any_depth_and_the_output_tree_mirrors_them(tree: Path, tmp_path: Path) -> None:
+    out_inside = tree / "out"
+    writable_copy(SUBJECTS / "rajagopal2016_walk", out_inside / "labA" / "s01")  # an earlier run's output
+    found = find_subjects(tree, exclude=(out_inside,))
+    assert [s.rel for s in found] == ["labA/s01", "labB/deeper/s02"]
+    assert found[1].out_dir(tmp_path / "OUT") == (tmp_path / "OUT" / "labB" / "deeper" / "s02").resolve()
+    assert found[0].path == (tree / "labA" / "s01").resolve()
+
+
+def test_a_folder_without_subjects_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match="no subject folder") as info:
+        find_subjects(tmp_path)
+    assert info.value.path == str(tmp_path.resolve())
+
+
+def test_manifest_key_follows_the_inputs_and_only_them(tree: Path) -> None:
+    subject = tree / "labA" / "s01"
+    key = manifest_key(subject, {"a": 1})
+    assert set(key["inputs"]) == {"_subject.json", "unscaled_generic.osim", "trials/static/markers.trc",
+                                  "trials/walk/markers.trc", "trials/walk/grf.mot"}  # fmt: skip
+    # the same files elsewhere give the same key; meshes, outputs and the review record are no inputs
+    assert manifest_key(tree / "labB" / "deeper" / "s02", {"a": 1}) == key
+    (subject / "Geometry").mkdir()
+    (subject / "Geometry" / "femur.vtp").write_text("mesh")
+    (subject / "annotations.json").write_text("{}")
+    assert manifest_key(subject, {"a": 1}) == key
+    # the review record enters as such, settings and content changes change the key
+    with_review = manifest_key(subject, {"a": 1}, subject / "annotations.json")
+    assert with_review["annotations"]["sha256"] and with_review != key
+    assert manifest_key(subject, {"a": 2}) != key
+    trc = subject / "trials" / "walk" / "markers.trc"
+    trc.write_bytes(trc.read_bytes() + b"\n")
+    assert manifest_key(subject, {"a": 1})["inputs"]["trials/walk/markers.trc"] != key["inputs"]["trials/walk/markers.trc"]
+    assert len(input_files(subject)) == 5
+
+
+def test_a_stored_manifest_counts_only_with_an_equal_key_and_a_final_status(tmp_path: Path) -> None:
+    key = {"schema": 1, "inputs": {"a": "0"}}
+    (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": "ok"}))
+    assert current_manifest(tmp_path, key)["status"] == "ok"
+    assert current_manifest(tmp_path, {**key, "inputs": {"a": "1"}}) is None
+    (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": "running"}))
+    assert current_manifest(tmp_path, key) is None
+    (tmp_path / "manifest.json").write_text('{"key": ')  # cut short by a crash: not current
+    assert current_manifest(tmp_path, key) is None
+
+
+def test_report_escapes_names_and_lists_failures_with_file_and_line() -> None:
+    subjects = [
+        {"rel": "lab<A>/s&1", "status": "failed", "trials": [],
+         "error": {"type": "TrcFormatError", "message": "bad row", "path": "/d/markers.trc", "line": 7}},
+        {"rel": "labA/s2", "status": "kinematics_only", "trials": [
+            {"trial": "static", "status": "kinematics_only", "frames": 100, "rate_hz": 100.0, "duration_s": 1.0,
+             "measured_frames": 0, "measured_s": 0.0, "marker_rms_m": 0.01, "contact_frames": None,
+             "clinical_frames": 0, "residual_force_hist_BW": None, "residual_moment_hist_BWh": None,
+             "hicks_linear_ok": None, "hicks_angular_ok": None}]},
+    ]  # fmt: skip
+    totals = dataset_totals(subjects)
+    assert totals["subjects"] == {"failed": 1, "kinematics_only": 1} and totals["frames"] == 100
+    assert totals["hours_with_measured_force"] == 0.0 and totals["clinical_grade_share"] is None
+    page = render_report({"dataset": "/d", "out": "/o", "addb_version": "x", "finished": "now", "seconds": 1.0,
+                          "totals": totals, "subjects": subjects})  # fmt: skip
+    assert "lab&lt;A&gt;/s&amp;1" in page and "lab<A>" not in page
+    assert "/d/markers.trc:7" in page and "Failures (1)" in page and "<svg" in page
