@@ -5,7 +5,9 @@ prints the paper's table (method x four metrics) with a dataset summary and writ
 ``benchmark.json`` and ``benchmark.md``. Each argument is a processed output folder or a
 subject folder; a subject folder not processed yet is processed first into its default
 output folder (:mod:`addb_viewer.locations`: ``<subject>/addb_out``, or the user's cache
-for a read-only folder).
+for a read-only folder). An argument may also be an AddBiomechanics ``.b3d`` file (the
+published dataset's format): its dynamics pass's frames with measured force are the
+ground truth, its kinematics pass the input.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
     from solver.results import processed_trials
 
     p = Path(path)
+    if p.suffix.lower() == ".b3d" and p.is_file():
+        return p, None  # an AddBiomechanics binary subject: read as is (solver.benchmark.b3d_trials)
     if not p.is_dir():
         raise SubjectFolderError("not a folder", path=p)
     if processed_trials(p):
@@ -138,7 +142,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "subjects; prints the table and writes benchmark.json and benchmark.md."
         ),
     )
-    p.add_argument("subjects", nargs="+", metavar="SUBJECT_DIR", help="subject folder or processed output folder")
+    p.add_argument("subjects", nargs="+", metavar="SUBJECT_DIR", help="subject folder, processed output folder, or AddBiomechanics .b3d file")
     p.add_argument("--method", action="append", choices=("analytical", "mlp", "hybrid"), help="method to score (repeatable; default analytical): the paper's analytical and MLP baselines, or the hybrid (analytical total force split between the feet by a network)")
     p.add_argument("--train", action="append", metavar="SUBJECT_DIR", help="train the networks (mlp, hybrid) on these subjects only (repeatable)")
     p.add_argument("--split", choices=("loso", "seeded"), default="loso", help="protocol without --train: leave-one-subject-out (default) or one seeded train/dev/test split")

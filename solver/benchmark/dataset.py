@@ -254,7 +254,14 @@ def kinematic_coordinates(trial: ProcessedTrial) -> FloatArray:
     Per frame, the kinematics stage's least-squares solver (equal marker weights), warm
     started along time, forwards and backwards, from the processed pose of the frame that
     sees the most markers (:func:`solver.kinematics.ik.solve_trajectory_from_best_frame`).
+
+    A trial read from a .b3d file with a kinematics pass carries that pass's coordinates as
+    ``settings["kinematic_q"]`` (:mod:`solver.benchmark.b3d_trials`): they are the input, as
+    in the paper.
     """
+    given = trial.settings.get("kinematic_q") if isinstance(trial.settings, dict) else None
+    if given is not None:
+        return np.asarray(given, dtype=float)
     from solver.kinematics.ik import FrameSolver, IkSettings, solve_trajectory_from_best_frame
 
     sk = skeleton_for(trial.model_path)
@@ -432,17 +439,31 @@ def load_dataset(
     margin_frames: int = MARGIN_FRAMES,
 ) -> Dataset:
     """The benchmark dataset of every trial processed into the output folders ``out_dirs``
-    (one per subject, as written by :func:`solver.pipeline.process_subject`).
+    (one per subject, as written by :func:`solver.pipeline.process_subject`); an entry may
+    also be an AddBiomechanics ``.b3d`` file (one subject: its dynamics pass is the ground
+    truth, :mod:`solver.benchmark.b3d_trials`).
 
     Raises
     ------
     BenchmarkError
-        An output folder holds no processed trial, or two folders hold the same subject.
+        An output folder holds no processed trial, two folders hold the same subject, or a
+        .b3d file has no dynamics pass.
+    B3dFormatError
+        A .b3d file is damaged.
     """
 
     def load_all() -> Iterator[ProcessedTrial]:
         seen: dict[str, Path] = {}
         for out in out_dirs:
+            if Path(out).suffix.lower() == ".b3d" and Path(out).is_file():
+                from solver.benchmark.b3d_trials import b3d_processed_trials
+
+                for trial in b3d_processed_trials(out):
+                    first = seen.setdefault(trial.subject, Path(out))
+                    if first != Path(out):
+                        raise BenchmarkError(f"subject {trial.subject!r} is also in {first}", path=out)
+                    yield trial
+                continue
             names = processed_trials(out)
             if not names:
                 raise BenchmarkError("no processed trial in this folder", path=out)

@@ -374,7 +374,7 @@ def processed_to_b3d(
             _missing_reason(bool(tr.unobserved[i]), bool(flagged[i]), tr.proposal_reasons[i] if i < len(tr.proposal_reasons) else "")
             for i in range(t)
         )
-        root = tr.body_names.index(model.joints[0].child) if model.joints and model.joints[0].child in tr.body_names else 0
+        root = tr.body_names.index(model.joints[0].child.body) if model.joints and model.joints[0].child.body in tr.body_names else 0
         r = _rotation_wxyz(tr.body_wxyz[:, root])
         res_f = np.einsum("tji,tj->ti", r, np.nan_to_num(tr.residual_force))
         res_m = np.einsum("tji,tj->ti", r, np.nan_to_num(tr.residual_moment))

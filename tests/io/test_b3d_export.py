@@ -125,3 +125,39 @@ def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path) -> N
     assert written == ["lab_a/s01.b3d", "s02.b3d"]
     for p in dest.rglob("*.b3d"):
         assert len(open_b3d(p).header.trials) == 2
+
+
+def test_benchmark_reads_b3d_like_our_output(processed: Path, tmp_path: Path) -> None:
+    """The benchmark on the exported .b3d (its dynamics pass as ground truth) scores the
+    same frames with the same ground truth as on addb's output folder."""
+    from solver.benchmark.dataset import load_dataset, torque_columns
+
+    exported = tmp_path / "subject.b3d"
+    assert main(["export", str(processed), "--format", "b3d", "-o", str(exported)]) == 0
+    ours = load_dataset([processed], inputs="processed")
+    theirs = load_dataset([exported], inputs="processed")
+    assert [t.trial for t in theirs.trials] == [t.trial for t in ours.trials]
+    assert theirs.n_frames == ours.n_frames > 100
+    for a, b in zip(ours.trials, theirs.trials, strict=True):
+        np.testing.assert_array_equal(a.frames, b.frames)
+        np.testing.assert_array_equal(a.contact, b.contact)
+        np.testing.assert_array_equal(a.com_acc, b.com_acc)
+        np.testing.assert_allclose(a.grf, b.grf, atol=1e-9)
+        np.testing.assert_allclose(a.grm, b.grm, atol=1e-6)
+        cols = torque_columns(a)
+        np.testing.assert_array_equal(a.tau[:, cols], b.tau[:, cols])
+        np.testing.assert_allclose(a.q, b.q, atol=1e-12)
+    # the CLI takes the file as a subject, and scores it as the output folder
+    for name, arg in (("b3d", exported), ("out", processed)):
+        assert main(["benchmark", str(arg), "--inputs", "processed", "-o", str(tmp_path / name)]) == 0
+    rows = [json.loads((tmp_path / name / "benchmark.json").read_text())["rows"][0] for name in ("b3d", "out")]
+    assert rows[0]["frames"] == rows[1]["frames"]
+    for metric in ("com_acc", "grf", "grm", "torque"):
+        assert rows[0][metric] == pytest.approx(rows[1][metric], rel=1e-6), metric
+
+
+def test_benchmark_needs_a_dynamics_pass(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """results.b3d has only a kinematics pass: no ground truth, a clear error."""
+    assert main(["benchmark", str(B3D), "-o", str(tmp_path / "bench")]) == 1
+    err = capsys.readouterr().err
+    assert "no dynamics pass" in err and str(B3D) in err
