@@ -54,8 +54,10 @@ def main(argv: list[str] | None = None) -> int:
         "file's centre of mass within 1 mm: tests/io/test_b3d_convert.py). Residuals are addb's, on the frames",
         "the file marks measured (notMissingGRF) that addb also treated as measured.",
         "",
-        "| trial | frames | markers | AddB pass | AddB marker RMS (cm) | addb marker RMS (cm) | AddB reported RMS, mean (cm) "
-        "| measured frames (file / addb) | addb linear residual RMS N (Hicks) | addb angular residual RMS N·m (Hicks) |",
+        (
+            "| trial | frames | markers | AddB pass | AddB marker RMS (cm) | addb marker RMS (cm) | AddB reported RMS, mean (cm) "
+            "| measured frames (file / addb) | addb linear residual RMS N (Hicks) | addb angular residual RMS N·m (Hicks) |"
+        ),
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:

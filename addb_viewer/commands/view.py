@@ -1,5 +1,8 @@
 """``addb view [SUBJECT_DIR]``: review a subject in the browser (default: the bundled demo).
 
+``addb view FILE.b3d`` converts the AddBiomechanics file into a cached subject folder
+first (:func:`b3d_subject`), then reviews that.
+
 Prints the page's address, then serves until Ctrl-C (or SIGTERM). A subject without
 processed output is processed first, with the progress in the page; a subject that
 fails to load shows the error in the page and on the terminal, and the server keeps
@@ -28,11 +31,36 @@ def default_reviewer() -> str:
         return "reviewer"
 
 
+def b3d_subject(path: Path) -> Path:
+    """The cached subject folder of a .b3d file, converted on first use.
+
+    ``$XDG_CACHE_HOME/addb/b3d/<stem>-<hash>`` (the hash is of the resolved path, size and
+    modification time, so a changed file converts again); the file's missing-GRF labels
+    become the folder's review record (``addb convert``).
+    """
+    import hashlib
+
+    from addb_viewer.commands.convert import write_review_record
+    from addb_viewer.locations import cache_root
+    from solver.io.b3d_convert import b3d_to_subject
+    from solver.io.subject import SUBJECT_JSON
+
+    st = path.stat()
+    key = f"{path.resolve()}:{st.st_size}:{st.st_mtime_ns}"
+    folder = cache_root() / "b3d" / f"{path.stem}-{hashlib.sha1(key.encode()).hexdigest()[:10]}"
+    if not (folder / SUBJECT_JSON).is_file():
+        print(f"addb view: converting {path} to {folder}", flush=True)
+        write_review_record(b3d_to_subject(path, folder, overwrite=True))
+    return folder
+
+
 def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.paths import ReviewPaths
     from addb_viewer.app.server import ReviewApp
 
     subject = Path(args.subject) if args.subject else None
+    if subject is not None and subject.suffix.lower() == ".b3d" and subject.is_file():
+        subject = b3d_subject(subject)
     if subject is None:
         from addb_viewer.demo import DEMO_SUBJECT
 
@@ -61,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="review a subject in the browser: replay, flag frames, reprocess")
-    p.add_argument("subject", nargs="?", help="AddBiomechanics subject folder (default: the bundled demo subject)")
+    p.add_argument("subject", nargs="?", help="AddBiomechanics subject folder or .b3d file (default: the bundled demo subject)")
     p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080; the next free one if busy; 0: any)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, this machine only)")
     p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")

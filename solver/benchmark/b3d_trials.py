@@ -108,7 +108,7 @@ def b3d_processed_trials(path: str | Path) -> Iterator[ProcessedTrial]:
                 PlateData(
                     name=body, force=force.copy(), cop=cop.copy(), free_moment=moment_o - np.cross(cop, force),
                     corners=None, body=np.full(t, body_index, dtype=np.int64),
-                )  # fmt: skip
+                )
             )
         residual = p.extra.get("root_frame_residual")
         res_f = np.zeros((t, 3))

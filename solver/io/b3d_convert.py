@@ -380,39 +380,41 @@ def processed_to_b3d(
         res_m = np.einsum("tji,tj->ti", r, np.nan_to_num(tr.residual_moment))
         ones = np.ones(len(dofs), bool)
 
-        def trial_pass(kind: str, dyn: bool) -> B3dTrialPass:
-            return B3dTrialPass(
-                type=kind, marker_rms=rms, marker_max=mmax,
-                linear_residual=lin if dyn else np.zeros(t), angular_residual=ang if dyn else np.zeros(t),
-                joints_max_velocity=max_vel, dof_positions_observed=ones,
-                dof_velocities_finite_differenced=ones, dof_accelerations_finite_differenced=ones,
-            )  # fmt: skip
-
-        def pass_frames(kind: str, torques: np.ndarray, extra: dict[str, np.ndarray]) -> B3dPassFrames:
-            return B3dPassFrames(
-                type=kind, pos=q, vel=qd, acc=qdd, tau=torques,
-                ground_contact_wrench=wrench, ground_contact_cop=cop, ground_contact_torque=torque,
-                ground_contact_force=force, com_pos=com, com_vel=com_vel, com_acc=com_acc, extra=extra,
-            )  # fmt: skip
-
+        common_pass = {
+            "marker_rms": rms, "marker_max": mmax, "joints_max_velocity": max_vel,
+            "dof_positions_observed": ones, "dof_velocities_finite_differenced": ones,
+            "dof_accelerations_finite_differenced": ones,
+        }  # fmt: skip
+        kin_pass = B3dTrialPass(type="kinematics", linear_residual=np.zeros(t), angular_residual=np.zeros(t), **common_pass)
+        dyn_pass = B3dTrialPass(type="dynamics", linear_residual=lin, angular_residual=ang, **common_pass)
+        common_frames = {
+            "pos": q, "vel": qd, "acc": qdd, "ground_contact_wrench": wrench, "ground_contact_cop": cop,
+            "ground_contact_torque": torque, "ground_contact_force": force, "com_pos": com, "com_vel": com_vel,
+            "com_acc": com_acc,
+        }  # fmt: skip
+        kin_frames = B3dPassFrames(
+            type="kinematics", tau=np.zeros_like(q), extra={"root_frame_residual": np.zeros((t, 6))}, **common_frames
+        )
+        dyn_frames = B3dPassFrames(
+            type="dynamics", tau=tau, extra={"root_frame_residual": np.concatenate([res_m, res_f], axis=1)}, **common_frames
+        )
+        corners = (
+            np.stack([p.corners for p in plates])
+            if plates and all(p.corners is not None for p in plates)
+            else np.zeros((0, 4, 3))
+        )
         header_trials.append(
             B3dTrial(
-                name=tr.trial, original_name=tr.trial, split_index=0, timestep_s=dt, n_frames=t,
-                tags=(), missing_grf=reasons, n_force_plates=len(plates),
-                force_plate_corners=np.stack([p.corners for p in plates]) if plates and all(p.corners is not None for p in plates) else np.zeros((0, 4, 3)),
-                marker_names_guessed=False,
-                passes=(trial_pass("kinematics", False), trial_pass("dynamics", True)),
-            )  # fmt: skip
+                name=tr.trial, original_name=tr.trial, split_index=0, timestep_s=dt, n_frames=t, tags=(),
+                missing_grf=reasons, n_force_plates=len(plates), force_plate_corners=corners,
+                marker_names_guessed=False, passes=(kin_pass, dyn_pass),
+            )
         )
         blocks.append(
             B3dFrames(
                 trial=k, start=0, time_s=np.arange(t) * dt, missing_grf=reasons, markers=markers,
-                plate_force=pf, plate_cop=pc, plate_moment=pm,
-                passes=(
-                    pass_frames("kinematics", np.zeros_like(q), {"root_frame_residual": np.zeros((t, 6))}),
-                    pass_frames("dynamics", tau, {"root_frame_residual": np.concatenate([res_m, res_f], axis=1)}),
-                ),
-            )  # fmt: skip
+                plate_force=pf, plate_cop=pc, plate_moment=pm, passes=(kin_frames, dyn_frames),
+            )
         )
     header = B3dHeader(
         version=4,

@@ -386,8 +386,10 @@ def _b3d(p: Path) -> dict[str, Any]:
 
 def _b3d_lines(d: dict[str, Any]) -> list[str]:
     lines = [
-        f"  version {d['version']}, {d['bytes']:,} bytes; subject: {d['sex']}, age {d['age_years']}, "
-        f"{_fmt(d['mass_kg'])} kg, {_fmt(d['height_m'])} m, tags {d['subject_tags']}",
+        (
+            f"  version {d['version']}, {d['bytes']:,} bytes; subject: {d['sex']}, age {d['age_years']}, "
+            f"{_fmt(d['mass_kg'])} kg, {_fmt(d['height_m'])} m, tags {d['subject_tags']}"
+        ),
         f"  {d['dofs']} DOFs, {d['markers']} markers, contact bodies {', '.join(d['ground_contact_bodies'])}",
         f"  processing passes: {', '.join(d['passes']) or 'none'}",
         f"  {len(d['trials'])} trials, {d['frames']} frames:",

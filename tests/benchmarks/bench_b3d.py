@@ -28,9 +28,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from solver.io.b3d import B3dFrames, B3dHeader, open_b3d  # noqa: E402
-from solver.io.b3d_convert import processed_to_b3d  # noqa: E402
-from solver.io.b3d_writer import write_b3d  # noqa: E402
+from solver.io.b3d import B3dFrames, B3dHeader, open_b3d
+from solver.io.b3d_convert import processed_to_b3d
+from solver.io.b3d_writer import write_b3d
 
 B3D = REPO.parent / "shared" / "data" / "b3d" / "results.b3d"
 
@@ -56,7 +56,7 @@ def big_subject(n: int) -> tuple[B3dHeader, list[B3dFrames]]:
     return header, [frames]
 
 
-def timed(fn, repeat: int) -> list[float]:  # noqa: ANN001
+def timed(fn, repeat: int) -> list[float]:
     out = []
     for _ in range(repeat):
         t0 = time.perf_counter()

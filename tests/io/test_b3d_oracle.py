@@ -150,7 +150,7 @@ def test_every_frame(b3d: B3dFile, oracle: dict) -> None:
     for o in oracle["all_frames"]:
         fr = b3d.read_trial(o["trial"])
         assert fr.n_frames == o["numFramesRead"]
-        assert [int(round(t / b3d.header.trials[o["trial"]].timestep_s)) for t in fr.time_s] == o["t"]
+        assert [round(float(t / b3d.header.trials[o["trial"]].timestep_s)) for t in fr.time_s] == o["t"]
         assert fr.passes[0].pos.tolist() == o["pass0_pos"]
         assert (~np.isnan(fr.markers).any(axis=2)).sum(axis=1).tolist() == o["numMarkerObservations"]
         assert fr.plate_force.tolist() == o["rawForcePlateForces"]
