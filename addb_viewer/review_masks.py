@@ -1,8 +1,8 @@
 """The reviewer's unmeasured-force flags of a subject, as the solver takes them.
 
 Used by ``addb process`` on a dataset (each subject's review record, where ``addb view``
-keeps it: :func:`addb_viewer.locations.annotations_path`), and hashed into each subject's
-manifest so that a changed review reprocesses the subject.
+keeps it: :func:`addb_viewer.locations.annotations_path`); :func:`review_digest` enters
+each subject's manifest so that a changed review reprocesses the subject.
 """
 
 from __future__ import annotations
@@ -18,6 +18,31 @@ def review_record(subject_dir: str, out_dir: str) -> Path | None:
     """The subject's review record file, or None when it has none."""
     path = annotations_path(subject_dir, out_dir)
     return path if path.is_file() else None
+
+
+def review_digest(subject_dir: str, out_dir: str) -> str | None:
+    """SHA-256 of the subject's unmeasured-force flags (trial -> frame runs and feet), or
+    None when it has no record or no flag; what a dataset run's manifest keys on.
+
+    Raises
+    ------
+    annotations.AnnotationError
+        The record is damaged (names the file).
+    """
+    import hashlib
+    import json
+
+    from annotations import AnnotationStore
+
+    path = review_record(subject_dir, out_dir)
+    if path is None:
+        return None
+    with AnnotationStore.open(path, reviewer="addb process") as store:
+        flags = {
+            name: [[r.start, r.stop, r.foot] for r in store.review(name).unmeasured_force] for name in store.trials()
+        }
+    flags = {k: v for k, v in flags.items() if v}
+    return hashlib.sha256(json.dumps(flags, sort_keys=True).encode()).hexdigest() if flags else None
 
 
 def subject_masks(subject_dir: str, out_dir: str) -> dict[str, np.ndarray] | None:

@@ -42,7 +42,7 @@ def _masks(path: str, subject_dir: str) -> dict:
 def run_dataset(args: argparse.Namespace) -> int:
     """A dataset folder: every subject on the Dask cluster, the summary, failures listed."""
     from addb_viewer.progress import ProgressBar, table
-    from addb_viewer.review_masks import review_record, subject_masks
+    from addb_viewer.review_masks import review_digest, subject_masks
     from solver.dataset.runner import REPORT_NAME, SUMMARY_NAME, DatasetOptions, process_dataset
 
     if args.trial or args.annotations:
@@ -52,7 +52,7 @@ def run_dataset(args: argparse.Namespace) -> int:
         memory_limit=args.memory_limit,
     )  # fmt: skip
     run = process_dataset(
-        args.subject, args.out, options=opts, masks=subject_masks, review_record=review_record,
+        args.subject, args.out, options=opts, masks=subject_masks, review_digest=review_digest,
         progress=ProgressBar(), log=lambda m: print(f"addb process: {m}", file=sys.stderr),
     )  # fmt: skip
     rows = []

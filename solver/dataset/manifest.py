@@ -4,7 +4,7 @@ Every subject output of a dataset run carries ``manifest.json``::
 
     {"key": {"schema": 1, "addb_version": "0.1.0",
              "inputs": {"_subject.json": "<sha256>", "trials/walk/markers.trc": "<sha256>", ...},
-             "settings": {...}, "annotations": {"path": "...", "sha256": "..."} | null},
+             "settings": {...}, "annotations": "<sha256 of the reviewer's flags>" | null},
      "status": "ok" | "kinematics_only" | "failed", "error": {...} (failed only),
      "subject": {...}, "trials": [...]}          (the summary rows, solver.dataset.summary)
 
@@ -14,7 +14,8 @@ same way (its manifest has ``"status": "failed"`` and the error), so an unchange
 subject is reported again without being run again; a subject whose worker died has no
 such record and runs again. The inputs are every file of the subject folder
 except hidden files, addb's output folder, bone meshes (``Geometry/``, they do not change
-the solution) and the review record, which enters as ``annotations`` instead.
+the solution) and the review record, whose unmeasured-force flags enter as ``annotations``
+instead (a digest given by the caller: the solver package does not read review records).
 """
 
 from __future__ import annotations
@@ -70,9 +71,7 @@ def input_files(subject_dir: str | Path) -> dict[str, Path]:
     return out
 
 
-def manifest_key(
-    subject_dir: str | Path, settings: dict[str, Any], annotations: str | Path | None = None
-) -> dict[str, Any]:
+def manifest_key(subject_dir: str | Path, settings: dict[str, Any], review: str | None = None) -> dict[str, Any]:
     """The ``key`` of a subject's manifest, computed from its files now.
 
     Parameters
@@ -81,17 +80,16 @@ def manifest_key(
         The subject folder.
     settings
         The run's settings that change the solution (JSON-serializable).
-    annotations
-        The review record whose flags the run applies, or None.
+    review
+        A digest of the reviewer's flags the run applies (the review record's
+        unmeasured-force frames, not its file: edits wait in a journal before they reach
+        the file), or None when there are none.
 
     Raises
     ------
     OSError
         A file cannot be read (the caller records it as the subject's failure).
     """
-    review = None
-    if annotations is not None and Path(annotations).is_file():
-        review = {"path": str(Path(annotations).resolve()), "sha256": file_sha256(annotations)}
     return {
         "schema": SCHEMA,
         "addb_version": addb_version(),

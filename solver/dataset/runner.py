@@ -141,7 +141,7 @@ def process_dataset(
     *,
     options: DatasetOptions | None = None,
     masks: MaskLoader | None = None,
-    review_record: Callable[[str, str], Path | None] | None = None,
+    review_digest: Callable[[str, str], str | None] | None = None,
     progress: Progress | None = None,
     log: Callable[[str], None] | None = None,
 ) -> DatasetRun:
@@ -157,10 +157,10 @@ def process_dataset(
         ``dataset_report.html`` at its root.
     options
         Cluster, retries, resume.
-    masks, review_record
+    masks, review_digest
         ``(subject_dir, out_dir) ->`` the reviewer's unmeasured-force masks of a subject,
-        and the review record file they come from (hashed into the manifest);
-        module-level functions (Dask sends them to the workers by name).
+        and a digest of those flags (part of the manifest key, so that a changed review
+        reprocesses the subject); module-level functions (Dask sends them by name).
     progress
         Called with (message, fraction of subjects finished).
     log
@@ -189,10 +189,13 @@ def process_dataset(
     for entry in subjects:
         target = entry.out_dir(out)
         try:
-            record = review_record(str(entry.path), str(target)) if review_record else None
-            key = manifest_key(entry.path, settings, record)
+            review = review_digest(str(entry.path), str(target)) if review_digest else None
+            key = manifest_key(entry.path, settings, review)
         except OSError as exc:
             results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
+            continue
+        except Exception as exc:  # a damaged review record (the annotations package's error)
+            results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
             continue
         stored = None if opts.force else current_manifest(target, key)
         if stored is not None:

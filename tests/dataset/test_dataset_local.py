@@ -126,3 +126,23 @@ def test_second_run_skips_everything_and_an_edited_input_reprocesses_one_subject
     for rel in FULL_TREE:
         assert read_manifest(out / rel) == before[rel]
     assert read_manifest(out / KINEMATICS_ONLY)["key"] != before[KINEMATICS_ONLY]["key"]
+
+
+def test_a_reviewers_flags_reprocess_their_subject_and_replace_its_proposals(first_run, tree) -> None:
+    """Flags saved by a reviewer (still in the record's journal) change the manifest key of
+    that subject only, and the rerun leaves out exactly the flagged frames."""
+    from annotations import AnnotationStore
+
+    out, _, _ = first_run
+    walk = "labA/rajagopal2016_walk"
+    before = json.loads((out / walk / "walk" / "results.json").read_text())
+    with AnnotationStore.open(tree / walk, reviewer="tester") as store:
+        store.set_unmeasured("walk", range(100, 110))
+    cli(["process", str(tree), "--out", str(out), "--workers", "2"])
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    status = {s["rel"]: s["status"] for s in summary["subjects"]}
+    assert status[walk] == "ok" and status["labA/rajagopal2016_run"] == "skipped"
+    after = json.loads((out / walk / "walk" / "results.json").read_text())
+    assert after["unobserved_frames"] == list(range(100, 110)) != before["unobserved_frames"]
+    assert after["n_observed_frames"] == after["n_frames"] - 10
+    assert read_manifest(out / walk)["key"]["annotations"] is not None
