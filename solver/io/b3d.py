@@ -614,6 +614,70 @@ _PASS_FIXED = (
 )
 
 
+def _varint(data: bytes, pos: int) -> tuple[int, int] | None:
+    """A base-128 varint at ``pos``: (value, next position), or None if truncated or too long."""
+    value = shift = 0
+    for i in range(pos, min(pos + 10, len(data))):
+        b = data[i]
+        value |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return value, i + 1
+        shift += 7
+    return None
+
+
+def _layout(message: bytes) -> list[tuple[int, int, int]] | None:
+    """(field number, payload start, payload length) of every field of a serialized message
+    made only of length-delimited fields (packed repeated doubles), or None otherwise."""
+    out = []
+    pos, end = 0, len(message)
+    while pos < end:
+        key = _varint(message, pos)
+        if key is None or key[0] & 7 != 2 or key[0] >> 3 == 0:
+            return None
+        length = _varint(message, key[1])
+        if length is None or length[1] + length[0] > end or length[0] % 8:
+            return None
+        out.append((key[0] >> 3, length[1], length[0]))
+        pos = length[1] + length[0]
+    return out
+
+
+def _columns_fast(region: np.ndarray, fields: Mapping[int, str]) -> dict[str, np.ndarray] | None:
+    """All frames of one message kind at once, when they share the first frame's layout.
+
+    ``region`` is ``(F, L)`` bytes: message ``i`` in row ``i``. When every row has the same
+    field keys and lengths at the same places as row 0 (checked byte for byte), each
+    field's packed doubles sit in the same columns of every row and are read as one
+    ``(F, K)`` little-endian float64 view; this gives what parsing every row would give.
+    Returns None when the rows differ or are not all packed doubles (the caller then
+    parses row by row and reports the damaged one).
+    """
+    layout = _layout(region[0].tobytes())
+    if layout is None:
+        return None
+    framing = np.ones(region.shape[1], dtype=bool)
+    for _, s0, ln in layout:
+        framing[s0:s0 + ln] = False
+    cols = np.flatnonzero(framing)
+    if (region[:, cols] != region[0, cols]).any():
+        return None
+    parts: dict[str, list[np.ndarray]] = {}
+    for number, s0, ln in layout:
+        name = fields.get(number)
+        if name is not None:
+            parts.setdefault(name, []).append(np.ascontiguousarray(region[:, s0:s0 + ln]).view("<f8"))
+    n = region.shape[0]
+    out = {name: np.concatenate(v, axis=1) if len(v) > 1 else v[0] for name, v in parts.items()}
+    for name in fields.values():
+        out.setdefault(name, np.zeros((n, 0)))
+    return {name: a.astype(np.float64, copy=False) for name, a in out.items()}
+
+
+_SENSOR_FIELDS = {f.number: f.name for f in schema.SensorFrame.DESCRIPTOR.fields}
+_PASS_FIELDS = {f.number: f.name for f in schema.PassFrame.DESCRIPTOR.fields}
+
+
 def _decode_frames(b3d: B3dFile, k: int, start: int, n: int, blob: bytes, first: int) -> B3dFrames:
     h = b3d.header
     info = h.trials[k]
@@ -652,7 +716,39 @@ def _decode_frames(b3d: B3dFile, k: int, start: int, n: int, blob: bytes, first:
             return
         raise fail(f"{name} has {got} values, expected {need}", offset, frame, what)
 
-    for i in range(n):
+    def take_all(target: np.ndarray, values: np.ndarray, need: int, name: str, offset: int, what: str, *, minimum: bool = False) -> None:
+        got = values.shape[1]
+        if got == need or (minimum and got >= need):
+            target[:] = values[:, :need]
+        elif got or minimum:
+            raise fail(f"{name} has {got} values, expected {need}", offset, start, what)
+
+    fast = None
+    if n:
+        rows = np.frombuffer(blob, dtype=np.uint8).reshape(n, size)
+        fast_sensor = _columns_fast(rows[:, :sb], _SENSOR_FIELDS)
+        fast_passes = [_columns_fast(rows[:, sb + j * pb: sb + (j + 1) * pb], _PASS_FIELDS) for j in range(n_pass)]
+        if fast_sensor is not None and all(f is not None for f in fast_passes):
+            fast = (fast_sensor, fast_passes)
+    if fast is not None:
+        fs, fps = fast
+        what = "sensor frame"
+        take_all(markers, fs["marker_obs"], m * 3, "marker_obs", first, what)
+        take_all(force, fs["raw_force_plate_force"], p * 3, "raw_force_plate_force", first, what, minimum=True)
+        take_all(cop, fs["raw_force_plate_cop"], p * 3, "raw_force_plate_cop", first, what, minimum=True)
+        take_all(moment, fs["raw_force_plate_torque"], p * 3, "raw_force_plate_torque", first, what, minimum=True)
+        take_all(acc_obs, fs["acc_obs"], na * 3, "acc_obs", first, what)
+        take_all(gyro_obs, fs["gyro_obs"], ng * 3, "gyro_obs", first, what)
+        take_all(emg, fs["emg_obs"], ne, "emg_obs", first, what)
+        take_all(exo, fs["exo_obs"], nx, "exo_obs", first, what)
+        take_all(custom, fs["custom_values"], nc, "custom_values", first, what)
+        for j, fp in enumerate(fps):
+            what = f"pass {j} frame"
+            for name, kind in _PASS_FIXED:
+                take_all(fixed[j][name], fp[name], sizes[kind], name, first + sb + j * pb, what)
+            for name in schema.PASS_EXTRA_FIELDS:
+                extra[j][name] = fp[name]  # type: ignore[assignment]  # (F, K) already
+    for i in range(n if fast is None else 0):
         frame = start + i
         base = i * size
         off = first + base
@@ -696,7 +792,10 @@ def _decode_frames(b3d: B3dFile, k: int, start: int, n: int, blob: bytes, first:
         fx = fixed[j]
         ex = {}
         for name, rows in extra[j].items():
-            arr = np.stack(rows) if rows else np.zeros((0, 0))
+            if isinstance(rows, np.ndarray):
+                arr = rows.copy()
+            else:
+                arr = np.stack(rows) if rows else np.zeros((0, 0))
             ex[name] = freeze(arr, arr.shape)
         passes.append(
             B3dPassFrames(

@@ -187,3 +187,37 @@ def test_frames_are_immutable(b3d: B3dFile) -> None:
         b3d.read_frames(0, 100, 200)
     with pytest.raises(KeyError):
         b3d.read_frame("nope", 0)
+
+
+def test_vectorized_read_equals_frame_by_frame_parse(b3d: B3dFile, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ranges are read as column views when every frame shares frame 0's field layout;
+    forcing the per-frame protobuf parse gives the same values."""
+    import dataclasses
+
+    from solver.io import b3d as reader
+
+    fast = [b3d.read_trial(k) for k in range(2)] + [b3d.read_frames(1, 0, 0)]
+    monkeypatch.setattr(reader, "_columns_fast", lambda region, fields: None)
+    slow = [b3d.read_trial(k) for k in range(2)] + [b3d.read_frames(1, 0, 0)]
+    for a, b in zip(fast, slow, strict=True):
+        for f in dataclasses.fields(a):
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            if f.name == "passes":
+                for pa, pb in zip(x, y, strict=True):
+                    for g in dataclasses.fields(pa):
+                        u, v = getattr(pa, g.name), getattr(pb, g.name)
+                        if g.name == "extra":
+                            assert set(u) == set(v)
+                            for key in u:
+                                assert u[key].shape == v[key].shape, key
+                                np.testing.assert_array_equal(u[key], v[key])
+                        elif isinstance(u, np.ndarray):
+                            assert u.shape == v.shape
+                            np.testing.assert_array_equal(u, v)
+                        else:
+                            assert u == v
+            elif isinstance(x, np.ndarray):
+                assert x.shape == y.shape, f.name
+                np.testing.assert_array_equal(x, y)
+            else:
+                assert x == y, f.name
