@@ -541,7 +541,8 @@ class B3dFile:
                 f"file ends at byte {first + len(blob)}, expected {n} frames of {size} bytes from here",
                 path=self.path, offset=first, where=f"trial {info.name!r}, frame {start + len(blob) // size}",
             )
-        return _decode_frames(self, k, start, n, blob, first)
+        with np.errstate(all="ignore"):  # damaged values (signalling NaNs) are data, not errors
+            return _decode_frames(self, k, start, n, blob, first)
 
 
 def open_b3d(path: str | Path) -> B3dFile:
@@ -586,7 +587,8 @@ def open_b3d(path: str | Path) -> B3dFile:
         msg = schema.Header.FromString(raw)
     except (DecodeError, RuntimeError, ValueError) as exc:
         raise B3dFormatError(f"the header ({n} bytes) does not parse as a .b3d header: {exc}", path=p, offset=PREFIX_BYTES) from None
-    header = _header(msg, p)
+    with np.errstate(all="ignore"):  # a damaged float32 array may hold signalling NaNs
+        header = _header(msg, p)
     sensor, pass_bytes = int(msg.raw_sensor_frame_size), int(msg.processing_pass_frame_size)
     data_start = PREFIX_BYTES + n
     total_frames = sum(t.n_frames for t in header.trials)

@@ -58,7 +58,7 @@ def _read_everything(path: Path) -> None:
         b3d.model_text(j)
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(data=damaged())
 def test_damage_gives_only_our_error(data: bytes) -> None:
     with tempfile.TemporaryDirectory() as tmp:
