@@ -29,11 +29,16 @@ The plate force is taken as the ground reaction on the body when its largest ver
 value is positive; a plate that reports the force *on the plate* (largest magnitude
 negative) is negated and a :class:`UserWarning` says so. No zero-offset correction is
 applied (``FORCE_PLATFORM:ZERO`` is ignored): unloaded plates keep their offset.
+
+**Damaged files.** ezc3d trusts the counts and offsets in a file and can die of a
+segmentation fault on a damaged one, so :func:`read_c3d` first checks the header,
+parameter section and data extent in pure Python
+(:func:`solver.io.c3d_layout.check_c3d`, about 0.3 ms) and raises
+:class:`~solver.errors.C3dFormatError` naming the section and byte offset.
 """
 
 from __future__ import annotations
 
-import struct
 import warnings
 from pathlib import Path
 from typing import Any
@@ -42,6 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.errors import C3dFormatError
+from solver.io.c3d_layout import check_c3d
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
 
 FloatArray = NDArray[np.float64]
@@ -84,16 +90,18 @@ def read_c3d(
     FileNotFoundError
         ``path`` does not exist.
     C3dFormatError
-        ezc3d cannot read the file, the file is shorter than its frames need
-        (truncated), unknown or missing ``POINT:UNITS`` or platform
+        the header, parameter section or data section is damaged or inconsistent
+        (:func:`solver.io.c3d_layout.check_c3d`: the section, byte offset and what was
+        expected; a truncated file names the first incomplete frame), ezc3d cannot
+        read the file, unknown or missing ``POINT:UNITS`` or platform
         units, an invalid up axis, analog samples that are not a whole number per
         frame, or an unsupported platform type.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(2, "No such file", str(path))
+    check_c3d(path)  # a damaged layout gives our error before ezc3d can crash on it
     c3d = _open(path)
-    _check_size(path, c3d)
     params = c3d["parameters"]
     rot = rotation_to_opensim(params, up_axis=up_axis, path=path)
     markers = _markers(c3d, rot, path)
@@ -114,46 +122,6 @@ def _open(path: Path) -> Any:
         raise C3dFormatError(
             f"the force platforms cannot be processed: {exc}", path=path, where="FORCE_PLATFORM"
         ) from None
-
-
-def _check_size(path: Path, c3d: Any) -> None:
-    """Raise if the file is shorter than the frames its own header announces.
-
-    ezc3d silently stops at the end of a truncated file and shortens ``POINT:FRAMES``
-    and its header to what it read, so the original frame range is taken from the raw
-    header block (words 2-5: points, analog values per frame, first and last frame) or
-    ``TRIAL:ACTUAL_START_FIELD``/``ACTUAL_END_FIELD`` when present.
-    """
-    params = c3d["parameters"]
-    start = _param(params, "POINT", "DATA_START")
-    scale = _param(params, "POINT", "SCALE")
-    if start is None or scale is None or not len(start) or not len(scale):
-        return
-    with path.open("rb") as fh:
-        header = fh.read(512)
-        fh.seek(max(header[0] - 1, 0) * 512 + 3)
-        processor = fh.read(1)
-    endian = ">" if processor == b"\x56" else "<"  # 86: MIPS (big-endian)
-    n_points, n_analog, first, last = struct.unpack(endian + "HHHH", header[2:10])
-    end_field = _param(params, "TRIAL", "ACTUAL_END_FIELD")
-    start_field = _param(params, "TRIAL", "ACTUAL_START_FIELD")
-    if end_field is not None and len(end_field) == 2 and start_field is not None:
-        last = int(end_field[0]) % 65536 + 65536 * (int(end_field[1]) % 65536)
-        first = int(start_field[0]) % 65536 + 65536 * (int(start_field[1]) % 65536)
-    n_frames = last - first + 1
-    width = 4 if float(scale[0]) < 0 else 2
-    per_frame = (n_points * 4 + n_analog) * width
-    offset = (int(start[0]) - 1) * 512
-    size = path.stat().st_size
-    if n_frames > 0 and per_frame > 0 and size < offset + n_frames * per_frame:
-        complete = max(0, (size - offset) // per_frame)
-        raise C3dFormatError(
-            f"the file is truncated: its header announces {n_frames} frames "
-            f"({offset + n_frames * per_frame} bytes), the file has {size} bytes "
-            f"({complete} complete frames)",
-            path=path,
-            where=f"frame {complete + 1}",
-        )
 
 
 def _param(params: dict[str, Any], group: str, name: str) -> Any:

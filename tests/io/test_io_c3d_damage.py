@@ -1,0 +1,190 @@
+"""Damaged C3D files: the reader raises our own error, never dies of a signal inside ezc3d.
+
+ezc3d trusts the counts and offsets in a file; a damaged byte can make it crash the whole
+process (a segmentation fault), which pytest cannot catch. So every read of a damaged file
+here happens in a child process: one child reads a batch of damaged files (start-up is
+paid once per batch) and reports per file; a file after which the child died of a signal
+is named with the damage that produced it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT.parent / "shared" / "data"
+TRIALS = DATA / "trials" / "opensim_c3d"
+SOURCES = {name: (TRIALS / name).read_bytes() for name in ("walking2.c3d", "walking5.c3d")}
+PARAMETER_END = 13 * 512  # header block + 12 parameter blocks in both files; data after
+
+# The child: reads every path given on the command line with read_c3d and summarize and
+# prints one JSON line per file, flushed before the next file, so a crash points at the
+# file being read.
+CHILD = r"""
+import json, sys, warnings
+warnings.simplefilter("ignore")
+from solver.errors import AddbError
+from solver.io.c3d import read_c3d
+from solver.io.summary import summarize
+for index, path in enumerate(sys.argv[1:]):
+    print(json.dumps({"index": index, "state": "start"}), flush=True)
+    result = {"index": index, "state": "ok"}
+    for reader in (read_c3d, summarize):
+        try:
+            reader(path)
+        except AddbError as exc:
+            result = {"index": index, "state": "addb", "error": str(exc)}
+        except BaseException as exc:  # noqa: BLE001 - reported to the parent
+            result = {"index": index, "state": "other", "error": repr(exc)}
+            break
+    print(json.dumps(result), flush=True)
+"""
+
+
+def read_in_child(
+    paths: list[Path], timeout: float = 120.0, child: str = CHILD
+) -> list[dict[str, object]]:
+    """Read ``paths`` in child processes (running ``child``); one result per path, in order.
+
+    A child that dies of a signal gives ``{"state": "signal", "signal": n}`` for the
+    file it was reading, and a new child continues with the next file.
+    """
+    results: list[dict[str, object]] = []
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    while len(results) < len(paths):
+        rest = paths[len(results) :]
+        proc = subprocess.run(
+            [sys.executable, "-c", child, *map(str, rest)],
+            check=False,
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env=env,
+            timeout=timeout,
+        )
+        done = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+        finished = [r for r in done if r["state"] != "start"]
+        results.extend(finished)
+        if len(finished) == len(rest):
+            assert proc.returncode == 0, proc.stderr[-2000:]
+            break
+        crashed = {
+            "state": "signal" if proc.returncode < 0 else "exit",
+            "signal": -proc.returncode,
+            "returncode": proc.returncode,
+            "stderr": proc.stderr[-2000:],
+        }
+        results.append(crashed)  # the file after the last finished one
+    return results
+
+
+def damage(data: bytes, edits: list[tuple[str, int, int]]) -> bytes:
+    """Apply ``(kind, position, byte)`` edits: set a byte, delete, insert or truncate."""
+    buf = bytearray(data)
+    for kind, where, byte in edits:
+        if not buf:
+            break
+        i = where % len(buf)
+        if kind == "set":
+            buf[i] = byte
+        elif kind == "delete":
+            del buf[i]
+        elif kind == "insert":
+            buf.insert(i, byte)
+        else:
+            del buf[i:]
+    return bytes(buf)
+
+
+# ----------------------------------------------------------------------------- the issue
+
+
+def test_the_issue_two_bytes_give_our_error_naming_the_parameter_section(
+    tmp_path: Path,
+) -> None:
+    """Bytes 689-690 (from 1) of walking2.c3d, 0x00 0x01 -> 0xB6 0xFB: SUBJECTS:USED then
+    announces -74 dimensions (a signed byte), ezc3d keeps no dimension and reads the first
+    of an empty list: a segmentation fault before the check existed."""
+    data = bytearray(SOURCES["walking2.c3d"])
+    assert data[688:690] == b"\x00\x01"
+    data[688:690] = b"\xb6\xfb"
+    path = tmp_path / "walking2_damaged.c3d"
+    path.write_bytes(bytes(data))
+    (result,) = read_in_child([path])
+    assert result["state"] == "addb", result
+    message = str(result["error"])
+    assert message.startswith("C3dFormatError")
+    assert str(path) in message
+    assert "parameter section: SUBJECTS:USED" in message
+    assert "byte 688" in message and "number of dimensions -74" in message
+
+
+def test_undamaged_files_read_in_the_child() -> None:
+    """The child itself works: both real files read without error."""
+    results = read_in_child([TRIALS / name for name in SOURCES])
+    assert [r["state"] for r in results] == ["ok", "ok"]
+
+
+def test_the_harness_reports_a_signal_death_and_goes_on(tmp_path: Path) -> None:
+    """Without the check, ezc3d itself dies on the issue's file (so the fuzz below can
+    see a regression): the child reports a signal for that file and a new child reads
+    the next one."""
+    data = bytearray(SOURCES["walking2.c3d"])
+    data[688:690] = b"\xb6\xfb"
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(bytes(data))
+    raw = CHILD.replace(
+        "for reader in (read_c3d, summarize):",
+        "import ezc3d\n    for reader in (ezc3d.c3d,):",
+    )
+    results = read_in_child([bad, TRIALS / "walking5.c3d"], child=raw)
+    assert [r["state"] for r in results] == ["signal", "ok"], results
+
+
+# ----------------------------------------------------------------------------- fuzz
+
+_edit = st.tuples(
+    st.sampled_from(["set", "set", "set", "delete", "insert", "truncate"]),
+    st.one_of(  # mostly in the header and parameter section, where ezc3d trusts counts
+        st.integers(min_value=0, max_value=PARAMETER_END - 1),
+        st.integers(min_value=0, max_value=len(SOURCES["walking5.c3d"]) - 1),
+    ),
+    st.one_of(st.sampled_from([0x00, 0x01, 0x7F, 0x80, 0xFF, 0xB6]), st.integers(0, 255)),
+)
+_file_damage = st.tuples(st.sampled_from(sorted(SOURCES)), st.lists(_edit, min_size=1, max_size=4))
+BATCH = 40
+
+
+@settings(
+    max_examples=6,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+@given(batch=st.lists(_file_damage, min_size=BATCH, max_size=BATCH))
+def test_damaged_c3d_files_give_only_our_errors(
+    batch: list[tuple[str, list[tuple[str, int, int]]]],
+) -> None:
+    """Random byte changes, deletions, insertions and truncations of walking2/walking5:
+    each read either succeeds or raises an AddbError subclass naming the file; no child
+    dies of a signal and no other exception escapes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        for k, (name, edits) in enumerate(batch):
+            path = Path(tmp) / f"{k:03d}_{name}"
+            path.write_bytes(damage(SOURCES[name], edits))
+            paths.append(path)
+        results = read_in_child(paths)
+    for (name, edits), result in zip(batch, results, strict=True):
+        where = f"{name} damaged by {edits}"
+        assert result["state"] in ("ok", "addb"), f"{where}: {result}"
+        if result["state"] == "addb":
+            assert "Error (" in str(result["error"]) and name in str(result["error"]), where
