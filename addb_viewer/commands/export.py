@@ -108,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.recording.jobs import record_subject_trial
 
     path = record_subject_trial(
-        args.subject, args.trial, args.output, fmt=fmt, out_dir=args.out, progress=ProgressBar()
+        args.subject, args.trial, args.output, fmt=fmt, out_dir=args.out, progress=ProgressBar(),
+        geometry=args.geometry,
     )
     print(f"wrote {path} ({fmt}, {path.stat().st_size / 1e6:.1f} MB)")
     return 0
@@ -140,5 +141,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
+    )
+    p.add_argument(
+        "--geometry",
+        metavar="DIR",
+        help="folder of bone meshes (.vtp) for mcap/rrd when the subject has no Geometry folder "
+        "(default: $ADDB_GEOMETRY, then the meshes bundled with addb)",
     )
     p.set_defaults(handler=run)
