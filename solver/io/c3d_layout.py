@@ -163,7 +163,7 @@ class _Checker:
         if d[1] != 0x50:
             raise self.fail(
                 "header",
-                f"byte 1 is 0x{d[1]:02X}; a C3D header has the key 0x50 there "
+                f"byte offset 1 is 0x{d[1]:02X}; a C3D header has the key 0x50 there "
                 "(not a C3D file; ezc3d cannot read the file)",
             )
         p_block = d[0]
@@ -171,14 +171,14 @@ class _Checker:
         if p_block < 2 or p_start + 4 > self.size:
             raise self.fail(
                 "header",
-                f"byte 0 points the parameter section to block {p_block}; expected a block "
+                f"byte offset 0 points the parameter section to block {p_block}; expected a block "
                 f"from 2 to {self.size // BLOCK} (the file has {self.size} bytes)",
             )
         processor = d[p_start + 3]
         if processor not in _PROCESSORS:
             raise self.fail(
                 "parameter section",
-                f"byte {p_start + 3} (processor type) is {processor}; expected 84 (Intel), "
+                f"byte offset {p_start + 3} (processor type) is {processor}; expected 84 (Intel), "
                 "85 (DEC) or 86 (MIPS)",
             )
         self.endian = ">" if processor == 86 else "<"
@@ -200,7 +200,7 @@ class _Checker:
         if n_blocks < 1 or p_end > self.size:
             raise self.fail(
                 "parameter section",
-                f"byte {p_start + 2} gives {n_blocks} parameter blocks from byte {p_start} "
+                f"byte offset {p_start + 2} gives {n_blocks} parameter blocks from byte {p_start} "
                 f"(to byte {p_end}); the file has {self.size} bytes",
             )
         params = self._parameters(p_start + 4, p_end)
@@ -248,7 +248,7 @@ class _Checker:
             if pos + 2 > end:
                 raise self.fail(
                     "parameter section",
-                    f"byte {pos}: the next group or parameter starts past the end of the "
+                    f"byte offset {pos}: the next group or parameter starts past the end of the "
                     f"section (byte {end}); expected a record or a zero name length",
                 )
             (n_name, gid) = struct.unpack("bb", d[pos : pos + 2])
@@ -257,7 +257,7 @@ class _Checker:
             if gid == 0:
                 raise self.fail(
                     "parameter section",
-                    f"byte {pos + 1}: group id 0; expected a negative id (group) or a "
+                    f"byte offset {pos + 1}: group id 0; expected a negative id (group) or a "
                     "positive one (parameter of that group)",
                 )
             start = pos
@@ -265,14 +265,14 @@ class _Checker:
             if name_end + 2 > end:
                 raise self.fail(
                     "parameter section",
-                    f"byte {pos}: a name of {abs(n_name)} characters runs past the end of "
+                    f"byte offset {pos}: a name of {abs(n_name)} characters runs past the end of "
                     f"the section (byte {end})",
                 )
             raw_name = d[pos + 2 : name_end]
             if not all(c in _NAME_CHARS for c in raw_name):
                 raise self.fail(
                     "parameter section",
-                    f"byte {pos + 2}: name {raw_name!r} is not plain ASCII letters, digits "
+                    f"byte offset {pos + 2}: name {raw_name!r} is not plain ASCII letters, digits "
                     "and underscores",
                 )
             name = raw_name.decode("ascii")  # as stored: ezc3d looks names up as written
@@ -287,36 +287,40 @@ class _Checker:
             if gid < 0:
                 item_end = self._description(body, end, label)
                 if -gid in groups:
-                    raise self.fail(label, f"byte {start}: group id {-gid} defined twice")
+                    raise self.fail(label, f"byte offset {start}: group id {-gid} defined twice")
                 groups[-gid] = name
             else:
                 if body + 2 > end:
-                    raise self.fail(label, f"byte {body}: record runs past the section end")
+                    raise self.fail(label, f"byte offset {body}: record runs past the section end")
                 kind, n_dims = struct.unpack("bb", d[body : body + 2])
                 if kind not in _TYPES:
-                    raise self.fail(label, f"byte {body}: data type {kind}; expected -1, 1, 2 or 4")
+                    raise self.fail(
+                        label, f"byte offset {body}: data type {kind}; expected -1, 1, 2 or 4"
+                    )
                 if not 0 <= n_dims <= _MAX_DIMS:
                     raise self.fail(
                         label,
-                        f"byte {body + 1}: number of dimensions {n_dims}; expected 0 to "
+                        f"byte offset {body + 1}: number of dimensions {n_dims}; expected 0 to "
                         f"{_MAX_DIMS}",
                     )
                 if kind == -1 and n_dims == 0:
                     raise self.fail(
                         label,
-                        f"byte {body + 1}: a character parameter with no dimension; expected "
+                        f"byte offset {body + 1}: a character parameter with no dimension; expected "
                         "at least its string length",
                     )
                 dims_end = body + 2 + n_dims
                 if dims_end > end:
-                    raise self.fail(label, f"byte {body + 2}: dimensions run past the section")
+                    raise self.fail(
+                        label, f"byte offset {body + 2}: dimensions run past the section"
+                    )
                 dims = tuple(d[body + 2 : dims_end])
                 count = math.prod(dims) if dims else 1
                 values_end = dims_end + count * abs(kind)
                 if values_end + 1 > end:
                     raise self.fail(
                         label,
-                        f"byte {dims_end}: {count} values of {abs(kind)} bytes (dimensions "
+                        f"byte offset {dims_end}: {count} values of {abs(kind)} bytes (dimensions "
                         f"{list(dims)}) run past the end of the section (byte {end})",
                     )
                 item_end = self._description(values_end, end, label)
@@ -324,7 +328,7 @@ class _Checker:
             if nxt and not item_end <= nxt <= end:
                 raise self.fail(
                     label,
-                    f"byte {name_end}: offset to the next record {to_next} points to byte "
+                    f"byte offset {name_end}: offset to the next record {to_next} points to byte "
                     f"{nxt}; expected from byte {item_end} (end of this record) to the end "
                     f"of the section (byte {end})",
                 )
@@ -336,7 +340,7 @@ class _Checker:
             if gid not in groups:
                 raise self.fail(
                     f"parameter section: #{gid}:{name}",
-                    f"byte {start + 1}: the parameter belongs to group id {gid}, which the "
+                    f"byte offset {start + 1}: the parameter belongs to group id {gid}, which the "
                     "section does not define",
                 )
             group = groups[gid]
@@ -347,12 +351,12 @@ class _Checker:
 
     def _description(self, pos: int, end: int, label: str) -> int:
         if pos + 1 > end:
-            raise self.fail(label, f"byte {pos}: description length past the section end")
+            raise self.fail(label, f"byte offset {pos}: description length past the section end")
         (n,) = struct.unpack("b", self.data[pos : pos + 1])
         if n < 0 or pos + 1 + n > end:
             raise self.fail(
                 label,
-                f"byte {pos}: description length {n}; expected 0 to 127 characters inside "
+                f"byte offset {pos}: description length {n}; expected 0 to 127 characters inside "
                 f"the section (ends at byte {end})",
             )
         return pos + 1 + n
@@ -393,13 +397,13 @@ class _Checker:
         if p.type not in types:
             raise self.fail(
                 label,
-                f"byte {p.offset}: data type {_TYPES[p.type]}; expected "
+                f"byte offset {p.offset}: data type {_TYPES[p.type]}; expected "
                 + " or ".join(_TYPES[t] for t in types),
             )
         if len(p.values) < min_count:
             raise self.fail(
                 label,
-                f"byte {p.offset}: {len(p.values)} values (dimensions {list(p.dims)}); "
+                f"byte offset {p.offset}: {len(p.values)} values (dimensions {list(p.dims)}); "
                 f"expected at least {min_count}",
             )
         return p
@@ -420,7 +424,7 @@ class _Checker:
         if int(used.values[0]) % 65536 != n_points:
             raise self.fail(
                 "parameter section: POINT:USED",
-                f"byte {used.offset}: {used.values[0]} points; the header (bytes 2-3) "
+                f"byte offset {used.offset}: {used.values[0]} points; the header (bytes 2-3) "
                 f"says {n_points}",
             )
         start = self._param(params, "POINT", "DATA_START", integer, 1)
@@ -428,7 +432,7 @@ class _Checker:
         if int(start.values[0]) % 65536 != data_block:
             raise self.fail(
                 "parameter section: POINT:DATA_START",
-                f"byte {start.offset}: block {start.values[0]}; the header (bytes 16-17) "
+                f"byte offset {start.offset}: block {start.values[0]}; the header (bytes 16-17) "
                 f"says block {data_block}",
             )
         if (data_block - 1) * BLOCK < p_end:
@@ -447,7 +451,7 @@ class _Checker:
             if not math.isfinite(value) or (value < 0) != (scale < 0):
                 raise self.fail(
                     "parameter section: POINT:SCALE",
-                    f"byte {point_scale.offset}: {value}; the header scale factor (bytes "
+                    f"byte offset {point_scale.offset}: {value}; the header scale factor (bytes "
                     f"12-15) is {scale}, expected a finite number of the same sign",
                 )
             self._labels(params, "POINT", n_points)
@@ -455,7 +459,7 @@ class _Checker:
         if a_used is not None and int(a_used.values[0]) % 65536 != analogs:
             raise self.fail(
                 "parameter section: ANALOG:USED",
-                f"byte {a_used.offset}: {a_used.values[0]} channels; the header (bytes 4-5 "
+                f"byte offset {a_used.offset}: {a_used.values[0]} channels; the header (bytes 4-5 "
                 f"over bytes 18-19) gives {analogs}",
             )
         if ("ANALOG", "GEN_SCALE") in params or analogs:
@@ -487,7 +491,7 @@ class _Checker:
         if n < 0 or n > 64:
             raise self.fail(
                 "parameter section: FORCE_PLATFORM:USED",
-                f"byte {used.offset}: {n} platforms; expected 0 to 64",
+                f"byte offset {used.offset}: {n} platforms; expected 0 to 64",
             )
         if n == 0:
             return
@@ -499,7 +503,7 @@ class _Checker:
         if len(channel.dims) != 2 or channel.dims[0] < need or channel.dims[1] < n:
             raise self.fail(
                 "parameter section: FORCE_PLATFORM:CHANNEL",
-                f"byte {channel.offset}: dimensions {list(channel.dims)}; expected "
+                f"byte offset {channel.offset}: dimensions {list(channel.dims)}; expected "
                 f"[{need} or more, {n} or more] (channels x platforms)",
             )
         rows = channel.dims[0]
@@ -508,7 +512,7 @@ class _Checker:
                 if not 1 <= int(c) <= analogs:  # type: ignore[call-overload]
                     raise self.fail(
                         "parameter section: FORCE_PLATFORM:CHANNEL",
-                        f"byte {channel.offset}: platform {k + 1} channel {i + 1} is analog "
+                        f"byte offset {channel.offset}: platform {k + 1} channel {i + 1} is analog "
                         f"{c}; expected 1 to {analogs} (ANALOG:USED)",
                     )
         shapes = {"CORNERS": (3, 4), "ORIGIN": (3,)}
@@ -519,13 +523,13 @@ class _Checker:
             if len(p.dims) != len(want) or p.dims[:-1] != lead or p.dims[-1] < n:
                 raise self.fail(
                     f"parameter section: FORCE_PLATFORM:{name}",
-                    f"byte {p.offset}: dimensions {list(p.dims)}; expected "
+                    f"byte offset {p.offset}: dimensions {list(p.dims)}; expected "
                     f"{[*lead, f'{n} or more']}",
                 )
             if not np.isfinite(np.asarray(p.values, dtype=np.float64)).all():
                 raise self.fail(
                     f"parameter section: FORCE_PLATFORM:{name}",
-                    f"byte {p.offset}: a value is not a finite number",
+                    f"byte offset {p.offset}: a value is not a finite number",
                 )
         cal = self._param(
             params,
@@ -542,7 +546,7 @@ class _Checker:
         ):
             raise self.fail(
                 "parameter section: FORCE_PLATFORM:CAL_MATRIX",
-                f"byte {cal.offset}: dimensions {list(cal.dims)}; expected [c, c, "
+                f"byte offset {cal.offset}: dimensions {list(cal.dims)}; expected [c, c, "
                 f"{n} or more] (a square matrix per platform)",
             )
 

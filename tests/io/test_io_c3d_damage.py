@@ -124,7 +124,7 @@ def test_the_issue_two_bytes_give_our_error_naming_the_parameter_section(
     assert message.startswith("C3dFormatError")
     assert str(path) in message
     assert "parameter section: SUBJECTS:USED" in message
-    assert "byte 688" in message and "number of dimensions -74" in message
+    assert "byte offset 688" in message and "number of dimensions -74" in message
 
 
 def test_undamaged_files_read_in_the_child() -> None:
