@@ -87,7 +87,8 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
     dict
         ``trial``, ``status`` (``"ok"`` when the dynamics stage ran, else
         ``"kinematics_only"``), ``frames``, ``rate_hz``, ``duration_s``,
-        ``measured_frames``, ``measured_s``, the metrics of results.json (marker RMS m,
+        ``measured_frames``, ``measured_s``, ``proposed_ranges`` (half-open frame ranges
+        the solver proposes as unmeasured), the metrics of results.json (marker RMS m,
         residual RMS in N, N·m, BW, BW·h, Hicks verdicts, fitted mass kg, stage seconds),
         ``contact_frames`` (class -> frames), ``clinical_frames``, and the per-frame
         residual histograms ``residual_force_hist_BW`` / ``residual_moment_hist_BWh``.
@@ -104,6 +105,9 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
         "duration_s": n / rate if rate else None,
     }
     row.update({k: m.get(k) for k in _METRICS})
+    from solver.dynamics.preprocess import true_runs
+
+    row["proposed_ranges"] = [list(r) for r in true_runs(np.asarray(trial.proposed, dtype=bool))]
     if not dynamics:
         row.update(measured_frames=0, measured_s=0.0, contact_frames=None, clinical_frames=0,
                    residual_force_hist_BW=None, residual_moment_hist_BWh=None)  # fmt: skip

@@ -1,0 +1,275 @@
+"""The review queue of a dataset: every subject and trial, its processing and review state,
+sorted by what needs a reviewer's attention (no viser here: the page draws it).
+
+A dataset is opened from either
+
+* a dataset output tree (it holds ``dataset_summary.json``, written by
+  ``addb process DATASET_DIR``): its subjects are those of the summary and their input
+  folders are below the summary's ``dataset``; or
+* a tree of subject folders (:func:`solver.dataset.discover.find_subjects`): outputs go to
+  ``<DATASET_DIR>/addb_out`` (mirroring the tree) when the folder is writable, else to the
+  user's cache (:func:`dataset_output_dir`).
+
+Per trial the row says: the processing state (not processed / processing with its
+progress / failed with the error / processed / kinematics only), the review state
+(unreviewed / in review / reviewed, and by whom) from the subject's review record
+(:func:`addb_viewer.locations.annotations_path`), the frames the solver proposes as
+unmeasured that the reviewer has neither flagged nor rejected (pending proposals), the
+Hicks verdicts and the marker RMS. Everything is read from the small files of the output
+tree (``manifest.json``, ``results.json``) and the review records, never from the trials'
+arrays, so a queue of hundreds of subjects opens in well under a second.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import numpy as np
+
+from addb_viewer.locations import annotations_path, cache_root
+from solver.dataset.discover import find_subjects
+from solver.dataset.manifest import read_manifest
+from solver.dataset.runner import SUMMARY_NAME
+from solver.io.subject import folder_is_writable
+
+#: Output folder of a dataset inside a writable dataset folder.
+DATASET_OUTPUT_NAME = "addb_out"
+
+#: Processing states, as shown.
+NOT_PROCESSED, PROCESSING, FAILED, PROCESSED, KINEMATICS_ONLY = (
+    "not processed", "processing", "failed", "processed", "kinematics only")  # fmt: skip
+#: Review states, as shown.
+UNREVIEWED, IN_REVIEW, REVIEWED = "unreviewed", "in review", "reviewed"
+
+
+@dataclass(frozen=True)
+class QueueSubject:
+    """One subject of the dataset: its key, input folder and output folder."""
+
+    rel: str
+    subject_dir: Path
+    out_dir: Path
+
+
+@dataclass(frozen=True)
+class QueueRow:
+    """One trial (or, for a subject without processed trials, the subject) in the queue.
+
+    Attributes
+    ----------
+    subject
+        The subject's :class:`QueueSubject`.
+    trial
+        Trial name; None for a subject row (not processed, processing or failed).
+    processing
+        :data:`NOT_PROCESSED`, :data:`PROCESSING`, :data:`FAILED`, :data:`PROCESSED` or
+        :data:`KINEMATICS_ONLY`.
+    detail
+        The error of a failed subject, or the progress message of a running one ("" else).
+    review
+        :data:`UNREVIEWED`, :data:`IN_REVIEW` or :data:`REVIEWED`.
+    reviewer
+        Who marked it reviewed (or, in review, who edited last); None when nobody.
+    pending
+        Frames the solver proposes as unmeasured that are neither flagged nor rejected;
+        None when unknown (an output without a manifest).
+    frames, measured_frames
+        Frames of the trial, and those with measured force (0 without dynamics).
+    marker_rms_m
+        Marker RMS error, m (None when unknown).
+    hicks_linear_ok, hicks_angular_ok
+        Hicks verdicts (None without dynamics).
+    """
+
+    subject: QueueSubject
+    trial: str | None
+    processing: str
+    detail: str = ""
+    review: str = UNREVIEWED
+    reviewer: str | None = None
+    pending: int | None = None
+    frames: int = 0
+    measured_frames: int = 0
+    marker_rms_m: float | None = None
+    hicks_linear_ok: bool | None = None
+    hicks_angular_ok: bool | None = None
+
+    @property
+    def needs_review(self) -> bool:
+        """Processed (dynamics or kinematics only) and not marked reviewed."""
+        return self.trial is not None and self.review != REVIEWED
+
+    @property
+    def attention(self) -> tuple[Any, ...]:
+        """Sort key: what a reviewer should look at first comes first.
+
+        Order: processed trials with pending proposals or a failed Hicks threshold, trials
+        in review, other unreviewed trials, failed subjects, running ones, unprocessed
+        ones, reviewed trials; within a group more pending frames first, then by name.
+        """
+        hicks_bad = self.hicks_linear_ok is False or self.hicks_angular_ok is False
+        if self.trial is not None and self.review != REVIEWED and ((self.pending or 0) > 0 or hicks_bad):
+            group = 0
+        elif self.trial is not None and self.review == IN_REVIEW:
+            group = 1
+        elif self.trial is not None and self.review == UNREVIEWED:
+            group = 2
+        else:
+            group = {FAILED: 3, PROCESSING: 4, NOT_PROCESSED: 5}.get(self.processing, 6)
+        return (group, -(self.pending or 0), self.subject.rel, self.trial or "")
+
+
+def dataset_output_dir(dataset_dir: str | Path) -> Path:
+    """Default output tree of a dataset folder: ``<dataset>/addb_out`` when writable, else
+    ``$XDG_CACHE_HOME/addb/<name>-<hash>`` (as for single subjects)."""
+    root = Path(dataset_dir).resolve()
+    if folder_is_writable(root):
+        return root / DATASET_OUTPUT_NAME
+    return cache_root() / f"{root.name}-{hashlib.sha1(str(root).encode()).hexdigest()[:8]}"
+
+
+def is_dataset(path: str | Path) -> bool:
+    """True for a dataset output tree or a folder holding subject folders (not itself one)."""
+    p = Path(path)
+    if (p / SUMMARY_NAME).is_file():
+        return True
+    if not p.is_dir() or (p / "_subject.json").is_file():
+        return False
+    try:
+        find_subjects(p)
+    except Exception:  # noqa: BLE001 - no subject below: not a dataset
+        return False
+    return True
+
+
+def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tuple[Path, Path, tuple[QueueSubject, ...]]:
+    """The dataset folder, the output tree and the subjects of ``path`` (see module doc).
+
+    Raises
+    ------
+    DatasetError
+        A tree without any subject folder.
+    """
+    p = Path(path).resolve()
+    if (p / SUMMARY_NAME).is_file():
+        summary = json.loads((p / SUMMARY_NAME).read_text())
+        dataset = Path(summary["dataset"])
+        rels = [s["rel"] for s in summary["subjects"]]
+        return dataset, p, tuple(QueueSubject(r, dataset.joinpath(*PurePosixPath(r).parts), p.joinpath(*PurePosixPath(r).parts)) for r in rels)
+    out = Path(out_dir).resolve() if out_dir is not None else dataset_output_dir(p)
+    found = find_subjects(p, exclude=(out,))
+    return p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in found)
+
+
+def _review_state(snapshot: Any | None) -> tuple[str, str | None]:
+    if snapshot is None:
+        return UNREVIEWED, None
+    if snapshot.reviewed:
+        prov = snapshot.reviewed_provenance
+        return REVIEWED, prov.reviewer if prov else None
+    edits = [r.provenance for r in (*snapshot.unmeasured_force, *snapshot.excluded)]
+    edits += [n.provenance for n in snapshot.notes] + [a.provenance for a in snapshot.activities]
+    edits = [e for e in edits if e is not None and e.source not in ("imported",)]
+    if edits or snapshot.reviewed_provenance is not None:
+        last = max(edits, key=lambda e: e.timestamp) if edits else snapshot.reviewed_provenance
+        return IN_REVIEW, last.reviewer
+    return UNREVIEWED, None
+
+
+def _pending(row: Mapping[str, Any], snapshot: Any | None) -> int | None:
+    if "proposed_ranges" not in row:
+        return None
+    n = int(row["frames"])
+    proposed = np.zeros(n, bool)
+    for a, b in row["proposed_ranges"]:
+        proposed[a:b] = True
+    if snapshot is None:
+        return int(proposed.sum())
+    from addb_viewer.app.flags import build_view
+
+    return int(build_view(snapshot, proposed).pending.sum())
+
+
+def _snapshots(subject: QueueSubject) -> dict[str, Any]:
+    """Trial -> review snapshot of the subject's record ({} when it has none or is damaged)."""
+    from annotations import AnnotationError, AnnotationStore
+
+    path = annotations_path(subject.subject_dir, subject.out_dir)
+    if not path.is_file():
+        return {}
+    try:
+        with AnnotationStore.open(path, reviewer="addb queue") as store:
+            return store.snapshot()
+    except (AnnotationError, OSError):
+        return {}
+
+
+def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any]]]:
+    """(processing state, detail, trial rows) from a subject's output folder."""
+    manifest = read_manifest(subject.out_dir)
+    if manifest is not None:
+        if manifest.get("status") == "failed":
+            err = manifest.get("error") or {}
+            where = ":".join(str(x) for x in (err.get("path"), err.get("line")) if x is not None)
+            return FAILED, f"{err.get('type')}: {err.get('message')}" + (f" ({where})" if where else ""), []
+        return PROCESSED, "", list(manifest.get("trials") or [])
+    rows = []
+    for res in sorted(subject.out_dir.glob("*/results.json")):
+        if not (res.parent / "trial.npz").is_file():
+            continue
+        try:
+            m = json.loads(res.read_text())
+        except (OSError, ValueError):
+            continue
+        dyn = "n_observed_frames" in m
+        rows.append({
+            "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
+            "measured_frames": m.get("n_observed_frames", 0), "marker_rms_m": m.get("marker_rms_m"),
+            "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
+        })  # fmt: skip
+    return (PROCESSED if rows else NOT_PROCESSED), "", rows
+
+
+def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] | None = None) -> list[QueueRow]:
+    """The queue rows of ``subjects``, sorted by :attr:`QueueRow.attention`.
+
+    Parameters
+    ----------
+    subjects
+        From :func:`dataset_subjects`.
+    running
+        Subject rel -> progress message, for subjects being processed now.
+    """
+    running = running or {}
+    out: list[QueueRow] = []
+    for subject in subjects:
+        if subject.rel in running:
+            out.append(QueueRow(subject, None, PROCESSING, running[subject.rel]))
+            continue
+        state, detail, rows = _rows_of_output(subject)
+        if not rows:
+            out.append(QueueRow(subject, None, state, detail))
+            continue
+        snaps = _snapshots(subject)
+        for r in rows:
+            snap = snaps.get(r["trial"])
+            review, reviewer = _review_state(snap)
+            out.append(QueueRow(
+                subject, r["trial"], PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY, "", review, reviewer,
+                _pending(r, snap), int(r.get("frames") or 0), int(r.get("measured_frames") or 0),
+                r.get("marker_rms_m"), r.get("hicks_linear_ok"), r.get("hicks_angular_ok"),
+            ))  # fmt: skip
+    return sorted(out, key=lambda row: row.attention)
+
+
+def next_to_review(rows: list[QueueRow], after: tuple[str, str] | None = None) -> QueueRow | None:
+    """The first row that needs review (in queue order), other than ``after`` (rel, trial)."""
+    for row in rows:
+        if row.needs_review and (row.subject.rel, row.trial) != after:
+            return row
+    return None

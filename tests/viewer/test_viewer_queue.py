@@ -1,0 +1,103 @@
+"""The review queue of a dataset (no browser): processing and review states, pending
+proposals, the order a reviewer works in, and the "next trial to review"."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from addb_viewer.app.queue import (
+    FAILED,
+    IN_REVIEW,
+    KINEMATICS_ONLY,
+    NOT_PROCESSED,
+    PROCESSED,
+    PROCESSING,
+    REVIEWED,
+    UNREVIEWED,
+    build_queue,
+    dataset_subjects,
+    is_dataset,
+    next_to_review,
+)
+from addb_viewer.locations import annotations_path
+from annotations import AnnotationStore
+from solver.dataset.manifest import MANIFEST_NAME
+from solver.dataset.summary import subject_rows
+from solver.pipeline import process_subject
+from tests.conftest import SHARED_DATA, writable_copy
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+
+
+@pytest.fixture(scope="module")
+def walk_output(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("queue") / "walk_out"
+    process_subject(WALK, out)
+    return out
+
+
+@pytest.fixture
+def dataset(tmp_path: Path, walk_output: Path) -> Path:
+    """Five copies of the walk: fresh, reviewed by alice, in review by bob (two proposed
+    frames flagged), failed, not processed; outputs in <dataset>/addb_out."""
+    root = tmp_path / "ds"
+    rows = subject_rows(walk_output)
+    for name in ("fresh", "done", "busy", "broken", "waiting"):
+        writable_copy(WALK, root / "lab" / name)
+    out = root / "addb_out" / "lab"
+    for name in ("fresh", "done", "busy"):
+        shutil.copytree(walk_output, out / name)
+        (out / name / MANIFEST_NAME).write_text(json.dumps({"key": {}, "status": "ok", "trials": rows}))
+    (out / "broken").mkdir(parents=True)
+    (out / "broken" / MANIFEST_NAME).write_text(json.dumps({"key": {}, "status": "failed", "trials": [], "error": {
+        "type": "TrcFormatError", "message": "bad row", "path": "/x/markers.trc", "line": 121}}))  # fmt: skip
+    with AnnotationStore.open(annotations_path(root / "lab" / "done", out / "done"), reviewer="alice") as s:
+        s.set_reviewed("walk")
+    walk = next(r for r in rows if r["trial"] == "walk")
+    first = walk["proposed_ranges"][0][0]
+    with AnnotationStore.open(annotations_path(root / "lab" / "busy", out / "busy"), reviewer="bob") as s:
+        s.set_unmeasured("walk", [first, first + 1])
+    return root
+
+
+def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output: Path) -> None:
+    assert is_dataset(dataset) and not is_dataset(dataset / "lab" / "fresh")
+    root, out, subjects = dataset_subjects(dataset)
+    assert out == (dataset / "addb_out").resolve() and [s.rel for s in subjects] == [
+        "lab/broken", "lab/busy", "lab/done", "lab/fresh", "lab/waiting"]  # fmt: skip
+    rows = build_queue(subjects, running={"lab/waiting": "kinematics 40 %"})
+    by = {(r.subject.rel, r.trial): r for r in rows}
+    proposed = int(sum(b - a for a, b in next(
+        r for r in subject_rows(walk_output) if r["trial"] == "walk")["proposed_ranges"]))  # fmt: skip
+    assert proposed > 2
+    assert by[("lab/fresh", "walk")].pending == proposed and by[("lab/fresh", "walk")].review == UNREVIEWED
+    assert by[("lab/busy", "walk")].pending == proposed - 2
+    assert (by[("lab/busy", "walk")].review, by[("lab/busy", "walk")].reviewer) == (IN_REVIEW, "bob")
+    assert (by[("lab/done", "walk")].review, by[("lab/done", "walk")].reviewer) == (REVIEWED, "alice")
+    assert by[("lab/done", "static")].processing == KINEMATICS_ONLY
+    assert by[("lab/fresh", "walk")].processing == PROCESSED and by[("lab/fresh", "walk")].measured_frames > 0
+    assert by[("lab/broken", None)].processing == FAILED and "markers.trc:121" in by[("lab/broken", None)].detail
+    assert by[("lab/waiting", None)].processing == PROCESSING
+    results = json.loads((walk_output / "walk" / "results.json").read_text())
+    assert by[("lab/fresh", "walk")].marker_rms_m == pytest.approx(results["marker_rms_m"], abs=1e-15)
+    # order: trials with pending proposals first (most pending first), failed, running, reviewed last
+    order = [(r.subject.rel, r.trial) for r in rows]
+    assert order[:2] == [("lab/fresh", "walk"), ("lab/busy", "walk")]
+    assert order.index(("lab/broken", None)) < order.index(("lab/waiting", None)) < order.index(("lab/done", "walk"))
+    assert next_to_review(rows).trial == "walk" and next_to_review(rows).subject.rel == "lab/fresh"
+    assert next_to_review(rows, after=("lab/fresh", "walk")).subject.rel == "lab/busy"
+    # without a process running, the waiting subject is simply not processed
+    assert next(r for r in build_queue(subjects) if r.subject.rel == "lab/waiting").processing == NOT_PROCESSED
+
+
+def test_a_dataset_output_tree_opens_the_same_queue(dataset: Path) -> None:
+    root, out, subjects = dataset_subjects(dataset)
+    summary = {"dataset": str(root), "subjects": [{"rel": s.rel} for s in subjects]}
+    (out / "dataset_summary.json").write_text(json.dumps(summary))
+    root2, out2, subjects2 = dataset_subjects(out)
+    assert (root2, out2) == (root, out) and subjects2 == subjects
+    assert [r.attention for r in build_queue(subjects2)] == [r.attention for r in build_queue(subjects)]
