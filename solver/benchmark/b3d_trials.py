@@ -59,7 +59,7 @@ def b3d_processed_trials(path: str | Path) -> Iterator[ProcessedTrial]:
     """
     from solver.benchmark.dataset import BenchmarkError, skeleton_for
     from solver.io.b3d import dof_names, open_b3d
-    from solver.pipeline import rotations_to_wxyz
+    from solver.model.rotations import rotations_to_wxyz
 
     f = open_b3d(path)
     h = f.header
