@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from solver.benchmark.dataset import GRAVITY, skeleton_for
-from solver.pipeline import rotations_to_wxyz
+from solver.model.rotations import rotations_to_wxyz
 from solver.results import PlateData, ProcessedTrial
 from tests.conftest import SHARED_DATA
 
