@@ -330,8 +330,8 @@ def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
         )
     entry = dict(entry)
     if entry["cause"] == "segment_mass_distribution":
-        from solver.model.mass_groups import group_masses, redistribute
         from solver.io.subject import load_subject
+        from solver.model.mass_groups import group_masses, redistribute
         from solver.model.osim import read_osim
         from solver.model.osim_writer import write_osim
 

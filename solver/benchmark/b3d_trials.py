@@ -57,7 +57,7 @@ def b3d_processed_trials(path: str | Path) -> Iterator[ProcessedTrial]:
     BenchmarkError
         The file has no dynamics pass (no ground truth).
     """
-    from solver.benchmark.dataset import BenchmarkError, skeleton_for
+    from solver.benchmark.models import BenchmarkError, skeleton_for
     from solver.io.b3d import dof_names, open_b3d
     from solver.model.rotations import rotations_to_wxyz
 

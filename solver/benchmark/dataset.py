@@ -50,14 +50,12 @@ from __future__ import annotations
 import random
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.errors import AddbError
+from solver.benchmark.models import BenchmarkError, skeleton_for
 from solver.results import ProcessedTrial, load_processed, processed_trials
 
 FloatArray = NDArray[np.float64]
@@ -84,10 +82,6 @@ GRAVITY = np.array([0.0, -9.80665, 0.0])
 SPLITS = ("train", "dev", "test")
 #: Sources of the input coordinates (see the module docstring).
 INPUTS = ("kinematic", "processed")
-
-
-class BenchmarkError(AddbError):
-    """The benchmark cannot run: no usable trial, a subject in two splits, a missing model."""
 
 
 @dataclass(frozen=True)
@@ -204,26 +198,6 @@ class Dataset:
     def n_frames(self) -> int:
         """Number of benchmark frames."""
         return int(sum(t.frames.size for t in self.trials))
-
-
-# ---------------------------------------------------------------------------------- model
-
-
-@lru_cache(maxsize=16)
-def skeleton_for(model_path: str) -> Any:
-    """The :class:`~solver.model.skeleton.Skeleton` of a scaled model file (cached).
-
-    Raises
-    ------
-    BenchmarkError
-        The model file does not exist (the output folder was moved).
-    """
-    from solver.model.osim import read_osim
-    from solver.model.skeleton import Skeleton
-
-    if not Path(model_path).is_file():
-        raise BenchmarkError("the trial's scaled model file is missing (was the output folder moved?)", path=model_path)
-    return Skeleton(read_osim(model_path))
 
 
 def torque_columns(trial: BenchmarkTrial) -> NDArray[np.intp]:

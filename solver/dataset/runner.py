@@ -194,7 +194,7 @@ def process_dataset(
         except OSError as exc:
             results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
             continue
-        except Exception as exc:  # a damaged review record (the annotations package's error)
+        except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
             results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
             continue
         stored = None if opts.force else current_manifest(target, key)
@@ -283,7 +283,7 @@ def _run_jobs(
                     f"the worker processing this subject died {attempts[job.rel]} time(s) "
                     "(killed, or over its memory limit)",
                 )
-            except Exception as exc:  # a failure outside the pipeline (e.g. sending the task)
+            except Exception as exc:  # noqa: BLE001 - a failure outside the pipeline (e.g. sending the task)
                 outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), type(exc).__name__, str(exc))
             outcome["attempts"] = attempts[job.rel]
             results[job.rel] = outcome

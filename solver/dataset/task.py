@@ -163,7 +163,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         os.replace(work / LOG_NAME, work / "out" / LOG_NAME)
         write_json(work / "out" / MANIFEST_NAME, {"key": job.key, **outcome})
         _replace_dir(work / "out", final)
-    except Exception as exc:  # the data's or the solver's failure: recorded, the batch goes on
+    except Exception as exc:  # noqa: BLE001 - the data's or the solver's failure: recorded, the batch goes on
         log(f"failed: {exc}")
         log(traceback.format_exc().rstrip())
         log.close()

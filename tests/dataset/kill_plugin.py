@@ -20,7 +20,7 @@ class KillOnFirstAttempt(WorkerPlugin):
         self.rel = rel
         self.marker = marker
 
-    def transition(self, key, start, finish, **kwargs) -> None:  # noqa: ANN001 (Dask's signature)
+    def transition(self, key, start, finish, **kwargs) -> None:
         name = key if isinstance(key, str) else str(key)
         if finish == "executing" and name.startswith(f"addb-subject-{self.rel}-"):
             marker = Path(self.marker)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -48,10 +47,11 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory):
     work = tmp_path_factory.mktemp("cluster")
     env = dict(os.environ, PYTHONPATH=str(REPO), DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="0")
     sched_file = work / "scheduler.json"
+    logs = [open(work / name, "w") for name in ("scheduler.log", "worker0.log", "worker1.log")]  # noqa: SIM115 (closed below)
     procs = [subprocess.Popen(
         [*_dask_command("scheduler"), "--host", "127.0.0.1", "--port", "0", "--dashboard-address", ":0",
          "--scheduler-file", str(sched_file)],
-        env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=open(work / "scheduler.log", "w"),
+        env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=logs[0],
     )]  # fmt: skip
     deadline = time.monotonic() + 60
     while not sched_file.exists() and time.monotonic() < deadline:
@@ -62,7 +62,7 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory):
         procs.append(subprocess.Popen(
             [*_dask_command("worker"), address, "--nthreads", "1", "--nworkers", "1", "--name", f"w{k}",
              "--host", "127.0.0.1", "--dashboard-address", ":0"],
-            env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=open(work / f"worker{k}.log", "w"),
+            env=env, cwd=work, stdout=subprocess.DEVNULL, stderr=logs[k + 1],
         ))  # fmt: skip
     from distributed import Client
 
@@ -76,6 +76,8 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory):
             p.wait(timeout=30)
         except subprocess.TimeoutExpired:
             p.kill()
+    for f in logs:
+        f.close()
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +107,7 @@ def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(schedule
 
     from tests.dataset.kill_plugin import KillOnFirstAttempt
 
-    address, work = scheduler
+    address, _ = scheduler
     marker = tmp_path / "killed.pid"
     out = tmp_path / "out"
     with Client(address, timeout="30s") as client:

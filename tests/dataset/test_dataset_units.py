@@ -13,8 +13,8 @@ from solver.dataset.manifest import current_manifest, input_files, manifest_key
 from solver.dataset.report import render_report
 from solver.dataset.summary import dataset_totals
 from solver.errors import DatasetError
-from tests.dataset.dataset_tree import SUBJECTS
 from tests.conftest import writable_copy
+from tests.dataset.dataset_tree import SUBJECTS
 
 
 @pytest.fixture

@@ -66,7 +66,7 @@ def dataset(tmp_path: Path, walk_output: Path) -> Path:
 
 def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output: Path) -> None:
     assert is_dataset(dataset) and not is_dataset(dataset / "lab" / "fresh")
-    root, out, subjects = dataset_subjects(dataset)
+    _, out, subjects = dataset_subjects(dataset)
     assert out == (dataset / "addb_out").resolve() and [s.rel for s in subjects] == [
         "lab/broken", "lab/busy", "lab/done", "lab/fresh", "lab/waiting"]  # fmt: skip
     rows = build_queue(subjects, running={"lab/waiting": "kinematics 40 %"})
