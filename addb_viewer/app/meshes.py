@@ -7,8 +7,9 @@ reader with :mod:`xml.etree` and numpy. It reads the ``Points`` and the ``Polys`
 Polygons with more than three vertices are fan-triangulated, strips are split into
 triangles. ``appended`` data is not supported (OpenSim's Geometry files do not use it).
 
-Vertices are in the body frame, metres; :func:`body_mesh` merges the meshes attached to
-one body, each multiplied by its scale factors, and caches what it read.
+Vertices are in the body frame, metres; :func:`body_mesh` looks the files up along a
+search path (:mod:`addb_viewer.geometry`), merges the meshes attached to one body, each
+multiplied by its scale factors, and caches what it read.
 """
 
 from __future__ import annotations
@@ -19,13 +20,15 @@ import functools
 import os
 import xml.etree.ElementTree as ET
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from addb_viewer.app.paths import UnsafePathError, confine
+from addb_viewer.app.paths import UnsafePathError
+from addb_viewer.geometry import find_mesh
 from solver.errors import FileFormatError
 
 _TYPES = {
@@ -253,15 +256,17 @@ def cached_vtp(path: str | os.PathLike[str]) -> trimesh.Trimesh:
 
 
 def body_mesh(
-    geometry_dir: str | os.PathLike[str],
+    search_path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     meshes: list[tuple[str, tuple[float, float, float]]],
 ) -> tuple[trimesh.Trimesh | None, list[str]]:
     """The meshes attached to one body, each scaled, merged into one mesh.
 
     Parameters
     ----------
-    geometry_dir
-        The model's geometry folder; mesh files must lie inside it.
+    search_path
+        The folders mesh files are looked up in, first match wins
+        (:func:`addb_viewer.geometry.mesh_search_path`), or one folder; a file is taken
+        only inside the folder it is found in.
     meshes
         ``(file name, (3,) scale factors)`` pairs, as in ``ProcessedTrial.body_meshes``.
 
@@ -270,17 +275,23 @@ def body_mesh(
     mesh
         Merged mesh in the body frame (m), or None when no file could be read.
     problems
-        One message per file that is missing, outside the folder or unreadable (the
-        other meshes are still used).
+        One message per file that is missing from every folder, outside them or
+        unreadable (the other meshes are still used).
     """
+    folders = (
+        (search_path,) if isinstance(search_path, (str, os.PathLike)) else tuple(search_path)
+    )
     parts: list[trimesh.Trimesh] = []
     problems: list[str] = []
     for name, scale in meshes:
         try:
-            path = confine(geometry_dir, name)
+            path = find_mesh(name, folders)
+            if path is None:
+                raise FileNotFoundError(name)
             m = cached_vtp(path)
         except FileNotFoundError:
-            problems.append(f"mesh file {name} not found in {geometry_dir}")
+            where = ", ".join(str(f) for f in folders) or "no folder"
+            problems.append(f"mesh file {name} not found in {where}")
             continue
         except (UnsafePathError, VtpFormatError, OSError) as exc:
             problems.append(str(exc))

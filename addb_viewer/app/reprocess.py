@@ -171,6 +171,7 @@ class Reprocessor:
             status.content = "No trial loaded."
             return
         try:
+            from addb_viewer.geometry import trial_search_path
             from addb_viewer.recording.metadata import review_state
             from addb_viewer.recording.rerun_writer import write_rerun
         except ImportError as exc:
@@ -186,7 +187,8 @@ class Reprocessor:
         def run() -> None:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
-                write_rerun(trial, path, annotations=review)
+                search = trial_search_path(trial, app.paths.subject_dir, app.geometry)
+                write_rerun(trial, path, annotations=review, mesh_path=search)
                 status.content = f"✓ wrote {path} ({path.stat().st_size / 1e6:.1f} MB)"
             except Exception as exc:  # noqa: BLE001 - shown in the page
                 status.content = f"<span style='color:#c00'>Recording failed</span>: {exc}"

@@ -14,6 +14,7 @@ terminal) instead of being lost or stopping the server.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import threading
 import time
@@ -35,6 +36,7 @@ from addb_viewer.app.reprocess import Reprocessor
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
+from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
 from solver.errors import AddbError
 from solver.results import ProcessedTrial, load_processed, processed_trials
@@ -66,6 +68,9 @@ class ReviewApp:
     background
         Load (and if needed process) the subject in a background thread, so the page is
         reachable at once; False loads before returning (tests).
+    geometry
+        Extra folder(s) of bone meshes (``--geometry``), looked up before the bundled
+        set (:func:`addb_viewer.geometry.mesh_search_path`); None: ``$ADDB_GEOMETRY``.
     """
 
     def __init__(
@@ -76,8 +81,10 @@ class ReviewApp:
         host: str = "127.0.0.1",
         port: int = 8080,
         background: bool = True,
+        geometry: str | os.PathLike[str] | None = None,
     ) -> None:
         self.paths = paths
+        self.geometry = geometry
         self.reviewer = reviewer
         self.started_at = time.monotonic()
         self.first_frame_seconds: float | None = None
@@ -200,9 +207,10 @@ class ReviewApp:
                 f"cannot read the processed trial ({type(exc).__name__}: {exc}); press Reprocess to recompute it",
                 path=self.paths.trial_dir(name) / "trial.npz",
             ) from exc
+        search = trial_search_path(trial, self.paths.subject_dir, self.geometry)
         meshes, problems = {}, []
         for body, files in trial.body_meshes.items():
-            meshes[body], p = body_mesh(trial.geometry_dir, files) if trial.geometry_dir else (None, [])
+            meshes[body], p = body_mesh(search, files) if files else (None, [])
             problems += p
         editor = self._editor_for(trial)
         view = editor.view() if editor is not None else None

@@ -10,7 +10,13 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.recording.jobs import record_subject_trial
 
     path = record_subject_trial(
-        args.subject, args.trial, args.output, fmt="rrd", out_dir=args.out, progress=ProgressBar()
+        args.subject,
+        args.trial,
+        args.output,
+        fmt="rrd",
+        out_dir=args.out,
+        progress=ProgressBar(),
+        geometry=args.geometry,
     )
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB); open it with: rerun {path}")
     return 0
@@ -32,5 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
+    )
+    p.add_argument(
+        "--geometry",
+        metavar="DIR",
+        help="folder of bone meshes (.vtp) to use when the subject has no Geometry folder "
+        "(default: $ADDB_GEOMETRY, then the meshes bundled with addb)",
     )
     p.set_defaults(handler=run)

@@ -69,7 +69,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
         return 1
     paths = ReviewPaths.for_subject(subject, args.out)
-    app = ReviewApp(paths, reviewer=args.reviewer or default_reviewer(), host=args.host, port=args.port)
+    from addb_viewer.geometry import mesh_search_path
+
+    mesh_search_path(None, None, args.geometry, bundled=False)  # a wrong --geometry fails here
+    app = ReviewApp(
+        paths,
+        reviewer=args.reviewer or default_reviewer(),
+        host=args.host,
+        port=args.port,
+        geometry=args.geometry,
+    )
     print(f"addb view: {paths.subject_dir.name} at {app.url}  (output {paths.out_dir}; Ctrl-C to stop)", flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -94,4 +103,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, this machine only)")
     p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")
     p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo)")
+    p.add_argument(
+        "--geometry",
+        metavar="DIR",
+        help="folder of bone meshes (.vtp) to use when the subject has no Geometry folder "
+        "(default: $ADDB_GEOMETRY, then the meshes bundled with addb)",
+    )
     p.set_defaults(handler=run)

@@ -283,6 +283,37 @@ def scene_updates(trial: ProcessedTrial, log_ns: np.ndarray, force_scale: float)
     return out
 
 
+def bone_meshes_update(
+    meshes: dict[str, Any], log_ns: int, color: tuple[float, float, float] = (0.91, 0.89, 0.82)
+) -> str:
+    """One ``foxglove.SceneUpdate`` JSON message with an entity ``bone/<body>`` per body of
+    ``meshes`` (body name -> trimesh mesh in the body frame, m): a GLB model
+    (``model/gltf-binary``, base64) at the body frame's origin, ``frame_locked`` to the
+    body's frame of ``/tf`` so that it follows the body, lifetime unlimited."""
+    import base64
+
+    stamp = _stamp(int(log_ns))
+    entities = []
+    for body, mesh in meshes.items():
+        e = _empty_entity(stamp, f"bone/{body}")
+        e["frame_id"] = body
+        e["frame_locked"] = True
+        glb = mesh.export(file_type="glb")
+        e["models"] = [
+            {
+                "pose": _pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
+                "scale": {"x": 1.0, "y": 1.0, "z": 1.0},
+                "color": {"r": color[0], "g": color[1], "b": color[2], "a": 1.0},
+                "override_color": True,
+                "url": "",
+                "media_type": "model/gltf-binary",
+                "data": base64.b64encode(glb).decode("ascii"),
+            }
+        ]
+        entities.append(e)
+    return json.dumps({"deletions": [], "entities": entities})
+
+
 def _pose(p: list[float], wxyz: list[float]) -> dict[str, Any]:
     return {
         "position": {"x": p[0], "y": p[1], "z": p[2]},

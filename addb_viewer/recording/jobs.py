@@ -9,7 +9,7 @@ record when there is one.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -94,16 +94,19 @@ def write_recording(
     fmt: str,
     *,
     annotations: dict[str, Any] | None = None,
+    mesh_path: Sequence[str | os.PathLike[str]] | None = None,
 ) -> Path:
-    """Write ``trial`` as ``fmt`` (``"rrd"`` or ``"mcap"``) to ``output``."""
+    """Write ``trial`` as ``fmt`` (``"rrd"`` or ``"mcap"``) to ``output``; bone meshes
+    are looked up along ``mesh_path`` (default: the trial's own search path, see
+    :func:`addb_viewer.geometry.trial_search_path`)."""
     if fmt == "rrd":
         from addb_viewer.recording.rerun_writer import write_rerun
 
-        return write_rerun(trial, output, annotations=annotations)
+        return write_rerun(trial, output, annotations=annotations, mesh_path=mesh_path)
     if fmt == "mcap":
         from addb_viewer.recording.mcap_writer import write_mcap
 
-        return write_mcap(trial, output, annotations=annotations)
+        return write_mcap(trial, output, annotations=annotations, mesh_path=mesh_path)
     raise ValueError(f"unknown recording format {fmt!r}; expected one of {', '.join(FORMATS)}")
 
 
@@ -115,6 +118,7 @@ def record_subject_trial(
     fmt: str = "rrd",
     out_dir: str | os.PathLike[str] | None = None,
     progress: Progress | None = None,
+    geometry: str | os.PathLike[str] | None = None,
 ) -> Path:
     """Process the subject if needed and write one trial's recording with its review state.
 
@@ -132,14 +136,30 @@ def record_subject_trial(
         Output folder of the subject (default location if None).
     progress
         Progress callback while processing.
+    geometry
+        Extra folder of bone meshes (``--geometry``); None: ``$ADDB_GEOMETRY`` if set.
+        Meshes are looked up in the subject's ``Geometry``, the model's folders, this
+        folder, then the bundled set (:func:`addb_viewer.geometry.mesh_search_path`).
 
     Returns
     -------
     Path
         ``output``.
+
+    Raises
+    ------
+    GeometryPathError
+        ``geometry`` is not a folder (checked before any processing).
     """
+    from addb_viewer.geometry import mesh_search_path, trial_search_path
+
+    mesh_search_path(None, None, geometry, bundled=False)  # a wrong --geometry fails first
     out = ensure_processed(subject_dir, out_dir, progress=progress)
     processed = load_trial(out, trial)
     return write_recording(
-        processed, output, fmt, annotations=review_state_of(subject_dir, out, trial)
+        processed,
+        output,
+        fmt,
+        annotations=review_state_of(subject_dir, out, trial),
+        mesh_path=trial_search_path(processed, subject_dir, geometry),
     )

@@ -4,7 +4,10 @@ The layout (topics, schemas, metadata records) is described in :mod:`solver.io.m
 which reads it back. Our own channels carry exact float64 numbers (``repr`` round trip,
 ``null`` for NaN); ``/tf`` uses Foxglove's ``foxglove.FrameTransforms`` JSON schema so that
 Foxglove's 3D panel places the bodies, and ``/scene`` is a ``foxglove.SceneUpdate`` with
-the GRF arrows at the centre of pressure and the centre of mass, for display only.
+the GRF arrows at the centre of pressure and the centre of mass, for display only;
+``/skeleton/meshes`` carries the bone meshes once (found along the search path of
+:mod:`addb_viewer.geometry`, as for the review app and Rerun), locked to the body frames,
+and the metadata record ``addb.meshes`` names the folders searched and any file missing.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from solver.io.mcap_file import (
     META_FRAMES,
     META_INFO,
     TOPIC_ANNOTATIONS,
+    TOPIC_BONES,
     TOPIC_COM,
     TOPIC_COORDINATES,
     TOPIC_FLAGS,
@@ -39,6 +43,9 @@ from solver.results import ProcessedTrial
 
 #: Length of a GRF arrow in the ``/scene`` display per newton, m/N (1 mm per N).
 FORCE_SCALE_M_PER_N = 1e-3
+
+#: Metadata record of the bone meshes: ``search_path`` and ``missing`` (JSON arrays).
+META_MESHES = "addb.meshes"
 
 #: Uncompressed bytes per chunk: smaller chunks make reading one frame cheaper.
 CHUNK_SIZE = 256 * 1024
@@ -183,6 +190,7 @@ def write_mcap(
     *,
     annotations: dict[str, Any] | None = None,
     settings: dict[str, Any] | None = None,
+    mesh_path: Sequence[str | os.PathLike[str]] | None = None,
 ) -> Path:
     """Write ``trial`` as an MCAP file (layout in :mod:`solver.io.mcap_file`).
 
@@ -196,13 +204,25 @@ def write_mcap(
         Review state of the trial (``addb_viewer.recording.metadata.review_state``).
     settings
         Solver settings to record; default ``trial.settings``.
+    mesh_path
+        Folders the bone meshes are looked up in, first match wins; default
+        :func:`addb_viewer.geometry.trial_search_path` of the trial.
 
     Returns
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    GeometryPathError
+        ``$ADDB_GEOMETRY`` names something that is not a folder (default ``mesh_path`` only).
     """
     from mcap.writer import CompressionType, IndexType, Writer
+
+    from addb_viewer.geometry import trial_search_path
+
+    search = tuple(mesh_path) if mesh_path is not None else trial_search_path(trial)
 
     path = Path(path)
     info = recording_info(trial, annotations=annotations, settings=settings)
@@ -218,7 +238,7 @@ def write_mcap(
                 index_types=IndexType.ALL,
             )
             w.start(profile="", library="addb")
-            _write_all(w, trial, info, log_ns)
+            _write_all(w, trial, info, log_ns, search)
             w.finish()
         os.replace(tmp_name, path)
     except BaseException:
@@ -227,7 +247,9 @@ def write_mcap(
     return path
 
 
-def _write_all(w: Any, trial: ProcessedTrial, info: dict[str, Any], log_ns: np.ndarray) -> None:
+def _write_all(
+    w: Any, trial: ProcessedTrial, info: dict[str, Any], log_ns: np.ndarray, search: tuple[Any, ...]
+) -> None:
     schema_ids = {
         name: w.register_schema(name=name, encoding="jsonschema", data=data)
         for name, data in _own_schemas(len(trial.marker_names), len(trial.coordinate_names)).items()
@@ -347,7 +369,38 @@ def _write_all(w: Any, trial: ProcessedTrial, info: dict[str, Any], log_ns: np.n
             fox.scene_updates(trial, log_ns, FORCE_SCALE_M_PER_N),
         )
     )
-
     for k, t in enumerate(log_ns.tolist()):
         for ch, msgs in streams:
             w.add_message(ch, log_time=t, publish_time=t, sequence=k, data=msgs[k].encode())
+    # last, in chunks of its own: reading a frame never decompresses the meshes (but frame 0)
+    _write_bones(w, trial, log_ns, search, schema_ids["foxglove.SceneUpdate"])
+
+
+def _write_bones(
+    w: Any, trial: ProcessedTrial, log_ns: np.ndarray, search: tuple[Any, ...], schema: int
+) -> None:
+    """``/skeleton/meshes`` (one SceneUpdate at the first frame) and ``addb.meshes``."""
+    from addb_viewer.app.meshes import body_mesh
+    from addb_viewer.geometry import report_missing
+
+    meshes: dict[str, Any] = {}
+    problems: list[str] = []
+    for body in trial.body_names:
+        files = trial.body_meshes.get(body, [])
+        if not files:
+            continue
+        mesh, why = body_mesh(search, files)
+        problems += why
+        if mesh is not None and len(mesh.faces):
+            meshes[body] = mesh
+    report_missing(problems)
+    w.add_metadata(
+        META_MESHES,
+        {"search_path": json.dumps([str(p) for p in search]), "missing": json.dumps(problems)},
+    )
+    if not meshes or not len(log_ns):
+        return
+    ch = w.register_channel(topic=TOPIC_BONES, message_encoding="json", schema_id=schema, metadata={})
+    w.flush()  # ends the frames' chunk: the meshes get a chunk of their own (time range: frame 0)
+    t = int(log_ns[0])
+    w.add_message(ch, log_time=t, publish_time=t, data=fox.bone_meshes_update(meshes, t).encode())

@@ -7,6 +7,8 @@ Entities (all data in the OpenSim ground frame, Y up, SI units)
 ``/world/markers/model``           Points3D per frame
 ``/world/skeleton/<body>``         Transform3D per frame: translation m, quaternion (x, y, z, w)
 ``/world/skeleton/<body>/mesh``    static Mesh3D: the body's bone meshes merged and scaled
+                                   (looked up along :mod:`addb_viewer.geometry`'s search path;
+                                   ``/meta/mesh_problems`` names any file still missing, once)
 ``/world/plates/<plate>/grf``      Arrows3D per frame from the CoP, ``FORCE_SCALE_M_PER_N``
                                    m per N (no arrow while unloaded)
 ``/world/plates/<plate>/outline``  static LineStrips3D when the plate corners are known
@@ -36,6 +38,7 @@ import json
 import os
 import tempfile
 import uuid
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -102,6 +105,7 @@ def write_rerun(
     *,
     annotations: dict[str, Any] | None = None,
     settings: dict[str, Any] | None = None,
+    mesh_path: Sequence[str | os.PathLike[str]] | None = None,
 ) -> Path:
     """Write ``trial`` as a Rerun recording file with the default :func:`blueprint`.
 
@@ -116,13 +120,26 @@ def write_rerun(
         Review state of the trial (``metadata.review_state``), stored with the recording.
     settings
         Solver settings to store; default ``trial.settings``.
+    mesh_path
+        Folders the bone meshes are looked up in, first match wins; default
+        :func:`addb_viewer.geometry.trial_search_path` of the trial (its recorded geometry
+        folder and model, ``$ADDB_GEOMETRY``, the bundled set).
 
     Returns
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    GeometryPathError
+        ``$ADDB_GEOMETRY`` names something that is not a folder (default ``mesh_path`` only).
     """
     import rerun as rr
+
+    from addb_viewer.geometry import trial_search_path
+
+    search = tuple(mesh_path) if mesh_path is not None else trial_search_path(trial)
 
     path = Path(path)
     info = recording_info(trial, annotations=annotations, settings=settings)
@@ -133,7 +150,7 @@ def write_rerun(
     try:
         rec.save(tmp_name, default_blueprint=blueprint(trial))
         rec.send_recording_name(f"{trial.subject} / {trial.trial}")
-        _log_all(rec, trial, info)
+        _log_all(rec, trial, info, search)
         rec.flush()
         rec.disconnect()
         os.replace(tmp_name, path)
@@ -144,7 +161,7 @@ def write_rerun(
     return path
 
 
-def _log_all(rec: Any, trial: ProcessedTrial, info: dict[str, Any]) -> None:
+def _log_all(rec: Any, trial: ProcessedTrial, info: dict[str, Any], search: tuple[Any, ...]) -> None:
     import rerun as rr
 
     _log_meta(rec, trial, info)
@@ -164,7 +181,7 @@ def _log_all(rec: Any, trial: ProcessedTrial, info: dict[str, Any]) -> None:
         )
 
     _log_markers(send, rec, trial)
-    _log_skeleton(send, rec, trial)
+    _log_skeleton(send, rec, trial, search)
     _log_plates(send, rec, trial)
     _log_series(send, rec, trial, info)
 
@@ -228,10 +245,11 @@ def _log_markers(send: Any, rec: Any, trial: ProcessedTrial) -> None:
     send("/world/com", rows, rr.Points3D.columns(positions=com[ok]).partition(ok.astype(np.int64)))
 
 
-def _log_skeleton(send: Any, rec: Any, trial: ProcessedTrial) -> None:
+def _log_skeleton(send: Any, rec: Any, trial: ProcessedTrial, search: tuple[Any, ...]) -> None:
     import rerun as rr
 
     from addb_viewer.app.meshes import body_mesh
+    from addb_viewer.geometry import report_missing
 
     problems: list[str] = []
     pos = np.asarray(trial.body_position, dtype=np.float64)
@@ -243,9 +261,9 @@ def _log_skeleton(send: Any, rec: Any, trial: ProcessedTrial) -> None:
             xyzw = wxyz[ok, j][:, [1, 2, 3, 0]]
             send(entity, ok, rr.Transform3D.columns(translation=pos[ok, j], quaternion=xyzw))
         meshes = trial.body_meshes.get(body, [])
-        if not meshes or not trial.geometry_dir:
+        if not meshes:
             continue
-        mesh, why = body_mesh(trial.geometry_dir, meshes)
+        mesh, why = body_mesh(search, meshes)
         problems += why
         if mesh is not None:
             rec.log(
@@ -259,6 +277,7 @@ def _log_skeleton(send: Any, rec: Any, trial: ProcessedTrial) -> None:
                 static=True,
             )
     if problems:
+        report_missing(problems)
         text = "Bone meshes not shown:\n\n" + "\n".join(f"* {p}" for p in problems)
         rec.log(
             "/meta/mesh_problems",

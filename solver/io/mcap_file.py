@@ -27,6 +27,10 @@ topic                             schema                 per-frame content
 ``/annotations``                  ``addb.Annotations``   one message at frame 0: review
                                                          state and solver settings
 ``/scene``                        ``foxglove.SceneUpdate``  display only: GRF arrows, CoM
+``/skeleton/meshes``              ``foxglove.SceneUpdate``  one message at frame 0, display
+                                                         only: each body's bone meshes as
+                                                         a GLB model locked to the body's
+                                                         frame
 ================================  =====================  =================================
 
 Metadata records: ``addb.recording`` (key ``info``: JSON of the recording's
@@ -72,6 +76,10 @@ TOPIC_TORQUES = "/joint_torques"
 TOPIC_FLAGS = "/flags"
 TOPIC_ANNOTATIONS = "/annotations"
 TOPIC_SCENE = "/scene"
+#: Bone meshes for display (one ``foxglove.SceneUpdate`` at the first log time).
+TOPIC_BONES = "/skeleton/meshes"
+#: Topics that are not read back (display only, or read separately).
+_NOT_FRAMES = (TOPIC_SCENE, TOPIC_ANNOTATIONS, TOPIC_BONES)
 #: Plate ``i`` is on ``TOPIC_PLATE.format(name=...)``; its channel metadata has ``plate_index``.
 TOPIC_PLATE = "/plates/{name}/wrench"
 
@@ -351,7 +359,7 @@ class McapRecording:
     ) -> None:
         topic, meta = self._channels[channel_id]
         plate = int(meta["plate_index"]) if "plate_index" in meta else None
-        if topic in (TOPIC_SCENE, TOPIC_ANNOTATIONS):
+        if topic in _NOT_FRAMES:
             return
         msg = json.loads(data)
         if topic == TOPIC_TF:
@@ -373,7 +381,7 @@ class McapRecording:
     def _expected_channels(self) -> set[str]:
         out = set()
         for topic, meta in self._channels.values():
-            if topic in (TOPIC_SCENE, TOPIC_ANNOTATIONS):
+            if topic in _NOT_FRAMES:
                 continue
             out.add(topic + (f"#{meta['plate_index']}" if "plate_index" in meta else ""))
         return out

@@ -167,8 +167,9 @@ def test_file_is_chunked_compressed_and_indexed(mcap_file: tuple[ProcessedTrial,
         assert summary is not None and summary.statistics is not None
         assert {c.compression for c in summary.chunk_indexes} == {"zstd"}
         assert all(c.message_index_offsets for c in summary.chunk_indexes)  # message indexes
-        # /annotations once; per frame: 2 marker sets, P plates, com, q, residuals, tau, flags, tf, scene
-        assert summary.statistics.message_count == 1 + trial.n_frames * (9 + len(trial.plates))
+        # /annotations and /skeleton/meshes once; per frame: 2 marker sets, P plates, com, q,
+        # residuals, tau, flags, tf, scene
+        assert summary.statistics.message_count == 2 + trial.n_frames * (9 + len(trial.plates))
         channels = {c.topic: c for c in summary.channels.values()}
         schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
         assert schemas[TOPIC_TF].name == "foxglove.FrameTransforms"

@@ -15,6 +15,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from addb_viewer.app.meshes import read_vtp
+from addb_viewer.geometry import find_mesh, trial_search_path
 from addb_viewer.recording.rerun_writer import FORCE_SCALE_M_PER_N, blueprint, write_rerun
 from solver.results import ProcessedTrial
 from tests.recording.recording_support import RERUN, REVIEW
@@ -161,11 +162,11 @@ def test_bulk_data_is_columnar(rrd: tuple[ProcessedTrial, Recording, Path]) -> N
 
 def test_meshes_logged_once_per_body(rrd: tuple[ProcessedTrial, Recording, Path]) -> None:
     trial, rec, _ = rrd
-    geometry = Path(trial.geometry_dir)
+    search = trial_search_path(trial)
     for body, meshes in trial.body_meshes.items():
         entity = f"/world/skeleton/{body}/mesh"
         assert rec.n_chunks[entity] == 1 and entity not in rec.temporal
-        n_vertices = sum(len(read_vtp(geometry / f).vertices) for f, _ in meshes)
+        n_vertices = sum(len(read_vtp(find_mesh(f, search)).vertices) for f, _ in meshes)
         assert len(rec.static[entity]["Mesh3D:vertex_positions"]) == n_vertices
     # Y up, declared once at the root
     assert "/world" in rec.static and "ViewCoordinates:xyz" in rec.static["/world"]
@@ -284,8 +285,14 @@ def test_missing_mesh_files_are_reported_not_fatal(
 ) -> None:
     import dataclasses
 
-    trial = dataclasses.replace(demo_trial, geometry_dir=str(tmp_path / "no-such-folder"))
-    rec = Recording(write_rerun(trial, tmp_path / "walk.rrd"))
+    (tmp_path / "empty").mkdir()
+    rec = Recording(write_rerun(demo_trial, tmp_path / "walk.rrd", mesh_path=[tmp_path / "empty"]))
     assert not any(e.endswith("/mesh") for e in rec.static)
-    assert "r_femur.vtp" in rec.static["/meta/mesh_problems"]["TextDocument:text"][0]
+    text = rec.static["/meta/mesh_problems"]["TextDocument:text"][0]
+    assert "r_femur.vtp" in text and text.count("r_femur.vtp") == 1
     assert "/world/skeleton/pelvis" in rec.temporal  # the poses are still there
+    # a recorded geometry folder that is gone: the bundled meshes are used
+    trial = dataclasses.replace(demo_trial, geometry_dir=str(tmp_path / "no-such-folder"))
+    rec = Recording(write_rerun(trial, tmp_path / "walk2.rrd"))
+    assert "/meta/mesh_problems" not in rec.static
+    assert all(f"/world/skeleton/{b}/mesh" in rec.static for b, m in trial.body_meshes.items() if m)

@@ -1,5 +1,5 @@
 """VTP reader (addb_viewer.app.meshes): vertex and triangle counts of the real OpenSim
-Geometry files (shared data and the bundled demo), every inline binary encoding VTK
+Geometry files (shared data and the set bundled with addb), every inline binary encoding VTK
 writes, strips, polygons, bad files, and merging/scaling per body."""
 
 from __future__ import annotations
@@ -12,8 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addb_viewer.app.meshes import VtpFormatError, body_mesh, fan_triangulate, read_vtp, strip_triangulate
+from addb_viewer.app.meshes import (
+    VtpFormatError,
+    body_mesh,
+    fan_triangulate,
+    read_vtp,
+    strip_triangulate,
+)
 from addb_viewer.demo import DEMO_SUBJECT
+from addb_viewer.geometry import BUNDLED_GEOMETRY
 
 
 def _declared(path: Path) -> tuple[int, int, int]:
@@ -26,27 +33,44 @@ def _declared(path: Path) -> tuple[int, int, int]:
     return n_points, int(np.sum(np.maximum(sizes - 2, 0))), int(sizes.size)
 
 
-def test_every_shared_geometry_file_matches_its_declared_counts(shared_data: Path) -> None:
-    files = sorted((shared_data / "models" / "Geometry").glob("*.vtp"))
-    assert len(files) == 81
-    total_v = total_f = 0
+def _model_meshes(model: Path) -> list[str]:
+    return sorted(set(re.findall(r"<(?:mesh_file|geometry_file)>\s*([^<\s]+)\s*<", model.read_text())))
+
+
+def test_every_bundled_geometry_file_matches_its_declared_counts(shared_data: Path) -> None:
+    files = sorted(BUNDLED_GEOMETRY.glob("*.vtp"))
+    assert len(files) >= 100
     for f in files:
         mesh = read_vtp(f)
-        n_points, n_tris, _ = _declared(f)
-        assert len(mesh.vertices) == n_points, f.name
-        assert len(mesh.faces) == n_tris, f.name
+        assert len(mesh.faces) > 0, f.name
+        if 'format="ascii"' in f.read_text()[:2000] and "<Strips>" not in f.read_text():
+            n_points, n_tris, _ = _declared(f)
+            assert len(mesh.vertices) == n_points, f.name
+            assert len(mesh.faces) == n_tris, f.name
+        # a byte-for-byte copy of opensim-models' file in the shared data
+        assert f.read_bytes() == (shared_data / "models" / "Geometry" / f.name).read_bytes(), f.name
+
+
+def test_rajagopal_meshes_match_vtk_counts(shared_data: Path) -> None:
+    names = _model_meshes(DEMO_SUBJECT / "unscaled_generic.osim")
+    assert len(names) == 81
+    total_v = total_f = 0
+    for name in names:
+        mesh = read_vtp(shared_data / "models" / "Geometry" / name)
+        n_points, n_tris, _ = _declared(shared_data / "models" / "Geometry" / name)
+        assert (len(mesh.vertices), len(mesh.faces)) == (n_points, n_tris), name
         total_v += len(mesh.vertices)
         total_f += len(mesh.faces)
     # figures measured with vtk's reader (notes/libraries.md section 4)
     assert (total_v, total_f) == (30751, 60856)
 
 
-def test_known_file_and_demo_copy() -> None:
-    femur = read_vtp(DEMO_SUBJECT / "Geometry" / "r_femur.vtp")
+def test_known_file_in_the_bundled_set() -> None:
+    femur = read_vtp(BUNDLED_GEOMETRY / "r_femur.vtp")
     assert femur.vertices.shape == (132, 3) and femur.faces.shape == (265, 3)
     assert 0.3 < np.ptp(femur.vertices[:, 1]) < 0.6  # a femur is ~0.4 m long
-    skull = read_vtp(DEMO_SUBJECT / "Geometry" / "hat_skull.vtp")  # has polygons of > 3 vertices
-    n_points, n_tris, n_polys = _declared(DEMO_SUBJECT / "Geometry" / "hat_skull.vtp")
+    skull = read_vtp(BUNDLED_GEOMETRY / "hat_skull.vtp")  # has polygons of > 3 vertices
+    _, n_tris, n_polys = _declared(BUNDLED_GEOMETRY / "hat_skull.vtp")
     assert len(skull.faces) == n_tris > n_polys
 
 
@@ -167,7 +191,7 @@ def test_bad_files_raise_a_clear_error(tmp_path: Path, text: str, match: str) ->
 
 
 def test_body_mesh_merges_scales_and_stays_in_the_geometry_folder(tmp_path: Path) -> None:
-    geo = DEMO_SUBJECT / "Geometry"
+    geo = BUNDLED_GEOMETRY
     one = read_vtp(geo / "r_pelvis.vtp")
     mesh, problems = body_mesh(geo, [("r_pelvis.vtp", (2.0, 1.0, 1.0)), ("sacrum.vtp", (1.0, 1.0, 1.0))])
     assert not problems

@@ -20,6 +20,7 @@ from addb_viewer.app.scene import (
     frame_geometry,
 )
 from addb_viewer.app.summary import G
+from addb_viewer.geometry import trial_search_path
 
 F32 = {"atol": 1e-5, "rtol": 1e-5}  # viser stores positions as float32
 
@@ -102,7 +103,7 @@ def test_required_force_arrow_from_the_centre_of_mass_acceleration(demo_paths, m
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         settings = SceneSettings(m_per_bw=1.0)
-        meshes = {b: body_mesh(trial.geometry_dir, m)[0] for b, m in trial.body_meshes.items()}
+        meshes = {b: body_mesh(trial_search_path(trial), m)[0] for b, m in trial.body_meshes.items()}
         scene = TrialScene(server, trial, meshes, settings)
         k = 120
         scene.show(k)
