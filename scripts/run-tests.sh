@@ -6,10 +6,13 @@
 # each test file on one worker (--dist loadfile: module and session fixtures, such as the
 # diagnosis's neutral bases, are built once). Serially the suite took 28 min on 2026-11-23,
 # with two workers 20.5 min (14 min on 2026-11-23, ninth session); ADDB_TEST_WORKERS=0 runs it serially.
+# -rfEs lists failures, errors and every skipped test with its reason at the end. A test that
+# needs Chromium, Playwright, OpenSim or PyTorch skips without it, but fails under CI=true
+# (tests/conftest.py: require_tool).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test,mlp]"
-exec .venv/bin/python -m pytest -q -n "${ADDB_TEST_WORKERS:-2}" --dist loadfile "$@"
+exec .venv/bin/python -m pytest -q -rfEs -n "${ADDB_TEST_WORKERS:-2}" --dist loadfile "$@"

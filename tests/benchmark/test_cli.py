@@ -8,6 +8,7 @@ import pytest
 
 from addb_viewer.cli import main as cli
 from solver.results import save_processed
+from tests.conftest import TORCH_REASON, import_tool
 
 from .conftest import motion, processed_trial
 
@@ -43,7 +44,7 @@ def test_benchmark_rejects_a_folder_that_is_not_a_subject(tmp_path, capsys) -> N
 
 @pytest.mark.parametrize("method", ["mlp", "hybrid"])
 def test_trained_methods_need_training_subjects(out_dirs, tmp_path, capsys, method) -> None:
-    pytest.importorskip("torch")
+    import_tool("torch", reason=TORCH_REASON)
     assert cli(["benchmark", str(out_dirs[0]), "--method", method, "-o", str(tmp_path)]) == 1
     assert "no training subject" in capsys.readouterr().err
 

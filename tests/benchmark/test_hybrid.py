@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pytest
 
 from solver.benchmark.analytical import analytical_baseline, kinematic_contact, torques_from_feet
 from solver.benchmark.dataset import benchmark_input, benchmark_trial, build_dataset, skeleton_for
@@ -23,10 +22,11 @@ from solver.benchmark.hybrid import (
 )
 from solver.benchmark.mlp import MlpOptions, torch_available
 from solver.benchmark.run import run_benchmark
+from tests.conftest import TORCH_REASON, needs_tool
 
 from .conftest import MODEL, motion, processed_trial
 
-needs_torch = pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
+needs_torch = needs_tool("torch", torch_available(), TORCH_REASON)
 
 
 def test_targets_are_the_measured_vertical_shares_or_airborne() -> None:

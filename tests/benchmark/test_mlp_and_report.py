@@ -13,6 +13,7 @@ from solver.benchmark.filtering import filtering_markdown, filtering_study, plot
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, history_index, torch_available, train_mlp
 from solver.benchmark.report import PAPER, dataset_summary, to_json, to_markdown, write_report
 from solver.benchmark.run import run_benchmark
+from tests.conftest import TORCH_REASON, needs_tool
 
 from .conftest import motion, processed_trial
 
@@ -35,7 +36,7 @@ def test_history_samples_every_stride_frames_clamped_at_the_start() -> None:
     assert idx[2, -1] == 99 and idx[2, 0] == 54
 
 
-@pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
+@needs_tool("torch", torch_available(), TORCH_REASON)
 def test_mlp_trains_one_epoch_and_predicts_every_frame(three_subjects) -> None:
     trials = three_subjects.trials
     spec = FeatureSpec.common(trials)
@@ -48,7 +49,7 @@ def test_mlp_trains_one_epoch_and_predicts_every_frame(three_subjects) -> None:
     np.testing.assert_allclose(pred.com_acc, pred.grf.sum(axis=1) / trials[2].mass_kg + [0, -9.80665, 0], atol=1e-9)
 
 
-@pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
+@needs_tool("torch", torch_available(), TORCH_REASON)
 def test_leave_one_subject_out_scores_every_subject_once(three_subjects) -> None:
     result = run_benchmark(three_subjects, methods=("analytical", "mlp"), mlp_options=MlpOptions(epochs=1, hidden=8))
     assert [r.method for r in result.rows] == ["analytical (measured contact)", "MLP"]

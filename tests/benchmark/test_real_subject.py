@@ -9,7 +9,7 @@ import pytest
 
 from addb_viewer.cli import main as cli
 from solver.benchmark.mlp import torch_available
-from tests.conftest import SHARED_DATA, writable_copy
+from tests.conftest import SHARED_DATA, TORCH_REASON, needs_tool, writable_copy
 
 pytestmark = pytest.mark.slow
 
@@ -33,7 +33,7 @@ def test_walk_subject_is_processed_and_scored(tmp_path, capsys) -> None:
     assert "walk" in capsys.readouterr().out
 
 
-@pytest.mark.skipif(not torch_available(), reason="PyTorch (the mlp extra) is not installed")
+@needs_tool("torch", torch_available(), TORCH_REASON)
 def test_hybrid_beats_the_motion_only_analytical_baseline_on_another_subject(tmp_path) -> None:
     """Two real subjects, leave-one-subject-out: the contact split (and force filter) learned
     on one subject's walk (and drop jump) scores the other's frames with a lower GRF error

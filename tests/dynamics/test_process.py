@@ -18,7 +18,7 @@ from solver.errors import DynamicsError, SubjectFolderError
 from solver.io.mot import read_table
 from solver.pipeline import process_subject
 from solver.results import load_processed
-from tests.conftest import SHARED_DATA, writable_copy
+from tests.conftest import OPENSIM_REASON, SHARED_DATA, import_tool, writable_copy
 
 REPO = Path(__file__).resolve().parents[2]
 SUBJECTS = SHARED_DATA / "subjects"
@@ -87,7 +87,7 @@ def test_walk_unobserved_frames_are_where_a_foot_is_on_the_floor(walk_out: Path)
 
 @pytest.mark.opensim
 def test_opensim_inverse_dynamics_reproduces_our_id_sto(walk_out: Path, tmp_path: Path) -> None:
-    osim = pytest.importorskip("opensim")
+    osim = import_tool("opensim", reason=OPENSIM_REASON)
     osim.Logger.setLevelString("error")
     mine = read_table(walk_out / "walk" / "walk_id.sto")
     tool = osim.InverseDynamicsTool()

@@ -17,6 +17,7 @@ from solver.io.external_loads import (
 )
 from solver.io.mot import read_forces, read_table
 from solver.io.review import read_review, write_review
+from tests.conftest import OPENSIM_REASON, import_tool
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 LOADS = sorted(DATA.rglob("grf_*.xml"))
@@ -64,7 +65,7 @@ def test_external_loads_round_trip(path: Path, tmp_path: Path) -> None:
 
 @pytest.mark.opensim
 def test_opensim_loads_written_external_loads(tmp_path: Path) -> None:
-    opensim = pytest.importorskip("opensim")
+    opensim = import_tool("opensim", reason=OPENSIM_REASON)
     loads = ExternalLoads(
         "plates",
         (

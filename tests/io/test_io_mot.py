@@ -24,6 +24,7 @@ from solver.io.mot import (
 )
 from solver.io.plate_moments import detect_reference
 from solver.io.types import ForcePlate, ForceRecording, Table
+from tests.conftest import OPENSIM_REASON, import_tool
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 MOT_FILES = sorted([*DATA.rglob("*.mot"), *DATA.rglob("*.sto")])
@@ -480,7 +481,7 @@ def test_force_columns_naming_schemes() -> None:
 def test_opensim_reads_written_forces_coordinates_and_sto(
     shared_data: Path, tmp_path: Path
 ) -> None:
-    opensim = pytest.importorskip("opensim")
+    opensim = import_tool("opensim", reason=OPENSIM_REASON)
     forces = read_forces(shared_data / "trials/rajagopal2016/grf_walk.mot")
     grf = tmp_path / "grf.mot"
     write_forces(grf, forces)

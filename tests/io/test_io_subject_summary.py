@@ -15,6 +15,7 @@ import pytest
 from solver.errors import FileFormatError, SubjectFolderError, TrcFormatError
 from solver.io.subject import load_subject, load_trial
 from solver.io.summary import format_summary, summarize
+from tests.conftest import OPENSIM_REASON, import_tool
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 SUBJECTS = sorted(p for p in (DATA / "subjects").iterdir() if p.is_dir())
@@ -183,7 +184,7 @@ def test_osim_counts_match_opensim_conventions(shared_data: Path) -> None:
 
 @pytest.mark.opensim
 def test_osim_counts_agree_with_opensim(shared_data: Path) -> None:
-    opensim = pytest.importorskip("opensim")
+    opensim = import_tool("opensim", reason=OPENSIM_REASON)
     path = shared_data / "models/Rajagopal2015_passiveCal_hipAbdMoved_noArms.osim"
     model = opensim.Model(str(path))
     d = summarize(path)

@@ -10,6 +10,7 @@ import pytest
 from solver.errors import TrcFormatError
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import MarkerTrajectories
+from tests.conftest import OPENSIM_REASON, import_tool
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 TRC_FILES = sorted(DATA.rglob("*.trc"))
@@ -350,7 +351,7 @@ def test_writer_rejects_names_trc_cannot_hold(tmp_path: Path) -> None:
 
 @pytest.mark.opensim
 def test_opensim_reads_written_trc(shared_data: Path, tmp_path: Path) -> None:
-    opensim = pytest.importorskip("opensim")
+    opensim = import_tool("opensim", reason=OPENSIM_REASON)
     markers = read_trc(shared_data / "trials/camargo2021_levelground/markers.trc")
     path = tmp_path / "for_opensim.trc"
     write_trc(path, markers, units="mm")

@@ -12,13 +12,15 @@ from solver.io.mot import read_coordinates
 from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
 from solver.pipeline import process_kinematics
-from tests.conftest import SHARED_DATA
+from tests.conftest import OPENSIM, OPENSIM_REASON, SHARED_DATA, require_tool
 
 pytestmark = pytest.mark.opensim
 
 
 def test_opensim_reproduces_our_markers_from_the_exported_files(tmp_path: Path) -> None:
-    ref = pytest.importorskip("tests.model.opensim_ref")
+    require_tool("opensim", OPENSIM, OPENSIM_REASON)
+    from tests.model import opensim_ref as ref
+
     out = tmp_path / "out"
     process_kinematics(SHARED_DATA / "subjects" / "rajagopal2016_walk", out)
     model_file = out / "rajagopal2016_walk_scaled.osim"

@@ -2,13 +2,16 @@
 
 Same method as shared/oracles (see its .json): forces removed, every coordinate
 unlocked, values set without assembly, dependent coordinates set from their coupler.
+
+Import it only after ``require_tool("opensim", OPENSIM, OPENSIM_REASON)`` (tests/conftest.py),
+which skips the test without OpenSim, or fails it under ``CI=true``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import opensim as osim
 
-osim = __import__("pytest").importorskip("opensim")
 osim.Logger.setLevelString("error")
 
 

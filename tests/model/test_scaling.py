@@ -13,6 +13,7 @@ from solver.model.osim import read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.scaling import scale_model
 from solver.model.skeleton import Skeleton
+from tests.conftest import OPENSIM, OPENSIM_REASON, require_tool
 from tests.model.conftest import MODELS, SHARED
 
 SCALE_SET = SHARED / "data" / "trials" / "rajagopal2016" / "scaleSet_applied_walk.xml"
@@ -29,7 +30,9 @@ def _study_scales(body_names: tuple[str, ...]) -> dict[str, list[float]]:
 @pytest.mark.parametrize("generic", GENERICS, ids=lambda p: p.parent.name)
 @pytest.mark.parametrize("preserve", [True, False])
 def test_scaling_matches_opensim_model_scale(generic: Path, preserve: bool, tmp_path: Path) -> None:
-    ref = pytest.importorskip("tests.model.opensim_ref")
+    require_tool("opensim", OPENSIM, OPENSIM_REASON)
+    from tests.model import opensim_ref as ref
+
     model = read_osim(generic)
     scales = _study_scales(model.body_names)
     ours = scale_model(model, scales, mass=85.0668, preserve_mass_distribution=preserve)
@@ -57,7 +60,9 @@ def test_scaling_matches_opensim_model_scale(generic: Path, preserve: bool, tmp_
 @pytest.mark.opensim
 @pytest.mark.parametrize("generic", GENERICS, ids=lambda p: p.parent.name)
 def test_written_model_loads_in_opensim_with_our_markers(generic: Path, tmp_path: Path) -> None:
-    ref = pytest.importorskip("tests.model.opensim_ref")
+    require_tool("opensim", OPENSIM, OPENSIM_REASON)
+    from tests.model import opensim_ref as ref
+
     model = read_osim(generic)
     scaled = scale_model(model, _study_scales(model.body_names), mass=80.0)
     out = write_osim(scaled, tmp_path / "ours.osim", name="scaled")

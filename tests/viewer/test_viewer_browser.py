@@ -23,8 +23,10 @@ import pytest
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.demo import DEMO_SUBJECT
 from annotations import AnnotationStore
+from tests.conftest import import_tool, needs_tool, tool_available
 
 CHROMIUM = "/usr/bin/chromium"
+PLAYWRIGHT_REASON = "the playwright package (test extra) is not installed"
 REPO = Path(__file__).resolve().parents[2]
 REPROCESS_TIMEOUT_MS = 300_000  # the full solver on the demo; ~60 s here, more on a busy CI
 ARGS = [
@@ -34,7 +36,8 @@ ARGS = [
 
 pytestmark = [
     pytest.mark.browser,
-    pytest.mark.skipif(not Path(CHROMIUM).exists(), reason=f"{CHROMIUM} is not installed"),
+    needs_tool("chromium", Path(CHROMIUM).exists(), f"{CHROMIUM} is not installed (Debian: apt-get install chromium)"),
+    needs_tool("playwright", tool_available("playwright"), PLAYWRIGHT_REASON),
 ]
 
 
@@ -77,7 +80,7 @@ def _colored_pixels(png: bytes) -> tuple[int, int]:
 
 
 def test_review_in_the_browser(view_server) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api")
+    sync_api = import_tool("playwright.sync_api", reason=PLAYWRIGHT_REASON)
     url, paths, log = view_server
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
