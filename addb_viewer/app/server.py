@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import socket
 import sys
 import threading
 import time
@@ -24,8 +25,8 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-import viser
 
+from addb_viewer.app.access import TOKEN_PARAM, is_loopback, new_token, start_viser
 from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
 from addb_viewer.app.meshes import body_mesh
@@ -71,6 +72,14 @@ class ReviewApp:
     geometry
         Extra folder(s) of bone meshes (``--geometry``), looked up before the bundled
         set (:func:`addb_viewer.geometry.mesh_search_path`); None: ``$ADDB_GEOMETRY``.
+    token
+        Access token every request must carry (:mod:`addb_viewer.app.access`); None: a
+        random one when ``host`` is not a loopback address, no token on loopback.
+
+    Raises
+    ------
+    AccessSetupError
+        A token is needed but cannot be enforced with the installed viser.
     """
 
     def __init__(
@@ -82,6 +91,7 @@ class ReviewApp:
         port: int = 8080,
         background: bool = True,
         geometry: str | os.PathLike[str] | None = None,
+        token: str | None = None,
     ) -> None:
         self.paths = paths
         self.geometry = geometry
@@ -89,7 +99,9 @@ class ReviewApp:
         self.started_at = time.monotonic()
         self.first_frame_seconds: float | None = None
         self.ready = threading.Event()
-        self.server = viser.ViserServer(host=host, port=port, label="addb review", verbose=False)
+        # beyond this machine every request must carry a token (see addb_viewer.app.access)
+        self.token = token if token is not None else (None if is_loopback(host) else new_token())
+        self.server = start_viser(host, port, token=self.token, label="addb review", verbose=False)
         self.server.scene.set_up_direction("+y")
         self.server.scene.configure_default_lights(cast_shadow=False)
         self.panel: ReviewPanel = build_panel(self.server, title=f"addb · {paths.subject_dir.name}")
@@ -126,10 +138,15 @@ class ReviewApp:
 
     @property
     def url(self) -> str:
-        """Address of the page."""
+        """Address of the page, with ``/?token=...`` when the server requires a token (a
+        wildcard host is shown as this machine's name, as the team would reach it)."""
         host = self.server.get_host()
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
-        return f"http://{shown}:{self.port}"
+        if host in ("0.0.0.0", "", "::"):
+            shown = socket.gethostname() if self.token else "127.0.0.1"
+        else:
+            shown = f"[{host}]" if ":" in host else host
+        base = f"http://{shown}:{self.port}"
+        return f"{base}/?{TOKEN_PARAM}={self.token}" if self.token else base
 
     def startup(self) -> None:
         """Open the review record, then show the first processed trial, processing the

@@ -80,6 +80,12 @@ def run(args: argparse.Namespace) -> int:
         geometry=args.geometry,
     )
     print(f"addb view: {paths.subject_dir.name} at {app.url}  (output {paths.out_dir}; Ctrl-C to stop)", flush=True)
+    if app.token:
+        print(
+            f"addb view: listening on {args.host}: requests need the access token in this address "
+            "(share it only with the reviewers; requests without it are refused and logged)",
+            flush=True,
+        )
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     announced = False
@@ -100,7 +106,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="review a subject in the browser: replay, flag frames, reprocess")
     p.add_argument("subject", nargs="?", help="AddBiomechanics subject folder or .b3d file (default: the bundled demo subject)")
     p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080; the next free one if busy; 0: any)")
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, this machine only)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind (default 127.0.0.1, this machine only); any other, e.g. 0.0.0.0 for a "
+        "team on a lab server, requires the access token printed in the address",
+    )
     p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")
     p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo)")
     p.add_argument(

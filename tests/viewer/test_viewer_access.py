@@ -1,0 +1,159 @@
+"""A team reviews on a lab server: ``addb view --host 0.0.0.0`` requires the access token
+(query ``?token=`` or the cookie the first page load sets), for HTTP and the websocket;
+refusals are logged; on 127.0.0.1 nothing changes. Every connection goes to 127.0.0.1.
+
+The Playwright page load needs /usr/bin/chromium and playwright (skipped without them,
+failed under ``CI=true``); the HTTP and websocket checks need neither.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import urllib.error
+import urllib.request
+from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
+
+import pytest
+import viser
+import websockets.exceptions
+import websockets.sync.client
+
+from addb_viewer.app.access import AccessGate, is_loopback
+from addb_viewer.demo import DEMO_SUBJECT
+from tests.conftest import import_tool, require_tool, tool_available
+
+CHROMIUM = "/usr/bin/chromium"
+REPO = Path(__file__).resolve().parents[2]
+ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]
+SUBPROTOCOL = f"viser-v{viser.__version__}"
+
+
+def _get(port: int, path: str, headers: dict[str, str] | None = None) -> tuple[int, dict[str, str], bytes]:
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", headers=headers or {})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, dict(r.headers), r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, dict(e.headers), e.read()
+
+
+def _websocket(port: int, path: str = "/", headers: dict[str, str] | None = None) -> int:
+    """101 when the handshake is accepted (then closed), else the HTTP status."""
+    try:
+        conn = websockets.sync.client.connect(
+            f"ws://127.0.0.1:{port}{path}", subprotocols=[SUBPROTOCOL],
+            additional_headers=headers or {}, open_timeout=30,
+        )
+    except websockets.exceptions.InvalidStatus as exc:
+        return exc.response.status_code
+    conn.close()
+    return 101
+
+
+def test_loopback_hosts() -> None:
+    assert all(is_loopback(h) for h in ("127.0.0.1", "127.1.2.3", "::1", "[::1]", "localhost"))
+    assert not any(is_loopback(h) for h in ("0.0.0.0", "", "::", "192.168.1.20", "lab-server"))
+
+
+def test_gate_accepts_the_token_by_query_or_cookie_only() -> None:
+    gate = AccessGate("s3cret-Token")
+    assert gate.check("/?token=s3cret-Token", [], 8080) == (True, True)
+    assert gate.check("/?a=1&token=s3cret-Token", [], 8080) == (True, True)
+    assert gate.check("/", ["x=1; addb_token_8080=s3cret-Token"], 8080) == (True, False)
+    assert gate.check("/", ["addb_token_8081=s3cret-Token"], 8080) == (False, False)  # another port's
+    assert gate.check("/?token=s3cret-token", [], 8080) == (False, False)  # case matters
+    assert gate.check("/?token=", ["addb_token_8080=wrong"], 8080) == (False, False)
+    assert gate.check("/", ['bad"cookie'], 8080) == (False, False)
+    with pytest.raises(ValueError):
+        AccessGate("")
+
+
+def test_loopback_app_needs_no_token(demo_paths, make_app) -> None:
+    app = make_app(demo_paths)
+    assert app.token is None and "token" not in app.url
+    assert _get(app.port, "/")[0] == 200
+    assert _websocket(app.port) == 101
+
+
+@pytest.fixture
+def lab_server(demo_out: Path, tmp_path: Path):
+    """``addb view --host 0.0.0.0 --port 0`` on the processed demo copy, in a subprocess."""
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "addb_viewer.cli", "view", str(DEMO_SUBJECT), "--out", str(demo_out),
+           "--host", "0.0.0.0", "--port", "0", "--reviewer", "lab"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
+    lines: list[str] = []
+    url = None
+    for line in proc.stdout:
+        lines.append(line)
+        m = re.search(r" at (http://\S+)", line)
+        url = url or (m.group(1) if m else None)
+        if "first frame shown" in line or proc.poll() is not None:
+            break
+    assert url, "".join(lines)
+    drain = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    drain.start()
+    yield url, lines
+    proc.send_signal(signal.SIGTERM)
+    try:
+        assert proc.wait(60) == 0, "".join(lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_lab_server_requires_the_token(lab_server) -> None:
+    url, log = lab_server
+    parts = urlsplit(url)
+    port = parts.port
+    (token,) = parse_qs(parts.query)["token"]
+    assert len(token) >= 32 and parts.path == "/"
+
+    # without the token (or with a wrong one): refused, HTTP and websocket
+    status, _, body = _get(port, "/")
+    assert status == 403 and b"access token" in body and b"<html" not in body.lower()
+    assert _get(port, "/?token=" + token[:-1] + "x")[0] == 403
+    assert _get(port, "/", {"Cookie": f"addb_token_{port}=nope"})[0] == 403
+    assert _websocket(port) == 403
+    assert _websocket(port, "/?token=wrong") == 403
+
+    # with it: the page, and a cookie for the page's later requests and its websocket
+    status, headers, body = _get(port, f"/?token={token}")
+    assert status == 200 and b"<title>Viser</title>" in body
+    cookie = headers["Set-Cookie"]
+    assert cookie.startswith(f"addb_token_{port}={token};") and "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    assert _get(port, "/", {"Cookie": f"addb_token_{port}={token}"})[0] == 200
+    assert _websocket(port, "/", {"Cookie": f"addb_token_{port}={token}"}) == 101
+    assert _websocket(port, f"/?token={token}") == 101
+
+    # each refusal is logged, without any token in the line
+    refused = [line for line in log if "refused" in line]
+    assert sum("refused HTTP GET /" in line for line in refused) >= 3, "".join(log)
+    assert sum("refused websocket /" in line for line in refused) >= 2, "".join(log)
+    assert not any(token in line or "nope" in line for line in refused)
+
+    # the page loads in a browser from the printed address and its websocket connects
+    require_tool("chromium", Path(CHROMIUM).exists(), f"{CHROMIUM} is not installed (Debian: apt-get install chromium)")
+    require_tool("playwright", tool_available("playwright"), "the playwright package (test extra) is not installed")
+    sync_api = import_tool("playwright.sync_api")
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 900, "height": 600})
+            page.goto(f"http://127.0.0.1:{port}/?token={token}")
+            # the panel (sent over the websocket) shows the subject and its frame counter
+            page.get_by_text(re.compile(r"frame \d+ / 237")).wait_for(timeout=60_000)
+            page.reload()  # later loads without the token in the address work from the cookie
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.get_by_text(re.compile(r"frame \d+ / 237")).wait_for(timeout=60_000)
+        finally:
+            browser.close()
