@@ -18,8 +18,8 @@ stays one continuous trajectory through them.
 
 The normal equations are block-banded in time (the derivative operators are truncated to
 ``band`` frames for the Jacobian; residuals and costs use the full operators), solved with
-a banded Cholesky (scipy ``solveh_banded``) with Levenberg-Marquardt damping and an exact
-line search on the cost. Between rounds of coordinate steps, the body mass factors solve a
+a banded Cholesky (LAPACK ``dpbtrf``, :mod:`solver.dynamics.banded`) with
+Levenberg-Marquardt damping and an exact line search on the cost. Between rounds of coordinate steps, the body mass factors solve a
 linear least-squares problem (the root generalized forces are linear in the inertial
 parameters: pinocchio's joint torque regressor) with a prior toward the scaled model's mass
 distribution.
@@ -29,13 +29,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.linalg import LinAlgError, solveh_banded
+from scipy.linalg import LinAlgError
 
+from solver.dynamics.banded import banded_cholesky_solve, lower_band_storage
 from solver.dynamics.spline import derivative_operators
 from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
@@ -133,8 +133,13 @@ class FitOutput:
     history: tuple[float, ...]
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+def _skew_batch(v: FloatArray) -> FloatArray:
+    """``(T, 3)`` vectors -> ``(T, 3, 3)`` cross-product matrices (``[v]x w = v x w``)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
 
 
 class _TrialProblem:
@@ -161,6 +166,9 @@ class _TrialProblem:
         w_obs = np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3)
         w_unobs = np.array([1 / st.unobserved_force_sigma] * 3 + [1 / st.unobserved_moment_sigma] * 3)
         self.w_res = np.where(np.asarray(data.observed, dtype=bool)[:, None], w_obs, w_unobs)  # (T, 6)
+        # (q, qp, vp, ap, hdot, com) of the last evaluated q: the step's accepted point is
+        # linearized next, and its centroidal terms are the ones the line search computed
+        self._state: tuple[FloatArray, ...] | None = None
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -178,6 +186,17 @@ class _TrialProblem:
             com[k] = data.com[0]
         return hdot, com
 
+    def _dynamics_state(self, q: FloatArray) -> tuple[FloatArray, ...]:
+        """``(qp, vp, ap, hdot, com)``: expanded (T, nv) positions, velocities, accelerations
+        and :meth:`momentum_rate` at q, reused when q equals the last evaluated one."""
+        last = self._state
+        if last is not None and np.array_equal(last[0], q):
+            return last[1:]
+        _, _, qp, vp, ap = self.kinematics(q)
+        hdot, com = self.momentum_rate(qp, vp, ap)
+        self._state = (q.copy(), qp, vp, ap, hdot, com)
+        return qp, vp, ap, hdot, com
+
     def residual_wrench(self, hdot: FloatArray, com: FloatArray) -> FloatArray:
         """(T, 6) root residual [force, moment about the centre of mass], ground frame."""
         f = hdot[:, :3] - self.mass * self.g - self.data.force
@@ -187,12 +206,11 @@ class _TrialProblem:
     def cost(self, q: FloatArray) -> float:
         """Total cost (see the module docstring)."""
         st = self.st
-        _, _, qp, vp, ap = self.kinematics(q)
+        _, _, _, hdot, com = self._dynamics_state(q)
         pos = self.sk.marker_positions(q, self.data.markers)
         e = np.where(self.seen[..., None], pos - self.y, 0.0) / st.marker_sigma
         total = float(np.sum(e**2))
         # residual terms on every frame (weights per frame)
-        hdot, com = self.momentum_rate(qp, vp, ap)
         r = self.residual_wrench(hdot, com) * self.w_res
         total += float(np.sum(r**2))
         smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
@@ -200,12 +218,17 @@ class _TrialProblem:
 
     # -------------------------------------------------------------- linearization
     def normal_equations(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Banded (upper) normal matrix and gradient for a step on the free coordinates.
+        """Banded normal matrix and gradient for a step on the free coordinates.
+
+        Marker Jacobians come from one batched forward kinematics over all frames; the
+        centroidal derivatives are pinocchio's, one call per frame; the coupling Jacobian
+        and the band products are batched over frames.
 
         Returns
         -------
         ab
-            ``(u + 1, T nf)`` upper banded storage for ``solveh_banded``.
+            ``(u + 1, T nf)`` lower band storage (``ab[d, c] = H[c + d, c]``, row 0 the
+            diagonal, u = (2 band + 1) nf - 1) for :func:`.banded.banded_cholesky_solve`.
         grad
             ``(T nf,)`` gradient of half the cost.
         """
@@ -214,63 +237,75 @@ class _TrialProblem:
         nb = 2 * b  # block bandwidth of J^T J
         blocks = np.zeros((t, nb + 1, nf, nf))  # blocks[i, o] = H(i, i + o)
         grad = np.zeros((t, nf))
-        _, _, qp, vp, ap = self.kinematics(q)
+        qp, vp, ap, hdot_all, com_all = self._dynamics_state(q)
         model, data = self.sk.model, self.sk.data
         sm = self.st.marker_sigma
-        dq = np.zeros((t, 6, nf))
-        dv = np.zeros((t, 6, nf))
-        da = np.zeros((t, 6, nf))
+        # markers: frame k depends on q_k only; unseen markers contribute zero rows
+        pos, jac = self.sk.marker_jacobians(q, self.data.markers)  # (T, M, 3), (T, M, 3, n)
+        jm = np.where(self.seen[:, :, None, None], jac[..., free], 0.0).reshape(t, -1, nf) / sm
+        rm = (np.where(self.seen[..., None], pos - self.y, 0.0) / sm).reshape(t, -1, 1)
+        jmt = jm.transpose(0, 2, 1)
+        blocks[:, 0] += jmt @ jm
+        grad += (jmt @ rm)[:, :, 0]
         # every frame has a residual term (unmeasured frames with a weaker weight)
-        hdot_all, com_all = self.momentum_rate(qp, vp, ap)
         res = self.residual_wrench(hdot_all, com_all) * self.w_res
+        nv = self.sk.nv
+        hq = np.empty((t, 6, nv))
+        hv = np.empty((t, 6, nv))
+        ha = np.empty((t, 6, nv))
+        jcom = np.empty((t, 3, nv))
         for k in range(t):
-            # markers: only frame k
-            seen = self.seen[k]
-            if seen.any():
-                pos, jac = self.sk.marker_jacobian(q[k], self.data.markers[seen])
-                jm = jac[:, :, free].reshape(-1, nf) / sm
-                rm = ((pos - self.y[k, seen]) / sm).reshape(-1)
-                blocks[k, 0] += jm.T @ jm
-                grad[k] += jm.T @ rm
             _, hdot_dq, hdot_dv, hdot_da = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-            jcom = pin.jacobianCenterOfMass(model, data, qp[k], False)
-            cmat = self.sk.cmap.jacobian(q[k])[:, free]
-            f_ext = self.data.force[k]
-            d_q = hdot_dq.copy()
-            d_q[3:] -= _skew(f_ext) @ jcom
-            dq[k] = (d_q @ cmat) * self.w_res[k][:, None]
-            dv[k] = (hdot_dv @ cmat) * self.w_res[k][:, None]
-            da[k] = (hdot_da @ cmat) * self.w_res[k][:, None]
-        # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k)
+            jcom[k] = pin.jacobianCenterOfMass(model, data, qp[k], False)
+            hq[k], hv[k], ha[k] = hdot_dq, hdot_dv, hdot_da
+        # the external moment about the centre of mass moves with it: d/dq of c x F_ext
+        hq[:, 3:] -= _skew_batch(self.data.force) @ jcom
+        cmat = self._coupling_free(q)  # (T, nv, nf)
+        w = self.w_res[:, :, None]
+        dq = (hq @ cmat) * w
+        dv = (hv @ cmat) * w
+        da = (ha @ cmat) * w
+        # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k);
+        # jb[k, :, o + b] = d r_k / d q_{k+o}, zero past the ends
         idx = np.arange(t)
+        jb = np.zeros((t, 6, 2 * b + 1, nf))
+        for o in range(-b, b + 1):
+            s = idx + o
+            ok = (s >= 0) & (s < t)
+            jb[ok, :, o + b] = (self.d1[idx[ok], s[ok]][:, None, None] * dv[ok]
+                                + self.d2[idx[ok], s[ok]][:, None, None] * da[ok]
+                                + (dq[ok] if o == 0 else 0.0))
+        gres = np.einsum("kroi,kr->koi", jb, res)  # (T, 2b + 1, nf)
         for o1 in range(-b, b + 1):
             s1 = idx + o1
             ok1 = (s1 >= 0) & (s1 < t)
-            j1 = (self.d1[idx, np.clip(s1, 0, t - 1)][:, None, None] * dv[idx]
-                  + self.d2[idx, np.clip(s1, 0, t - 1)][:, None, None] * da[idx]
-                  + (dq[idx] if o1 == 0 else 0.0))
-            j1[~ok1] = 0.0
             # idx + o1 is a set of distinct frames: plain fancy-index accumulation is exact
-            grad[s1[ok1]] += np.einsum("kri,kr->ki", j1[ok1], res[idx[ok1]])
+            grad[s1[ok1]] += gres[ok1, o1 + b]
+            j1t = jb[:, :, o1 + b].transpose(0, 2, 1)
             for o2 in range(o1, b + 1):
                 s2 = idx + o2
-                ok2 = (s2 >= 0) & (s2 < t)
-                j2 = (self.d1[idx, np.clip(s2, 0, t - 1)][:, None, None] * dv[idx]
-                      + self.d2[idx, np.clip(s2, 0, t - 1)][:, None, None] * da[idx]
-                      + (dq[idx] if o2 == 0 else 0.0))
-                both = ok1 & ok2
-                prod = np.einsum("kri,krj->kij", j1[both], j2[both])
-                blocks[s1[both], o2 - o1] += prod
+                both = ok1 & (s2 >= 0) & (s2 < t)
+                blocks[s1[both], o2 - o1] += j1t[both] @ jb[both, :, o2 + b]
         # smoothness: central second differences
         ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
         sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
         coef = np.array([1.0, -2.0, 1.0]) * ws
-        eye = np.eye(nf)
+        diag = np.arange(nf)
         for a in range(3):
             grad[a : a + t - 2] += coef[a] * sd
             for c in range(a, 3):
-                blocks[np.arange(t - 2) + a, c - a] += coef[a] * coef[c] * eye
-        return _to_banded(blocks, nf), grad.reshape(-1)
+                blocks[np.arange(t - 2)[:, None] + a, c - a, diag, diag] += coef[a] * coef[c]
+        return lower_band_storage(blocks), grad.reshape(-1)
+
+    def _coupling_free(self, q: FloatArray) -> FloatArray:
+        """``(T, nv, nf)`` coupling Jacobian d q_pin / d q restricted to the free coordinates."""
+        vals, cols = self.sk.cmap.jacobian_batch(q)  # (T, nv), (nv,)
+        where = np.full(self.sk.n, -1)
+        where[self.free] = np.arange(self.nf)
+        cmat = np.zeros((self.t, vals.shape[1], self.nf))
+        dof = np.flatnonzero(where[cols] >= 0)
+        cmat[:, dof, where[cols[dof]]] = vals[:, dof]
+        return cmat
 
     # -------------------------------------------------------------- steps
     def step(self, q: FloatArray, mu: float, cost0: float | None = None) -> tuple[FloatArray, float, float]:
@@ -284,14 +319,14 @@ class _TrialProblem:
         x = q[:, free]
         g2 = grad.reshape(-1, nf)
         held = (((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))).reshape(-1)
-        diag = np.maximum(ab[-1].copy(), 1e-9)
+        diag = np.maximum(ab[0].copy(), 1e-9)
         grad = np.where(held, 0.0, grad)
-        base = ab[-1] + held * 1e12
+        base = ab[0] + held * 1e12
         cost0 = self.cost(q) if cost0 is None else cost0
         for _ in range(4):
-            ab[-1] = base + mu * diag
+            ab[0] = base + mu * diag
             try:
-                delta = -solveh_banded(ab, grad, lower=False, check_finite=False).reshape(-1, nf)
+                delta = -banded_cholesky_solve(ab, grad).reshape(-1, nf)
             except LinAlgError:
                 mu *= 10
                 continue
@@ -306,27 +341,6 @@ class _TrialProblem:
                     return q_new, cost1, (max(mu / 3, 1e-9) if alpha == 1.0 else mu)
             mu *= 10
         return q, cost0, mu
-
-
-@lru_cache(maxsize=8)
-def _banded_index(t: int, nbp1: int, nf: int) -> tuple[tuple[NDArray[np.intp], ...], NDArray[np.intp], NDArray[np.intp], int]:
-    """Where each entry of the block bands goes in upper banded storage (cached per shape)."""
-    u = nbp1 * nf - 1
-    bi, o, i, j = np.indices((t, nbp1, nf, nf))
-    r = bi * nf + i
-    c = (bi + o) * nf + j
-    keep = (bi + o < t) & (c >= r)
-    return tuple(np.nonzero(keep)), (u + r - c)[keep], c[keep], u
-
-
-def _to_banded(blocks: FloatArray, nf: int) -> FloatArray:
-    """Block upper bands ``(T, nb+1, nf, nf)`` -> upper banded storage of the full matrix
-    (``ab[u + r - c, c] = H[r, c]`` for c >= r), as ``solveh_banded`` takes it."""
-    t, nbp1 = blocks.shape[:2]
-    src, rows, cols, u = _banded_index(t, nbp1, nf)
-    ab = np.zeros((u + 1, t * nf))
-    ab[rows, cols] = blocks[src]
-    return ab
 
 
 def mass_regression(

@@ -415,6 +415,55 @@ class Skeleton:
         m = local.shape[0]
         return pm, (jm.reshape(3 * m, self.nv) @ cmat).reshape(m, 3, self.n)
 
+    def marker_jacobians(self, q: FloatArray, markers: IntArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`marker_jacobian` for many frames at once (batched forward kinematics in numpy).
+
+        The DoF columns are the ones pinocchio's world-frame joint Jacobian gives: a revolute
+        DoF with world axis w through the joint origin o moves a point p at w x (p - o), a
+        prismatic one at w; they are mapped to the OpenSim coordinates with the coupling
+        Jacobian. Equal to the per-frame method to round-off (checked in tests/model).
+
+        Parameters
+        ----------
+        q
+            ``(T, n)`` or ``(n,)`` coordinates (rad or m).
+        markers
+            ``(M,)`` indices into :attr:`marker_names`.
+
+        Returns
+        -------
+        positions
+            ``(T, M, 3)`` ground frame, m.
+        jacobian
+            ``(T, M, 3, n)`` d position / d q (m per rad or m/m); columns of dependent
+            (coupled) coordinates are zero, their effect is in the independent coordinate's.
+        """
+        q2 = np.atleast_2d(np.asarray(q, dtype=float))
+        markers = np.asarray(markers, dtype=np.intp)
+        rot, pos = self._joint_poses_soa(q2)  # (nj, 3, 3, T), (nj, 3, T)
+        mj = self.marker_joint[markers]
+        pm = pos[mj] + np.einsum("mijt,mj->mit", rot[mj], self.marker_in_joint[markers])  # (M, 3, T)
+        vals, cols = self.cmap.jacobian_batch(q2)  # (T, nv), (nv,)
+        t, m = q2.shape[0], markers.size
+        jac = np.zeros((m, 3, self.n, t))
+        support = self._support[mj]  # (M, nv)
+        for j in range(1, self._parents.size):
+            dof = self._idx_v[j]
+            moved = np.flatnonzero(support[:, dof])
+            if moved.size == 0:
+                continue
+            w = np.einsum("ijt,j->it", rot[j], self._jaxis[j])  # (3, T) world axis
+            if self._jtype[j] == 0:
+                arm = pm[moved] - pos[j][None]  # (k, 3, T)
+                col = np.stack(
+                    [w[1] * arm[:, 2] - w[2] * arm[:, 1], w[2] * arm[:, 0] - w[0] * arm[:, 2], w[0] * arm[:, 1] - w[1] * arm[:, 0]],
+                    axis=1,
+                )
+            else:
+                col = np.broadcast_to(w[None], (moved.size, 3, t))
+            jac[moved, :, cols[dof]] += col * vals[:, dof]
+        return pm.transpose(2, 0, 1), jac.transpose(3, 0, 1, 2)
+
     # ------------------------------------------------------------------ dynamics
 
     def inverse_dynamics(

@@ -85,6 +85,20 @@ def test_marker_jacobian_matches_finite_differences(path: str) -> None:
     assert not jac[:, :, ~sk.is_independent].any()
 
 
+@pytest.mark.parametrize("path", MODEL_PATHS)
+def test_batched_marker_jacobians_equal_the_per_frame_ones(path: str) -> None:
+    sk = skeleton(path)
+    q = sk.cmap.complete(RNG.uniform(-0.5, 0.5, (6, sk.n)))
+    q[:, sk.coordinate_index("knee_angle_l")] = np.linspace(0.1, 1.6, 6)  # across the knee splines
+    idx = np.arange(len(sk.marker_names))[::-2]  # a subset, out of order
+    pos, jac = sk.marker_jacobians(q, idx)
+    assert pos.shape == (6, idx.size, 3) and jac.shape == (6, idx.size, 3, sk.n)
+    for k in range(6):
+        p1, j1 = sk.marker_jacobian(q[k], idx)
+        np.testing.assert_allclose(pos[k], p1, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(jac[k], j1, rtol=0, atol=1e-12)
+
+
 def test_gravity_torques_are_the_gradient_of_potential_energy() -> None:
     sk = skeleton(MODEL_PATHS[0])
     q = sk.cmap.complete(RNG.uniform(-0.4, 0.4, sk.n))

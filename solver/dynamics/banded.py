@@ -1,0 +1,82 @@
+"""Symmetric block-banded matrices: assembly into LAPACK band storage and the Cholesky solve.
+
+The dynamics fit's normal matrix H is symmetric and block-banded in time: with T frames of
+``nf`` unknowns each, block (i, i + o) of size ``nf x nf`` is nonzero only for
+``0 <= o <= nb``. It is assembled as its upper block bands, ``blocks[i, o] = H(i, i + o)``,
+and solved by a banded Cholesky factorization (LAPACK ``dpbtrf`` / ``dpbtrs``) in the
+lower band storage ``ab[d, c] = H[c + d, c]`` (d = 0 is the diagonal), whose column c is
+row c of the upper block band read from its diagonal on: a strided view of the blocks,
+so the conversion is a single copy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+from numpy.typing import NDArray
+from scipy.linalg import LinAlgError
+from scipy.linalg.lapack import dpbtrf, dpbtrs
+
+FloatArray = NDArray[np.float64]
+
+
+def lower_band_storage(blocks: FloatArray) -> FloatArray:
+    """Upper block bands -> LAPACK lower band storage of the whole symmetric matrix.
+
+    Parameters
+    ----------
+    blocks
+        ``(T, nb + 1, nf, nf)`` with ``blocks[i, o] = H(i, i + o)`` (blocks past the last
+        frame are ignored; only the upper triangle of each diagonal block ``blocks[i, 0]``
+        is read).
+
+    Returns
+    -------
+    ``(u + 1, T nf)`` Fortran-ordered array, ``ab[d, c] = H[c + d, c]`` with bandwidth
+    ``u = (nb + 1) nf - 1``; entries past the matrix end are zero.
+    """
+    t, nbp1, nf, _ = blocks.shape
+    width = nbp1 * nf  # u + 1
+    # panel[i, r, o nf + j] = H(i nf + r, (i + o) nf + j): row r of block row i, from its
+    # diagonal block on; padded with nf zero columns so every row has u + 1 entries
+    panel = np.zeros((t, nf, width + nf))
+    panel[:, :, :width] = blocks.transpose(0, 2, 1, 3).reshape(t, nf, width)
+    for o in range(1, nbp1):  # blocks past the last frame
+        panel[max(t - o, 0) :, :, o * nf : (o + 1) * nf] = 0.0
+    # skewed view: H[c, c + d] is panel[i, r, r + d] for c = i nf + r
+    s = panel.strides
+    view = as_strided(panel, shape=(t, nf, width), strides=(s[0], s[1] + s[2], s[2]), writeable=False)
+    return np.asfortranarray(view.reshape(t * nf, width).T)
+
+
+def banded_cholesky_solve(ab: FloatArray, rhs: FloatArray) -> FloatArray:
+    """Solve H x = rhs for a symmetric positive definite banded H (LAPACK dpbtrf + dpbtrs).
+
+    The same factorization as ``scipy.linalg.solveh_banded(ab, rhs, lower=True)``
+    without its argument checks and copies.
+
+    Parameters
+    ----------
+    ab
+        ``(u + 1, N)`` lower band storage, ``ab[d, c] = H[c + d, c]`` (not modified).
+    rhs
+        ``(N,)`` right-hand side.
+
+    Returns
+    -------
+    ``(N,)`` solution.
+
+    Raises
+    ------
+    LinAlgError
+        H is not positive definite (or a LAPACK argument error).
+    """
+    c, info = dpbtrf(ab, lower=1, overwrite_ab=0)
+    if info > 0:
+        raise LinAlgError(f"{info}-th leading minor not positive definite")
+    if info < 0:
+        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrf")
+    x, info = dpbtrs(c, rhs, lower=1)
+    if info != 0:
+        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrs")
+    return x

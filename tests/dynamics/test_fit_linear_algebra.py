@@ -1,0 +1,144 @@
+"""The dynamics fit's linear algebra: band storage, the banded Cholesky solve, the normal equations."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.linalg import LinAlgError, solveh_banded
+
+from solver.dynamics.banded import banded_cholesky_solve, lower_band_storage
+from solver.dynamics.fit import FitSettings, FitTrialInput, _TrialProblem
+from solver.model.osim import read_osim
+from solver.model.skeleton import Skeleton
+
+MODEL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "models" / "Rajagopal2016.osim"
+
+
+def _random_block_bands(t: int, nbp1: int, nf: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Upper block bands of a symmetric positive definite matrix, and the dense matrix."""
+    blocks = rng.normal(size=(t, nbp1, nf, nf))
+    n = t * nf
+    h = np.zeros((n, n))
+    for i in range(t):
+        for o in range(nbp1):
+            if i + o < t:
+                h[i * nf : (i + 1) * nf, (i + o) * nf : (i + o + 1) * nf] = blocks[i, o]
+    h = np.triu(h) + np.triu(h, 1).T  # symmetric, from the upper triangle only
+    shift = np.abs(h).sum(axis=1).max() + 1.0  # diagonally dominant: positive definite
+    h += shift * np.eye(n)
+    for i in range(t):
+        blocks[i, 0] += shift * np.eye(nf)
+    return blocks, h
+
+
+@pytest.mark.parametrize(("t", "nbp1", "nf"), [(9, 5, 3), (3, 5, 2), (6, 1, 4), (1, 3, 5)])
+def test_lower_band_storage_holds_the_dense_matrix(t: int, nbp1: int, nf: int) -> None:
+    rng = np.random.default_rng(t * 100 + nbp1 * 10 + nf)
+    blocks, h = _random_block_bands(t, nbp1, nf, rng)
+    blocks[:, 0] += np.tril(rng.normal(size=(t, nf, nf)), -1)  # the lower triangle is not read
+    ab = lower_band_storage(blocks)
+    u, n = nbp1 * nf - 1, t * nf
+    assert ab.shape == (u + 1, n)
+    expected = np.zeros((u + 1, n))
+    for d in range(min(u + 1, n)):
+        expected[d, : n - d] = np.diagonal(h, -d)
+    np.testing.assert_array_equal(ab, expected)
+
+
+def test_banded_cholesky_solve_equals_scipy_and_dense() -> None:
+    rng = np.random.default_rng(7)
+    blocks, h = _random_block_bands(40, 5, 6, rng)
+    ab = lower_band_storage(blocks)
+    rhs = rng.normal(size=h.shape[0])
+    keep = ab.copy()
+    x = banded_cholesky_solve(ab, rhs)
+    np.testing.assert_array_equal(ab, keep)  # not overwritten
+    np.testing.assert_array_equal(x, solveh_banded(ab, rhs, lower=True))
+    np.testing.assert_allclose(x, np.linalg.solve(h, rhs), rtol=1e-12, atol=1e-14)
+
+
+def test_banded_cholesky_solve_rejects_an_indefinite_matrix() -> None:
+    ab = np.array([[1.0, -1.0, 1.0], [0.5, 0.0, 0.0]])
+    with pytest.raises(LinAlgError):
+        banded_cholesky_solve(ab, np.ones(3))
+
+
+@cache
+def _skeleton() -> Skeleton:
+    return Skeleton(read_osim(MODEL))
+
+
+def _synthetic_trial(sk: Skeleton, t: int) -> FitTrialInput:
+    rng = np.random.default_rng(3)
+    time = np.arange(t) * 0.01
+    q = np.tile(sk.neutral(), (t, 1))
+    free = np.flatnonzero(sk.is_independent & ~sk.locked)
+    q[:, free] += 0.2 * np.sin(2 * np.pi * 1.3 * time[:, None] + rng.uniform(0, 6, free.size))
+    q = sk.cmap.complete(q)
+    markers = np.arange(0, len(sk.marker_names), 3)
+    obs = sk.marker_positions(q, markers) + rng.normal(scale=0.005, size=(t, markers.size, 3))
+    obs[2, 1] = np.nan  # a missing marker
+    force = np.array([0.0, sk.total_mass * 9.8, 0.0]) + rng.normal(scale=40.0, size=(t, 3))
+    moment = rng.normal(scale=30.0, size=(t, 3))
+    observed = np.ones(t, dtype=bool)
+    observed[t // 2 :] = False
+    return FitTrialInput(q=q, markers=markers, observed_markers=obs, observed=observed, force=force, moment=moment)
+
+
+def _residual_vector(prob: _TrialProblem, q: np.ndarray) -> np.ndarray:
+    """Every weighted residual of the fit's cost (its squares sum to the cost)."""
+    st, free = prob.st, prob.free
+    pos = prob.sk.marker_positions(q, prob.data.markers)
+    e = np.where(prob.seen[..., None], pos - prob.y, 0.0) / st.marker_sigma
+    _, _, qp, vp, ap = prob.kinematics(q)
+    r = prob.residual_wrench(*prob.momentum_rate(qp, vp, ap)) * prob.w_res
+    smooth = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) / (prob.data.dt**2 * st.accel_sigma)
+    return np.concatenate([e.ravel(), r.ravel(), smooth.ravel()])
+
+
+def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
+    """With the band covering the trial (no truncation) H = J^T J and grad = J^T r for the
+    Jacobian J of the weighted residuals, here by central differences.
+
+    Coordinates that drive nonlinear joint functions (the knee splines and patella couplers)
+    are left out: the fit's Jacobian of the velocities and accelerations keeps only the
+    coupling Jacobian's first derivative (v_pin = f'(x) xdot, whose f''(x) xdot term by x
+    it drops), a Gauss-Newton approximation of the residual wrench on those columns."""
+    sk = _skeleton()
+    t = 7
+    trial = _synthetic_trial(sk, t)
+    prob = _TrialProblem(sk, trial, replace(FitSettings(), band=t))
+    q = trial.q
+    r0 = _residual_vector(prob, q)
+    assert np.sum(r0**2) == pytest.approx(prob.cost(q), rel=1e-12)
+    ab, grad = prob.normal_equations(q)
+    nf = prob.nf
+    jac = np.zeros((r0.size, t * nf))
+    h = 1e-6
+    for k in range(t):
+        for i, c in enumerate(prob.free):
+            qp_, qm_ = q.copy(), q.copy()
+            qp_[k, c] += h
+            qm_[k, c] -= h
+            jac[:, k * nf + i] = (_residual_vector(prob, qp_) - _residual_vector(prob, qm_)) / (2 * h)
+    jtj = jac.T @ jac
+    n = t * nf
+    dense = np.zeros((n, n))
+    for d in range(min(ab.shape[0], n)):
+        idx = np.arange(n - d)
+        dense[idx + d, idx] = ab[d, : n - d]
+        dense[idx, idx + d] = ab[d, : n - d]
+    vals, cols = sk.cmap.jacobian_batch(q[:1])
+    bent, _ = sk.cmap.jacobian_batch(q[:1] + 0.1)
+    curved = set(cols[np.flatnonzero(vals[0] != bent[0])].tolist())
+    linear = np.tile([c not in curved for c in prob.free], t)
+    assert linear.sum() > t * nf // 2 and not linear.all()
+    scale = np.abs(jtj).max()
+    keep = np.ix_(linear, linear)
+    np.testing.assert_allclose(dense[keep], jtj[keep], rtol=0, atol=1e-7 * scale)
+    g_fd = jac.T @ r0
+    np.testing.assert_allclose(grad[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
