@@ -94,6 +94,7 @@ class JournaledStore:
             raise AnnotationError("use AnnotationStore.open(path, reviewer=...) to open a store")
         self.paths = paths
         self._reviewer = reviewer
+        self._acting = threading.local()
         self._clock = clock
         self._compact_every = compact_every
         self._max_undo = max_undo
@@ -241,6 +242,29 @@ class JournaledStore:
         """Reviewer name recorded with every edit of this store."""
         return self._reviewer
 
+    @contextmanager
+    def acting_as(self, reviewer: str) -> Iterator[None]:
+        """Record ``reviewer`` (instead of :attr:`reviewer`) as the author of the edits this
+        thread makes inside the block.
+
+        For one store shared by several people, e.g. a review server used by a team: each
+        edit keeps the name of whoever made it. Undo and redo stay per store (session).
+
+        Raises
+        ------
+        AnnotationError
+            If ``reviewer`` is empty, longer than 200 characters or has control characters.
+        """
+        name = str(reviewer).strip() if reviewer is not None else ""
+        if not name or len(name) > 200 or any(ord(c) < 32 for c in name):
+            raise AnnotationError(f"reviewer must be a non-empty name, got {reviewer!r}")
+        prev = getattr(self._acting, "name", None)
+        self._acting.name = name
+        try:
+            yield
+        finally:
+            self._acting.name = prev
+
     @property
     def session(self) -> str:
         """Id of this store session (written with each operation)."""
@@ -326,7 +350,7 @@ class JournaledStore:
             self._check_open()
             with self._locked(fcntl.LOCK_EX):
                 window = self._refresh_locked(repair=True)
-                prov = Provenance(self._reviewer, self._now(), source)
+                prov = Provenance(getattr(self._acting, "name", None) or self._reviewer, self._now(), source)
                 puts = build(prov)
                 edit_id = uuid.uuid4().hex
                 conflicts = detect_overrides(

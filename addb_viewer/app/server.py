@@ -109,6 +109,9 @@ class ReviewApp:
         self._lock = threading.RLock()
         self._edit_lock = threading.RLock()
         self._quiet = threading.local()
+        self._actor = threading.local()  # the page (viser client id) whose handler runs
+        self.client_names: dict[int, str] = {}
+        self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
         self.trials: list[str] = []
@@ -123,6 +126,8 @@ class ReviewApp:
         self._last_plot = 0.0
         self.jobs = Reprocessor(self)
         self._wire()
+        self.server.on_client_connect(self._client_connected)
+        self.server.on_client_disconnect(self._client_disconnected)
         self._player = threading.Thread(target=self._playback_loop, name="addb-playback", daemon=True)
         self._player.start()
         if background:
@@ -417,14 +422,56 @@ class ReviewApp:
         self.seek(target)
 
     # ================================================================== flags
+    # ================================================================== reviewers
+    def _client_connected(self, client: Any) -> None:
+        """Give a new page its own "Your name" field (each edit keeps its reviewer's name).
+
+        Prefilled with ``--reviewer`` on a loopback address (one person); empty on a
+        server reached by a team, where a page must name its reviewer before editing."""
+        default = self.reviewer if self.token is None else ""
+        self.client_names[client.client_id] = default
+        field = client.gui.add_text(
+            "Your name", initial_value=default, order=-1000.0,
+            hint="Recorded with each of your edits in the review record",
+        )
+        field.on_update(lambda e, cid=client.client_id: self.client_names.__setitem__(cid, str(e.target.value).strip()))
+        self.name_fields[client.client_id] = field
+
+    def _client_disconnected(self, client: Any) -> None:
+        self.client_names.pop(client.client_id, None)
+        self.name_fields.pop(client.client_id, None)
+
+    def reviewer_name(self, client_id: int | None) -> str | None:
+        """The name recorded with an edit from page ``client_id``: the page's "Your name",
+        else ``--reviewer`` on a loopback address; None when a page of a team server has
+        not named its reviewer. Edits from Python (no page) are the ``--reviewer``'s."""
+        if client_id is None:
+            return self.reviewer
+        name = self.client_names.get(client_id, "")
+        if name:
+            return name
+        return self.reviewer if self.token is None else None
+
     def edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
         """Run one store edit on the current trial and frame; say "saved" once it is durable.
+
+        The edit is recorded under the name of the page that asked for it
+        (:meth:`reviewer_name`); a page of a team server without a name is asked for one.
 
         viser runs the page's handlers in a thread pool, so two quick clicks (undo, then the
         reviewed box) would run side by side and the earlier one's message could come last;
         edits therefore run one at a time, each message final before the next edit starts."""
+        name = self.reviewer_name(getattr(self._actor, "client", None))
+        if name is None:
+            self.panel.saved.content = (
+                "<span style='color:#c00'>**not saved**</span>: type your name in “Your name” at the "
+                "top of the panel first (each edit keeps its reviewer's name)."
+            )
+            return
         with self._edit_lock:
-            self._edit(what, action)
+            acting = self.store.acting_as(name) if self.store is not None else contextlib.nullcontext()
+            with acting:
+                self._edit(what, action)
 
     def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
         with self._lock:
@@ -536,10 +583,14 @@ class ReviewApp:
         def handler(event: Any) -> None:
             if getattr(self._quiet, "on", False):
                 return
+            prev = getattr(self._actor, "client", None)
+            self._actor.client = getattr(event, "client_id", None)
             try:
                 fn(event)
             except Exception as exc:  # noqa: BLE001 - shown in the page
                 self.show_error(context, exc)
+            finally:
+                self._actor.client = prev
 
         return handler
 

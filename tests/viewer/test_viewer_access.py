@@ -23,9 +23,11 @@ import pytest
 import viser
 import websockets.exceptions
 import websockets.sync.client
+from viewer_support import ProtocolClient, wait_for
 
 from addb_viewer.app.access import AccessGate, is_loopback
 from addb_viewer.demo import DEMO_SUBJECT
+from annotations import AnnotationStore
 from tests.conftest import import_tool, require_tool, tool_available
 
 CHROMIUM = "/usr/bin/chromium"
@@ -157,3 +159,61 @@ def test_lab_server_requires_the_token(lab_server) -> None:
             page.get_by_text(re.compile(r"frame \d+ / 237")).wait_for(timeout=60_000)
         finally:
             browser.close()
+
+
+def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
+    """Two pages of one team server: an edit from a page without a name is refused, then
+    each page's edits are recorded under the name typed in its own "Your name" field."""
+    app = make_app(demo_paths, token="team-token")
+    assert app.token == "team-token"
+    p = app.panel
+    a = ProtocolClient(app.port, "/?token=team-token")
+    b = None
+    try:
+        (ida,) = wait_for(lambda: list(app.name_fields), what="page A's name field")
+        b = ProtocolClient(app.port, "/?token=team-token")
+        idb = wait_for(lambda: [c for c in app.name_fields if c != ida], what="page B's name field")[0]
+        assert app.client_names == {ida: "", idb: ""}  # empty on a team server
+
+        a.set_value(p.frame, 40)
+        wait_for(lambda: app.playback.frame == 40, what="seek to 40")
+        a.set_value(p.toggle_flag, True)
+        wait_for(lambda: "not saved" in p.saved.content, what="the request for a name")
+        assert "Your name" in p.saved.content
+
+        a.set_value(app.name_fields[ida], "ana")
+        b.set_value(app.name_fields[idb], "ben")
+        wait_for(lambda: app.client_names == {ida: "ana", idb: "ben"}, what="both names")
+        a.set_value(p.toggle_flag, True)
+        wait_for(lambda: "✓ saved" in p.saved.content and "ana" in p.saved.content, what="A's edit")
+        b.set_value(p.frame, 60)
+        wait_for(lambda: app.playback.frame == 60, what="seek to 60")
+        b.set_value(p.toggle_flag, True)
+        wait_for(lambda: "ben" in p.saved.content, what="B's edit")
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+    with AnnotationStore.open(demo_paths.annotations, reviewer="checker") as disk:
+        assert disk.flag("walk", 40).provenance.reviewer == "ana"
+        assert disk.flag("walk", 60).provenance.reviewer == "ben"
+        assert app.store.reviewer == "tester"  # the store's own name is unchanged
+
+
+def test_store_acting_as_is_per_thread(tmp_path: Path) -> None:
+    from annotations import AnnotationError
+
+    with AnnotationStore.open(tmp_path, reviewer="host") as store:
+        store.set_trial_info("walk", n_frames=100, rate_hz=100.0)
+        other: list[str] = []
+        with store.acting_as("ana"):
+            e = store.set_unmeasured("walk", range(10, 12))
+            t = threading.Thread(target=lambda: other.append(store.set_unmeasured("walk", [50]).provenance.reviewer))
+            t.start()
+            t.join()
+        assert e.provenance.reviewer == "ana" and other == ["host"]
+        assert store.set_unmeasured("walk", [70]).provenance.reviewer == "host"
+        with pytest.raises(AnnotationError, match="non-empty name"), store.acting_as("  "):
+            pass
+    with AnnotationStore.open(tmp_path, reviewer="checker") as disk:
+        assert [disk.flag("walk", k).provenance.reviewer for k in (10, 50, 70)] == ["ana", "host", "host"]

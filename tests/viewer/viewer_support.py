@@ -28,11 +28,13 @@ class ProtocolClient:
     ----------
     port
         The server's port.
+    path
+        Request target of the handshake (e.g. ``/?token=...`` for a server with a token).
     """
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, path: str = "") -> None:
         self.ws = connect(
-            f"ws://127.0.0.1:{port}",
+            f"ws://127.0.0.1:{port}{path}",
             subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
             max_size=None,
         )
