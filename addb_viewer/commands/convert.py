@@ -28,9 +28,9 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
     Path
         The review record (where :mod:`addb_viewer.locations` says the subject's record lives).
     """
+    from addb_viewer.locations import annotations_path, default_output_dir
     from annotations import AnnotationStore
     from annotations.masks import mask_to_ranges
-    from addb_viewer.locations import annotations_path, default_output_dir
 
     path = annotations_path(converted.path, default_output_dir(converted.path))
     with AnnotationStore.open(path, reviewer=reviewer) as store:
