@@ -11,22 +11,39 @@ result on screen and on disk, and says why in the page.
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir
 from addb_viewer.app.summary import comparison_markdown, trial_summary
-from annotations import AnnotationError
+from annotations import AnnotationError, AnnotationStore
 
-if TYPE_CHECKING:
-    from addb_viewer.app.server import ReviewApp
+
+class ReprocessHost(Protocol):
+    """What the reprocessor needs from the app (:class:`~addb_viewer.app.server.ReviewApp`
+    implements it); the reprocessor imports nothing of the server."""
+
+    paths: Any
+    store: AnnotationStore | None
+    trial: Any
+    trials: list[str]
+    panel: Any
+    playback: Any
+    geometry: Any
+    ready: threading.Event
+
+    def set_status(self, text: str) -> None: ...
+    def show_error(self, context: str, exc: BaseException | str) -> None: ...
+    def after_processing(self) -> None: ...
+    def load_trial(self, name: str, *, frame: int = 0) -> None: ...
+    def set_trial_options(self, selected: str) -> None: ...
 
 
 class Reprocessor:
-    """The solver-run controls of a :class:`~addb_viewer.app.server.ReviewApp`."""
+    """The solver-run controls of the review app (a :class:`ReprocessHost`)."""
 
-    def __init__(self, app: ReviewApp) -> None:
+    def __init__(self, app: ReprocessHost) -> None:
         self.app = app
         self.job: SolverJob | None = None
         self._lock = threading.Lock()
@@ -140,7 +157,7 @@ class Reprocessor:
         showing = app.trial is None or app.trial.trial == trial
         if trial not in app.trials:
             app.trials = sorted([*app.trials, trial])
-            app._set_trial_options(trial if showing else app.trial.trial)
+            app.set_trial_options(trial if showing else app.trial.trial)
         if not showing:
             self._say(f"{trial} was reprocessed; pick it in the trial list to see it.")
             return

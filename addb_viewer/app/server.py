@@ -160,7 +160,7 @@ class ReviewApp:
             self._open_store()
             self.trials = processed_trials(self.paths.out_dir) if self.paths.out_dir.is_dir() else []
             if self.trials:
-                self._set_trial_options(_preferred(self.trials))
+                self.set_trial_options(_preferred(self.trials))
                 self.load_trial(_preferred(self.trials))
             else:
                 self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet: processing…")
@@ -177,7 +177,7 @@ class ReviewApp:
             self.trials = processed_trials(self.paths.out_dir)
             if not self.trials:
                 raise FileNotFoundError(f"the solver wrote no trial into {self.paths.out_dir}")
-            self._set_trial_options(_preferred(self.trials))
+            self.set_trial_options(_preferred(self.trials))
             self.load_trial(_preferred(self.trials))
         except Exception as exc:  # noqa: BLE001
             self.show_error("Could not load the processed subject", exc)
@@ -203,7 +203,8 @@ class ReviewApp:
         self.server.stop()
 
     # ================================================================== loading
-    def _set_trial_options(self, selected: str) -> None:
+    def set_trial_options(self, selected: str) -> None:
+        """Fill the trial list with :attr:`trials` and select ``selected``."""
         with self._quiet_updates():
             self.panel.trial.options = tuple(self.trials)
             self.panel.trial.value = selected
