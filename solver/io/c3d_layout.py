@@ -50,6 +50,10 @@ _PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
 _TYPES = {-1: "char", 1: "byte", 2: "int16", 4: "float32"}
 _NAME_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
 _MAX_DIMS = 7
+_POINT_TEXT = (
+    "X_SCREEN", "Y_SCREEN", "UNITS", "LABELS", "LABELS2", "LABELS3",
+    "ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS",
+)  # fmt: skip
 _MAX_HEAD = 255 * BLOCK + 255 * BLOCK  # parameter section: from block <= 255, <= 255 blocks
 
 
@@ -99,7 +103,8 @@ def check_c3d(path: str | Path) -> C3dLayout:
     next one, names are plain ASCII, data types and dimension counts are those of the
     format, the parameters the reader needs exist with the right types and enough
     values (``POINT:USED``/``SCALE``/``DATA_START``/``LABELS``, ``ANALOG:USED``/
-    ``SCALE``/``OFFSET``/``GEN_SCALE``/``LABELS``, ``FORCE_PLATFORM:USED``/``TYPE``/
+    ``SCALE``/``OFFSET``/``GEN_SCALE``/``LABELS``, the text parameters ``POINT:X_SCREEN``/
+    ``Y_SCREEN``/``UNITS``/``ANGLES``/..., ``FORCE_PLATFORM:USED``/``TYPE``/
     ``CHANNEL``/``CORNERS``/``ORIGIN``/``CAL_MATRIX``) and agree with the header, plate
     channels name existing analog channels, and the file holds every frame it announces
     (``frames x (points x 4 + analog values) x word size`` bytes from the data start).
@@ -443,6 +448,8 @@ class _Checker:
                 f"{p_start}-{p_end}); expected a block after it",
             )
         self._param(params, "POINT", "FRAMES", (1, 2, 4), 1, required=False)
+        for name in _POINT_TEXT:  # read as text (axes, units, labels, model outputs)
+            self._param(params, "POINT", name, (-1,), 0, required=False)
         self._param(params, "POINT", "RATE", (4,), 1, required=False)
         if n_points:
             point_scale = self._param(params, "POINT", "SCALE", (4,), 1)

@@ -149,6 +149,42 @@ def test_the_harness_reports_a_signal_death_and_goes_on(tmp_path: Path) -> None:
     assert [r["state"] for r in results] == ["signal", "ok"], results
 
 
+# Damage found by fuzzing: each crashed ezc3d 1.7.2 with a segmentation fault (or, for the
+# screen axes, raised a bare ValueError in our reader) before the check; (file, edits,
+# expected ``where``, expected text in the message).
+FOUND = [
+    ("walking5.c3d", [("set", 4300, 0)], "parameter section", "ANALOG:SCALE is missing"),
+    ("walking5.c3d", [("set", 4408, 182)], "parameter section: ANALOG:OFFSET",
+     "number of dimensions -74"),
+    ("walking5.c3d", [("set", 6133, 255), ("set", 5953, 166), ("set", 3701, 128)],
+     "parameter section: group LABELS", "description length -1"),
+    ("walking5.c3d", [("delete", 7143, 127), ("set", 4753, 255), ("set", 4166, 215)],
+     "parameter section: group DESCRIPTIONS", "description length -1"),
+    ("walking2.c3d", [("truncate", 2982, 172), ("set", 3918, 255), ("set", 1278083, 128),
+                      ("insert", 1706, 128)], "parameter section",
+     "12 parameter blocks from byte 512 (to byte 6656); the file has 2983 bytes"),
+    ("walking2.c3d", [("set", 728, 128)], "parameter section: SUBJECTS:USES_PREFIXES",
+     "number of dimensions -128"),
+    ("walking2.c3d", [("set", 966, 1)], "parameter section: POINT:X_SCREEN",
+     "data type byte; expected char"),
+    ("walking2.c3d", [("set", 984, 1)], "parameter section: POINT:Y_SCREEN",
+     "data type byte; expected char"),
+]  # fmt: skip
+
+
+def test_damage_found_by_fuzzing_gives_our_error(tmp_path: Path) -> None:
+    paths = []
+    for k, (name, edits, _, _) in enumerate(FOUND):
+        path = tmp_path / f"{k}_{name}"
+        path.write_bytes(damage(SOURCES[name], edits))
+        paths.append(path)
+    results = read_in_child(paths)
+    for path, (_, edits, where, text), result in zip(paths, FOUND, results, strict=True):
+        assert result["state"] == "addb", (edits, result)
+        assert f"({path}, {where})" in str(result["error"]), (edits, result)
+        assert text in str(result["error"]), (edits, result)
+
+
 # ----------------------------------------------------------------------------- fuzz
 
 _edit = st.tuples(
