@@ -125,9 +125,9 @@ def check_c3d(path: str | Path) -> C3dLayout:
         ``path`` does not exist.
     C3dFormatError
         The first inconsistency found; ``where`` names the section (``header``,
-        ``parameter section``, ``parameter GROUP:NAME``, ``data section`` or
-        ``frame N`` for a truncated file) and the message the byte offset (from 0) and
-        what was expected.
+        ``parameter section``, ``parameter section: GROUP:NAME``, ``parameter section:
+        group NAME``, or ``frame N``, the first incomplete frame of a truncated data
+        section) and the message the byte offset (from 0) and what was expected.
 
     Source: the C3D format specification (Motion Lab Systems, c3d.org).
     """
@@ -220,8 +220,8 @@ class _Checker:
         if (n_points or analogs) and n_frames < 0:
             raise self.fail(
                 "header",
-                f"bytes 6-9 give frames {first} to {last}; expected the last frame not "
-                "before the first",
+                f"frames {first} to {last} (header bytes 6-9, or TRIAL:ACTUAL_START_FIELD/"
+                "ACTUAL_END_FIELD when present); expected the last frame not before the first",
             )
         if (n_points or analogs) and n_frames > 0 and self.size < offset + n_frames * frame_bytes:
             complete = max(0, (self.size - offset) // frame_bytes)

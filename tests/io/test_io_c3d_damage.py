@@ -19,6 +19,8 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from solver.io.c3d_layout import _dec_floats, check_c3d
+
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
 TRIALS = DATA / "trials" / "opensim_c3d"
@@ -147,6 +149,33 @@ def test_the_harness_reports_a_signal_death_and_goes_on(tmp_path: Path) -> None:
     )
     results = read_in_child([bad, TRIALS / "walking5.c3d"], child=raw)
     assert [r["state"] for r in results] == ["signal", "ok"], results
+
+
+def test_check_reads_the_layout_of_the_real_files() -> None:
+    """The pure-Python walk agrees with the files' own counts (and with ezc3d's reading,
+    which tests/io/test_io_c3d.py checks): 250 Hz markers, 2000 Hz analogs, two plates."""
+    w2, w5 = (check_c3d(TRIALS / name) for name in ("walking2.c3d", "walking5.c3d"))
+    for layout, points, frames in ((w2, 44, 1249), (w5, 40, 1103)):
+        assert layout.processor == "Intel" and layout.float_storage
+        assert (layout.n_points, layout.n_frames) == (points, frames)
+        assert (layout.n_analog_values, layout.analog_per_frame) == (96, 8)  # 12 channels
+        assert layout.data_offset == 13 * 512
+        assert layout.frame_bytes == (points * 4 + 96) * 4
+        assert layout.get("POINT", "FRAMES").values == (frames,)
+        assert layout.get("POINT", "RATE").values == (250.0,)
+        assert layout.get("ANALOG", "RATE").values == (2000.0,)
+        assert layout.get("FORCE_PLATFORM", "CHANNEL").dims == (6, 2)
+        assert layout.get("FORCE_PLATFORM", "CORNERS").dims == (3, 4, 2)
+        assert len(layout.get("POINT", "LABELS").values) == points
+    assert w2.get("SUBJECTS", "USED").offset == 679  # the record the issue's bytes are in
+
+
+def test_dec_floats_are_decoded() -> None:
+    """DEC (VAX F) floats: 16-bit words swapped and exponent bias 128 (value / 4 after the
+    swap): 1.0 is stored 0x80 0x40 0x00 0x00, -0.01 (a typical scale) 0x23 0xBD 0x0A 0xD7."""
+    assert _dec_floats(bytes([0x80, 0x40, 0, 0])) == [1.0]
+    (scale,) = _dec_floats(bytes([0x23, 0xBD, 0x0A, 0xD7]))
+    assert abs(scale - -0.01) < 1e-9
 
 
 # Damage found by fuzzing: each crashed ezc3d 1.7.2 with a segmentation fault (or, for the
