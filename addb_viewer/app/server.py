@@ -75,6 +75,9 @@ class ReviewApp:
     token
         Access token every request must carry (:mod:`addb_viewer.app.access`); None: a
         random one when ``host`` is not a loopback address, no token on loopback.
+    process_missing
+        Process a subject that has no output yet when it is opened (False when a dataset
+        runner processes the subjects in the background, :mod:`addb_viewer.app.workbench`).
 
     Raises
     ------
@@ -92,8 +95,11 @@ class ReviewApp:
         background: bool = True,
         geometry: str | os.PathLike[str] | None = None,
         token: str | None = None,
+        process_missing: bool = True,
     ) -> None:
         self.paths = paths
+        self.process_missing = process_missing
+        self.workbench: Any = None  # the dataset queue (addb_viewer.app.workbench), when reviewing a dataset
         self.geometry = geometry
         self.reviewer = reviewer
         self.started_at = time.monotonic()
@@ -162,14 +168,50 @@ class ReviewApp:
             if self.trials:
                 self.set_trial_options(_preferred(self.trials))
                 self.load_trial(_preferred(self.trials))
-            else:
+            elif self.process_missing:
                 self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet: processing…")
                 self.jobs.process_subject()
+            else:
+                self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet (see the dataset queue).")
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not open the subject", exc)
         finally:
             if not self.jobs.running:
                 self.ready.set()
+
+    def open_subject(self, paths: ReviewPaths, trial: str | None = None) -> None:
+        """Show another subject (the dataset queue's "Open"): a running solver run is
+        cancelled, the review record of the shown subject closed and the new one opened;
+        its ``trial`` (default: the preferred one) is loaded, or the page says it is not
+        processed yet. Errors are shown in the page."""
+        self.jobs.cancel(wait=True)
+        with self._lock:
+            self._drop_trial()
+            self.trial = self.playback = self.editor = self.view = None
+            self.trials = []
+            if self.store is not None:
+                with contextlib.suppress(AnnotationError):
+                    self.store.close()
+                self.store = None
+            self.paths = paths
+        self.server.gui.set_panel_label(f"addb · {paths.subject_dir.name}")
+        self.panel.comparison.content = ""
+        self.panel.job_status.content = ""
+        try:
+            self._open_store()
+            self.trials = processed_trials(paths.out_dir) if paths.out_dir.is_dir() else []
+            if not self.trials:
+                self.set_status(f"**{paths.subject_dir.name}** has not been processed yet (see the dataset queue).")
+                with self._quiet_updates():
+                    self.panel.trial.options = ("(none)",)
+                    self.panel.trial.value = "(none)"
+                    self.panel.trial.disabled = True
+                return
+            name = trial if trial in self.trials else _preferred(self.trials)
+            self.set_trial_options(name)
+            self.load_trial(name)
+        except Exception as exc:  # noqa: BLE001 - shown in the page
+            self.show_error("Could not open the subject", exc)
 
     def after_processing(self) -> None:
         """Called once the first processing run has written the output folder."""
@@ -193,8 +235,11 @@ class ReviewApp:
             self.show_error("The review record cannot be opened; flagging is disabled", exc)
 
     def stop(self) -> None:
-        """Stop playback, cancel a running solver, close the store, stop the server."""
+        """Stop playback, cancel a running solver (and a dataset's background run), close
+        the store, stop the server."""
         self._stop.set()
+        if self.workbench is not None:
+            self.workbench.stop()
         self.jobs.cancel(wait=True)
         self._player.join(timeout=2.0)
         if self.store is not None:
@@ -473,6 +518,8 @@ class ReviewApp:
             acting = self.store.acting_as(name) if self.store is not None else contextlib.nullcontext()
             with acting:
                 self._edit(what, action)
+        if self.workbench is not None:  # review state and pending proposals in the queue
+            self.workbench.refresh()
 
     def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
         with self._lock:

@@ -54,11 +54,41 @@ def b3d_subject(path: Path) -> Path:
     return folder
 
 
+def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, object]:
+    """The review app on a dataset's queue (:mod:`addb_viewer.app.workbench`), showing the
+    next trial to review (or the first subject)."""
+    from addb_viewer.app.paths import ReviewPaths
+    from addb_viewer.app.queue import build_queue, dataset_subjects, next_to_review
+    from addb_viewer.app.server import ReviewApp
+    from addb_viewer.app.workbench import Workbench
+
+    _, out, subjects = dataset_subjects(dataset, args.out)
+    rows = build_queue(subjects)
+    first = next_to_review(rows) or rows[0]
+    app = ReviewApp(
+        ReviewPaths.for_subject(first.subject.subject_dir, first.subject.out_dir),
+        reviewer=args.reviewer or default_reviewer(), host=args.host, port=args.port,
+        geometry=args.geometry, process_missing=False,
+    )  # fmt: skip
+    bench = Workbench(app, dataset, args.out, workers=args.workers)
+    bench.current = (first.subject.rel, first.trial)
+    bench.refresh()
+    print(f"addb view: dataset {dataset} ({len(subjects)} subjects, output {out})", flush=True)
+    return app, bench
+
+
 def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.paths import ReviewPaths
+    from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
 
     subject = Path(args.subject) if args.subject else None
+    if subject is not None and is_dataset(subject):
+        from addb_viewer.geometry import mesh_search_path
+
+        mesh_search_path(None, None, args.geometry, bundled=False)  # a wrong --geometry fails here
+        app, _ = open_dataset(args, subject)
+        return _serve(app, args)
     if subject is not None and subject.suffix.lower() == ".b3d" and subject.is_file():
         subject = b3d_subject(subject)
     if subject is None:
@@ -79,7 +109,13 @@ def run(args: argparse.Namespace) -> int:
         port=args.port,
         geometry=args.geometry,
     )
-    print(f"addb view: {paths.subject_dir.name} at {app.url}  (output {paths.out_dir}; Ctrl-C to stop)", flush=True)
+    print(f"addb view: {paths.subject_dir.name}  (output {paths.out_dir})", flush=True)
+    return _serve(app, args)
+
+
+def _serve(app: object, args: argparse.Namespace) -> int:
+    """Print the address and serve until Ctrl-C or SIGTERM."""
+    print(f"addb view: {app.paths.subject_dir.name} at {app.url}  (Ctrl-C to stop)", flush=True)
     if app.token:
         print(
             f"addb view: listening on {args.host}: requests need the access token in this address "
@@ -104,7 +140,12 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="review a subject in the browser: replay, flag frames, reprocess")
-    p.add_argument("subject", nargs="?", help="AddBiomechanics subject folder or .b3d file (default: the bundled demo subject)")
+    p.add_argument(
+        "subject",
+        nargs="?",
+        help="AddBiomechanics subject folder or .b3d file, or a dataset: a folder of subject folders "
+        "or a dataset output tree, reviewed through its queue (default: the bundled demo subject)",
+    )
     p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080; the next free one if busy; 0: any)")
     p.add_argument(
         "--host",
@@ -113,11 +154,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "team on a lab server, requires the access token printed in the address",
     )
     p.add_argument("--reviewer", help="your name, recorded with every flag (default: $ADDB_REVIEWER or your login)")
-    p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo)")
+    p.add_argument("--out", help="processed output folder (default: <subject>/addb_out, or the user cache for the demo; "
+                   "for a dataset its output tree, default <dataset>/addb_out)")
     p.add_argument(
         "--geometry",
         metavar="DIR",
         help="folder of bone meshes (.vtp) to use when the subject has no Geometry folder "
         "(default: $ADDB_GEOMETRY, then the meshes bundled with addb)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        help="dataset: worker processes that process the subjects without output in the background "
+        "(default: the cores less one; 0: none)",
     )
     p.set_defaults(handler=run)

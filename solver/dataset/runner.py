@@ -144,6 +144,8 @@ def process_dataset(
     review_digest: Callable[[str, str], str | None] | None = None,
     progress: Progress | None = None,
     log: Callable[[str], None] | None = None,
+    events: Callable[[str, dict[str, Any]], None] | None = None,
+    stop: Any = None,
 ) -> DatasetRun:
     """Process every subject folder below ``dataset_dir`` into the mirrored tree ``out_dir``.
 
@@ -165,6 +167,12 @@ def process_dataset(
         Called with (message, fraction of subjects finished).
     log
         Called with one-line messages for the user (the dashboard address, retries).
+    events
+        Called with ``("queued", {"rels": [...]})`` once the subjects to process are known
+        and ``("done", outcome)`` as each finishes (the review workbench's queue).
+    stop
+        A ``threading.Event``: once set, the subjects not finished are cancelled (their
+        outputs stay as they were) and listed with status ``"cancelled"``.
 
     Returns
     -------
@@ -206,13 +214,15 @@ def process_dataset(
                 results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
             continue
         jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
+    notify = events or (lambda kind, data: None)
+    notify("queued", {"rels": [j.rel for j in jobs]})
     done = len(results)
     total = len(subjects)
     say(f"{done} of {total} subjects up to date, {len(jobs)} to process", done / total)
     dashboard = None
     if jobs:
         dashboard = _run_jobs(jobs, opts, results, lambda d, frames: say(
-            f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell)
+            f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell, notify, stop)
         remove_stale_work(out)  # work folders of attempts whose worker was killed
     ordered = tuple(results[s.rel] for s in subjects)
     totals = dataset_totals(list(ordered))
@@ -228,9 +238,13 @@ def _run_jobs(
     results: dict[str, dict[str, Any]],
     step: Callable[[int, int], None],
     tell: Callable[[str], None],
+    notify: Callable[[str, dict[str, Any]], None],
+    stop: Any = None,
 ) -> str | None:
     """Submit ``jobs`` to the cluster, collect their outcomes into ``results``."""
-    from distributed import Client, as_completed
+    import threading
+
+    from distributed import CancelledError, Client, as_completed
     from distributed.scheduler import KilledWorker
 
     cluster = None
@@ -245,6 +259,8 @@ def _run_jobs(
             cluster.close()
         raise DatasetError(f"cannot reach the Dask scheduler: {exc}", where=opts.scheduler or "local cluster") from None
     dashboard = None
+    run_over = threading.Event()
+    watcher: threading.Thread | None = None
     try:
         info = client.scheduler_info()
         if info.get("services", {}).get("dashboard"):
@@ -260,18 +276,36 @@ def _run_jobs(
         attempts: dict[str, int] = {}
         by_key: dict[str, SubjectJob] = {}
 
+        futures: list[Any] = []
+
         def submit(job: SubjectJob) -> Any:
             attempts[job.rel] = attempts.get(job.rel, 0) + 1
             key = f"addb-subject-{job.rel}-{run_id}-{attempts[job.rel]}"
             by_key[key] = job
-            return client.submit(run_subject, job, key=key, pure=False, retries=0)
+            futures.append(client.submit(run_subject, job, key=key, pure=False, retries=0))
+            return futures[-1]
 
         pending = as_completed([submit(j) for j in jobs])
+        if stop is not None:  # cancel what is left once asked to stop (while the run lasts)
+            def watch() -> None:
+                while not run_over.is_set():
+                    if stop.wait(0.2):
+                        client.cancel([f for f in futures if not f.done()])
+                        return
+
+            watcher = threading.Thread(target=watch, name="addb-dataset-stop", daemon=True)
+            watcher.start()
         finished, frames = 0, 0
         for future in pending:
             job = by_key[future.key]
             try:
                 outcome = future.result()
+            except CancelledError:
+                if stop is not None and stop.is_set():
+                    outcome = {"rel": job.rel, "status": "cancelled", "trials": []}
+                else:
+                    outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), "CancelledError",
+                                       "the cluster cancelled this subject's task")  # fmt: skip
             except KilledWorker:
                 if attempts[job.rel] <= opts.retries:
                     tell(f"{job.rel}: its worker died; retrying (attempt {attempts[job.rel] + 1})")
@@ -287,10 +321,14 @@ def _run_jobs(
                 outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), type(exc).__name__, str(exc))
             outcome["attempts"] = attempts[job.rel]
             results[job.rel] = outcome
+            notify("done", outcome)
             finished += 1
             frames += sum(r["frames"] for r in outcome.get("trials") or [])
             step(finished, frames)
     finally:
+        run_over.set()
+        if watcher is not None:
+            watcher.join()
         client.close()
         if cluster is not None:
             cluster.close()

@@ -185,13 +185,25 @@ def _peak_rss_mb() -> float | None:
 
 
 def remove_stale_work(out_root: str | Path) -> int:
-    """Remove work folders left below ``out_root`` by killed workers; returns how many."""
+    """Remove work folders left below ``out_root`` by killed workers; returns how many.
+
+    A worker killed between the two renames of :func:`_replace_dir` leaves the previous
+    output in ``.addb-work-old-<name>-*/previous`` and no ``<name>``: that output is put
+    back in place first, so no finished subject is lost.
+    """
     n = 0
     root = Path(out_root)
     if not root.is_dir():
         return 0
-    for path in list(root.rglob(f"{WORK_PREFIX}*")):
-        if path.is_dir():
-            shutil.rmtree(path, ignore_errors=True)
-            n += 1
+    for path in sorted(root.rglob(f"{WORK_PREFIX}*")):
+        if not path.is_dir():
+            continue
+        old_prefix = f"{WORK_PREFIX}old-"
+        if path.name.startswith(old_prefix) and (path / "previous").is_dir():
+            name = path.name[len(old_prefix):].rsplit("-", 1)[0]  # mkdtemp's suffix has no "-"
+            final = path.parent / name
+            if name and not final.exists():
+                os.replace(path / "previous", final)
+        shutil.rmtree(path, ignore_errors=True)
+        n += 1
     return n

@@ -92,3 +92,22 @@ def test_report_escapes_names_and_lists_failures_with_file_and_line() -> None:
                           "totals": totals, "subjects": subjects})  # fmt: skip
     assert "lab&lt;A&gt;/s&amp;1" in page and "lab<A>" not in page
     assert "/d/markers.trc:7" in page and "Failures (1)" in page and "<svg" in page
+
+
+def test_a_worker_killed_between_the_two_renames_loses_no_finished_output(tmp_path: Path) -> None:
+    """_replace_dir moves the old output aside, then the new one in; a kill between the two
+    leaves only the moved-aside copy, which the next run puts back."""
+    import tempfile
+
+    from solver.dataset.task import WORK_PREFIX, remove_stale_work
+
+    out = tmp_path / "out"
+    out.mkdir()
+    aside = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}old-s-01-", dir=out))
+    (aside / "previous").mkdir()
+    (aside / "previous" / "manifest.json").write_text('{"key": {}}')
+    fresh = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}s-02-", dir=out))
+    (fresh / "half.txt").write_text("unfinished")
+    assert remove_stale_work(out) == 2
+    assert (out / "s-01" / "manifest.json").read_text() == '{"key": {}}'
+    assert sorted(p.name for p in out.iterdir()) == ["s-01"]

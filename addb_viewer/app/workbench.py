@@ -1,0 +1,205 @@
+"""The review workbench: ``addb view DATASET_DIR``, a queue over a whole dataset.
+
+A "Dataset" folder at the top of the panel shows the queue (:mod:`addb_viewer.app.queue`):
+every subject and trial with its processing state, review state, pending proposals,
+Hicks verdicts and marker RMS, sorted by what needs attention. "Open" switches the app
+to the chosen subject and trial (:meth:`ReviewApp.open_subject`); "Next trial to review"
+(button, and the hotkey R) opens the first trial in queue order that is not reviewed.
+
+Subjects without an up-to-date output are processed in the background by the dataset
+runner (:func:`solver.dataset.runner.process_dataset`, a Dask LocalCluster of
+``workers`` processes, by default one core fewer than the machine has so that the
+reviewer's own Reprocess keeps a core) while the reviewer works on others; the queue
+shows them as "processing" and refreshes as each one finishes. The queue is also read
+again every few seconds, so reviews saved from another page or machine show up.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.app.queue import (
+    FAILED,
+    PROCESSING,
+    REVIEWED,
+    QueueRow,
+    QueueSubject,
+    build_queue,
+    dataset_subjects,
+    next_to_review,
+)
+
+#: Rows shown in the queue table (the dropdown lists them all).
+TABLE_ROWS = 25
+#: Seconds between two readings of the queue from disk.
+REFRESH_S = 5.0
+#: Hotkey of "Next trial to review" (not a camera key; free in the review panel).
+NEXT_HOTKEY = "R"
+
+
+def row_label(row: QueueRow) -> str:
+    """The dropdown label of a queue row: ``rel / trial`` or ``rel (state)``."""
+    return f"{row.subject.rel} / {row.trial}" if row.trial else f"{row.subject.rel} ({row.processing})"
+
+
+def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tuple[str, str | None] | None = None) -> str:
+    """The queue as a markdown table (first ``limit`` rows) with a one-line summary."""
+    n_trials = sum(r.trial is not None for r in rows)
+    done = sum(r.review == REVIEWED for r in rows if r.trial is not None)
+    waiting = sum(r.processing == PROCESSING for r in rows)
+    failed = sum(r.processing == FAILED for r in rows)
+    head = f"**{len({r.subject.rel for r in rows})} subjects, {n_trials} trials: {done} reviewed"
+    head += f", {waiting} processing" if waiting else ""
+    head += f", {failed} failed" if failed else ""
+    lines = [head + "**", "", "| | subject / trial | state | review | pending | Hicks | RMS cm |", "|---|---|---|---|---|---|---|"]
+    for row in rows[:limit]:
+        mark = "▶" if current == (row.subject.rel, row.trial) else ""
+        review = row.review + (f" ({row.reviewer})" if row.reviewer else "") if row.trial else "-"
+        hicks = "-" if row.hicks_linear_ok is None else ("ok" if row.hicks_linear_ok and row.hicks_angular_ok is not False else "over")
+        state = row.processing + (f": {row.detail}" if row.detail else "")
+        rms = "-" if row.marker_rms_m is None else f"{100 * row.marker_rms_m:.2f}"
+        pending = "-" if row.pending is None or row.trial is None else str(row.pending)
+        lines.append(f"| {mark} | {_md(row_label(row) if row.trial else row.subject.rel)} | {_md(state[:80])} | {_md(review)} | {pending} | {hicks} | {rms} |")
+    if len(rows) > limit:
+        lines.append(f"\n… and {len(rows) - limit} more in the list below.")
+    return "\n".join(lines)
+
+
+def _md(text: str) -> str:
+    return text.replace("|", "\\|").replace("<", "&lt;")
+
+
+class Workbench:
+    """The dataset queue of a :class:`~addb_viewer.app.server.ReviewApp`.
+
+    Parameters
+    ----------
+    app
+        The review app (created with ``process_missing=False``).
+    dataset_dir, out_dir
+        The dataset (a tree of subject folders, or a dataset output tree) and its output
+        tree (None: :func:`addb_viewer.app.queue.dataset_output_dir`).
+    workers
+        Worker processes of the background dataset run; 0: no background processing.
+    """
+
+    def __init__(self, app: Any, dataset_dir: str | Path, out_dir: str | Path | None = None, *, workers: int | None = None) -> None:
+        self.app = app
+        self.dataset_dir, self.out_dir, self.subjects = dataset_subjects(dataset_dir, out_dir)
+        self.by_rel = {s.rel: s for s in self.subjects}
+        self.running: dict[str, str] = {}
+        self.rows: list[QueueRow] = []
+        self.labels: dict[str, tuple[str, str | None]] = {}
+        self.current: tuple[str, str | None] | None = None
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self.processing_done = threading.Event()
+        gui = app.server.gui
+        self.folder = gui.add_folder("Dataset", order=-10.0)
+        with self.folder:
+            self.table = gui.add_markdown("Reading the dataset…")
+            self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
+            self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
+            self.run_status = gui.add_markdown("")
+        self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
+        guard = app._guard
+        self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))
+        self.next_button.on_click(guard("Next trial to review", lambda e: self.open_next()))
+        self.command.on_trigger(guard("Next trial to review", lambda e: self.open_next()))
+        app.workbench = self
+        self.refresh()
+        n = (os.cpu_count() or 2) - 1 if workers is None else workers
+        if n > 0:
+            threading.Thread(target=self._process, args=(max(n, 1),), name="addb-dataset", daemon=True).start()
+        else:
+            self.processing_done.set()
+        threading.Thread(target=self._poll, name="addb-queue", daemon=True).start()
+
+    # ------------------------------------------------------------------ queue
+    def refresh(self) -> list[QueueRow]:
+        """Read the queue again from disk and redraw it."""
+        with self._lock:
+            rows = build_queue(self.subjects, dict(self.running))
+            self.rows = rows
+            self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
+            self.table.content = queue_markdown(rows, current=self.current)
+            options = ("(none)", *self.labels)
+            if tuple(self.choice.options) != options:
+                with self.app._quiet_updates():
+                    self.choice.options = options
+                    self.choice.value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
+            return rows
+
+    def _poll(self) -> None:
+        while not self._stop.wait(REFRESH_S):
+            try:
+                self.refresh()
+            except Exception as exc:  # noqa: BLE001 - shown in the page, the poll goes on
+                self.run_status.content = f"queue not refreshed: {exc}"
+
+    # ------------------------------------------------------------------ opening
+    def open(self, rel: str, trial: str | None = None) -> None:
+        """Show subject ``rel`` (its ``trial``, default the preferred one) in the app."""
+        subject: QueueSubject = self.by_rel[rel]
+        self.current = (rel, trial)
+        self.app.open_subject(ReviewPaths.for_subject(subject.subject_dir, subject.out_dir), trial)
+        if self.app.trial is not None:
+            self.current = (rel, self.app.trial.trial)
+        self.refresh()
+
+    def open_next(self) -> QueueRow | None:
+        """Open the next trial that needs review (after the one shown); None when none."""
+        row = next_to_review(self.refresh(), after=self.current)
+        if row is None:
+            self.run_status.content = "Every processed trial is reviewed."
+            return None
+        self.open(row.subject.rel, row.trial)
+        return row
+
+    def _chosen(self, label: str) -> None:
+        if label in self.labels and self.labels[label] != self.current:
+            self.open(*self.labels[label])
+
+    # ------------------------------------------------------------------ background processing
+    def _process(self, workers: int) -> None:
+        from addb_viewer.review_masks import review_digest, subject_masks
+        from solver.dataset.runner import DatasetOptions, process_dataset
+
+        def event(kind: str, data: dict[str, Any]) -> None:
+            with self._lock:
+                if kind == "queued":
+                    self.running.update(dict.fromkeys(data["rels"], "queued"))
+                elif kind == "done":
+                    self.running.pop(data["rel"], None)
+            self.refresh()
+            if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:
+                self.open(data["rel"])  # the subject on screen was waiting for its output
+
+        try:
+            dataset = self.dataset_dir
+            run = process_dataset(
+                dataset, self.out_dir, options=DatasetOptions(workers=workers), masks=subject_masks,
+                review_digest=review_digest, events=event, stop=self._stop,
+                progress=lambda m, f: setattr(self.run_status, "content", f"Background processing: {m}"),
+            )  # fmt: skip
+            failed = len(run.failed)
+            self.run_status.content = (
+                f"Background processing finished in {run.seconds:.0f} s" + (f"; {failed} subject(s) failed." if failed else ".")
+            )
+        except Exception as exc:  # noqa: BLE001 - shown in the page
+            self.run_status.content = f"Background processing stopped: {exc}"
+        finally:
+            with self._lock:
+                self.running.clear()
+            self.processing_done.set()
+            if not self._stop.is_set():
+                self.refresh()
+
+    def stop(self) -> None:
+        """Cancel the background run (subjects not finished keep their old output)."""
+        self._stop.set()
+        self.processing_done.wait(timeout=60)

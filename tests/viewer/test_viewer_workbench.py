@@ -1,0 +1,109 @@
+"""``addb view DATASET_DIR`` without a browser: a dataset of two shared subjects (no Geometry
+folder) is processed in the background by the Dask dataset runner while the app is up;
+the queue lists both subjects and their trials with their states; opening the second
+subject shows it with a bone mesh for every body; "Next trial to review" moves through
+the unreviewed trials and skips a trial once it is marked reviewed."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+import viser
+
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.app.queue import (
+    KINEMATICS_ONLY,
+    NOT_PROCESSED,
+    PROCESSED,
+    REVIEWED,
+    build_queue,
+    dataset_subjects,
+)
+from addb_viewer.app.workbench import Workbench, queue_markdown
+from tests.conftest import SHARED_DATA, writable_copy
+
+pytestmark = pytest.mark.slow
+SUBJECTS = {"labA/walk": "rajagopal2016_walk", "labB/run": "rajagopal2016_run"}
+
+
+@pytest.fixture
+def dataset(tmp_path: Path) -> Path:
+    for rel, name in SUBJECTS.items():
+        writable_copy(SHARED_DATA / "subjects" / name, tmp_path / "ds" / rel)
+        assert not (tmp_path / "ds" / rel / "Geometry").exists()
+    return tmp_path / "ds"
+
+
+def test_workbench_processes_in_the_background_and_opens_subjects_from_the_queue(
+    dataset: Path, make_app, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, out, subjects = dataset_subjects(dataset)
+    assert all(r.processing == NOT_PROCESSED for r in build_queue(subjects))
+    first = subjects[0]
+    app = make_app(ReviewPaths.for_subject(first.subject_dir, first.out_dir), process_missing=False)
+    assert app.trial is None and not app.jobs.running  # the app does not process it itself
+    bench = Workbench(app, dataset, workers=1)
+    bench.current = (first.rel, None)
+    assert bench.processing_done.wait(600), bench.run_status.content
+    rows = bench.refresh()
+    listed = {(r.subject.rel, r.trial): r.processing for r in rows}
+    assert listed == {
+        ("labA/walk", "walk"): PROCESSED, ("labA/walk", "static"): KINEMATICS_ONLY,
+        ("labB/run", "run"): PROCESSED, ("labB/run", "static"): KINEMATICS_ONLY,
+    }  # fmt: skip
+    assert (out / "labB" / "run" / "manifest.json").is_file()
+    # the subject on screen was waiting for its output: it is shown once processed
+    assert app.trial is not None and app.paths.subject_dir == first.subject_dir
+    text = queue_markdown(rows)
+    assert "labA/walk / walk" in text and "labB/run / run" in text
+    # open the second subject from the dropdown: every body drawn as a mesh
+    label = "labB/run / run"
+    bench.choice.value = label
+    assert app.paths.subject_dir == (dataset / "labB" / "run").resolve()
+    assert app.trial is not None and app.trial.trial == "run" and app.scene is not None
+    bodies = [b for b, m in app.trial.body_meshes.items() if m]
+    assert bodies and all(isinstance(app.scene.bodies[b], viser.MeshHandle) for b in bodies)
+    assert not app.panel.error.visible, app.panel.error.content
+    # next trial to review: another unreviewed trial; a reviewed one is skipped
+    row = bench.open_next()
+    assert row is not None and (row.subject.rel, row.trial) != ("labB/run", "run")
+    app.edit("trial reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
+    done = next(r for r in bench.rows if (r.subject.rel, r.trial) == (row.subject.rel, row.trial))
+    assert done.review == REVIEWED and done.reviewer == "tester"
+    seen = {(row.subject.rel, row.trial)}
+    for _ in range(3):
+        nxt = bench.open_next()
+        assert nxt is not None and (nxt.subject.rel, nxt.trial) not in seen
+        seen.add((nxt.subject.rel, nxt.trial))
+        app.edit("trial reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
+    assert bench.open_next() is None and "Every processed trial is reviewed" in bench.run_status.content
+    shutil.rmtree(out)
+
+
+def test_stopping_the_app_cancels_the_background_run_and_leaves_no_half_output(
+    dataset: Path, make_app, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import json
+    import time
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, out, subjects = dataset_subjects(dataset)
+    app = make_app(ReviewPaths.for_subject(subjects[1].subject_dir, subjects[1].out_dir), process_missing=False)
+    bench = Workbench(app, dataset, workers=1)
+    deadline = time.monotonic() + 120
+    while not bench.running and time.monotonic() < deadline:  # the run has queued its subjects
+        time.sleep(0.1)
+    assert bench.running
+    t0 = time.monotonic()
+    bench.stop()
+    assert bench.processing_done.is_set() and time.monotonic() - t0 < 60
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    statuses = {s["rel"]: s["status"] for s in summary["subjects"]}
+    assert "cancelled" in statuses.values() and "failed" not in statuses.values()
+    for s in summary["subjects"]:  # a cancelled subject's output folder was never put in place
+        if s["status"] == "cancelled":
+            assert not (out / s["rel"] / "manifest.json").exists()
+    assert not list(out.rglob(".addb-work-*"))
