@@ -1,6 +1,6 @@
 """The review workbench: ``addb view DATASET_DIR``, a queue over a whole dataset.
 
-A "Dataset" folder at the top of the panel shows the queue (:mod:`addb_viewer.app.queue`):
+A "Dataset queue" panel docked left of the 3D view shows the queue (:mod:`addb_viewer.app.queue`):
 every subject and trial with its processing state, review state, pending proposals,
 Hicks verdicts and marker RMS, sorted by what needs attention. "Open" switches the app
 to the chosen subject and trial (:meth:`ReviewApp.open_subject`); "Next trial to review"
@@ -24,6 +24,7 @@ from typing import Any
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.app.queue import (
     FAILED,
+    PROCESSED,
     PROCESSING,
     REVIEWED,
     QueueRow,
@@ -33,6 +34,8 @@ from addb_viewer.app.queue import (
     next_to_review,
 )
 
+#: Width of the queue's panel, px (docked left of the 3D view).
+PANEL_WIDTH = 560
 #: Rows shown in the queue table (the dropdown lists them all).
 TABLE_ROWS = 25
 #: Seconds between two readings of the queue from disk.
@@ -55,15 +58,16 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     head = f"**{len({r.subject.rel for r in rows})} subjects, {n_trials} trials: {done} reviewed"
     head += f", {waiting} processing" if waiting else ""
     head += f", {failed} failed" if failed else ""
-    lines = [head + "**", "", "| | subject / trial | state | review | pending | Hicks | RMS cm |", "|---|---|---|---|---|---|---|"]
+    lines = [head + "**", "", "| subject / trial | state | review | pending | Hicks | RMS cm |", "|---|---|---|---|---|---|"]
     for row in rows[:limit]:
-        mark = "▶" if current == (row.subject.rel, row.trial) else ""
+        name = _md(row_label(row) if row.trial else row.subject.rel)
+        name = f"**▶ {name}**" if current == (row.subject.rel, row.trial) else name
         review = row.review + (f" ({row.reviewer})" if row.reviewer else "") if row.trial else "-"
         hicks = "-" if row.hicks_linear_ok is None else ("ok" if row.hicks_linear_ok and row.hicks_angular_ok is not False else "over")
         state = row.processing + (f": {row.detail}" if row.detail else "")
         rms = "-" if row.marker_rms_m is None else f"{100 * row.marker_rms_m:.2f}"
-        pending = "-" if row.pending is None or row.trial is None else str(row.pending)
-        lines.append(f"| {mark} | {_md(row_label(row) if row.trial else row.subject.rel)} | {_md(state[:80])} | {_md(review)} | {pending} | {hicks} | {rms} |")
+        pending = "-" if row.pending is None or row.processing != PROCESSED else str(row.pending)
+        lines.append(f"| {name} | {_md(state[:80])} | {_md(review)} | {pending} | {hicks} | {rms} |")
     if len(rows) > limit:
         lines.append(f"\n… and {len(rows) - limit} more in the list below.")
     return "\n".join(lines)
@@ -99,12 +103,15 @@ class Workbench:
         self._stop = threading.Event()
         self.processing_done = threading.Event()
         gui = app.server.gui
-        self.folder = gui.add_folder("Dataset", order=-10.0)
-        with self.folder:
+        # a panel of its own, docked left of the 3D view: the queue table needs the width
+        self.panel = gui.add_panel()
+        with self.panel.add_tab("Dataset queue"):
             self.table = gui.add_markdown("Reading the dataset…")
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
             self.run_status = gui.add_markdown("")
+        self.panel.dock_left()
+        self.panel.set_width(PANEL_WIDTH)
         self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))

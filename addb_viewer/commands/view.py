@@ -71,7 +71,10 @@ def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, objec
         geometry=args.geometry, process_missing=False,
     )  # fmt: skip
     bench = Workbench(app, dataset, args.out, workers=args.workers)
-    bench.current = (first.subject.rel, first.trial)
+    if first.trial is not None and app.trial is not None and app.trial.trial != first.trial:
+        app.set_trial_options(first.trial)
+        app.load_trial(first.trial)
+    bench.current = (first.subject.rel, app.trial.trial if app.trial is not None else None)
     bench.refresh()
     print(f"addb view: dataset {dataset} ({len(subjects)} subjects, output {out})", flush=True)
     return app, bench
