@@ -15,10 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.constants import GRAVITY as G  # standard gravity, m/s²
 from solver.results import ProcessedTrial
-
-G = 9.80665
-"""Standard gravity, m/s² (OpenSim's default)."""
 
 HICKS_FORCE_FRACTION = 0.05
 """Residual force threshold as a fraction of the peak external force."""
@@ -122,7 +120,7 @@ _ROWS = (
 )
 
 
-def _fmt(value: float | int | None, digits: int) -> str:
+def _fmt(value: float | None, digits: int) -> str:
     if value is None:
         return "—"
     return f"{value:.{digits}f}" if digits else str(int(value))

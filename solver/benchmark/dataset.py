@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.benchmark.models import BenchmarkError, skeleton_for
+from solver.constants import GRAVITY_VECTOR
 from solver.results import ProcessedTrial, load_processed, processed_trials
 
 FloatArray = NDArray[np.float64]
@@ -77,7 +78,7 @@ DEFAULT_FEET = ("calcn_r", "calcn_l")
 #: dynamics stage's default threshold of contact assignment).
 LOADED_BW = 0.02
 #: Standard gravity, m/s² (OpenSim's ground frame, Y up).
-GRAVITY = np.array([0.0, -9.80665, 0.0])
+GRAVITY = np.array(GRAVITY_VECTOR)
 #: The splits, in order.
 SPLITS = ("train", "dev", "test")
 #: Sources of the input coordinates (see the module docstring).

@@ -14,11 +14,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.constants import GRAVITY  # re-exported: the g of body weight
+
 FloatArray = NDArray[np.float64]
 
 HICKS_LINEAR_BW = 0.05
 HICKS_ANGULAR_BWH = 0.1
-GRAVITY = 9.80665
 
 
 def residual_metrics(

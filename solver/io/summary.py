@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from solver.constants import GRAVITY
 from solver.errors import FileFormatError, XmlFormatError
 from solver.io.c3d import read_c3d
 from solver.io.external_loads import read_external_loads
@@ -28,8 +29,6 @@ from solver.io.review import read_review
 from solver.io.subject import load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
-
-GRAVITY = 9.80665
 
 
 def summarize(path: str | Path) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.constants import GRAVITY_VECTOR
 from solver.errors import OsimModelError
 from solver.model.functions import (
     Constant,
@@ -173,7 +174,7 @@ class OsimModel:
     coordinates: tuple[Coordinate, ...]
     couplers: tuple[Coupler, ...]
     markers: tuple[Marker, ...]
-    gravity: tuple[float, float, float] = (0.0, -9.80665, 0.0)
+    gravity: tuple[float, float, float] = GRAVITY_VECTOR
     source: str = ""
 
     @property
@@ -695,7 +696,7 @@ def read_osim(path: str | Path) -> OsimModel:
     for m in markers:
         if m.body not in names and m.body != "ground":
             raise ctx.error(f"marker {m.name} is on unknown body {m.body!r}")
-    gravity = ctx.floats(root, "gravity", 3, "0 -9.80665 0")
+    gravity = ctx.floats(root, "gravity", 3, " ".join(map(str, GRAVITY_VECTOR)))
     return OsimModel(
         name=root.get("name") or Path(path).stem,
         bodies=tuple(bodies),
