@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import viser
 
+from addb_viewer.app.camera import VIEWS
 from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
 
 #: Command label -> (hotkey, description).
@@ -55,6 +56,8 @@ class ReviewPanel:
     speed: viser.GuiSliderHandle
     loop: viser.GuiCheckboxHandle
     jump: viser.GuiButtonGroupHandle
+    views: viser.GuiButtonGroupHandle
+    follow: viser.GuiCheckboxHandle
     foot: viser.GuiDropdownHandle
     toggle_flag: viser.GuiButtonHandle
     marks: viser.GuiButtonGroupHandle
@@ -101,6 +104,8 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["speed"] = gui.add_slider("Speed (x)", min=SPEED_MIN, max=SPEED_MAX, step=0.1, initial_value=1.0)
         h["loop"] = gui.add_checkbox("Loop", initial_value=True)
         h["jump"] = gui.add_button_group("Jump to next", ("Flagged", "Proposal", "Over Hicks"))
+        h["views"] = gui.add_button_group("View", VIEWS)
+        h["follow"] = gui.add_checkbox("Follow pelvis", initial_value=False)
     with gui.add_folder("Flags (unmeasured force)"):
         h["foot"] = gui.add_dropdown("Foot", ("both", "left", "right"), initial_value="both")
         h["toggle_flag"] = gui.add_button("Toggle flag at this frame", hint="hotkey F")

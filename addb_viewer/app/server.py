@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.app.access import TOKEN_PARAM, is_loopback, new_token, start_viser
+from addb_viewer.app.camera import CameraPose, followed, framing_point, view_pose
 from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
 from addb_viewer.app.meshes import body_mesh
@@ -337,12 +338,37 @@ class ReviewApp:
         self._show_range_info()
 
     def _aim_camera(self, trial: ProcessedTrial) -> None:
-        pel = trial.body_position[:, 0, :]
-        ok = np.isfinite(pel).all(axis=1)
-        look = np.median(pel[ok], axis=0) if ok.any() else np.array([0.0, 1.0, 0.0])
-        pos = look + np.array([0.0, 0.4, 3.2])
+        """Frame the subject from the side, for new pages and every open one."""
+        self.camera_view("Sagittal", look=framing_point(trial.body_position[:, 0, :]))
+
+    def camera_view(self, view: str, *, look: np.ndarray | None = None) -> CameraPose:
+        """Put every page's camera (and new pages') in ``view`` (Sagittal, Frontal, Top)
+        looking at ``look`` (default: the pelvis at the current frame)."""
+        if look is None:
+            t, pb = self.trial, self.playback
+            look = t.body_position[pb.frame, 0, :] if t is not None and pb is not None else np.array([0.0, 1.0, 0.0])
+            if not np.isfinite(look).all() and t is not None:
+                look = framing_point(t.body_position[:, 0, :])
+        pose = view_pose(view, look)
         cam = self.server.initial_camera
-        cam.look_at, cam.position, cam.up = tuple(look), tuple(pos), (0.0, 1.0, 0.0)
+        cam.look_at, cam.position, cam.up = pose.look_at, pose.position, pose.up
+        for client in self.server.get_clients().values():
+            with client.atomic():
+                client.camera.up_direction = pose.up
+                client.camera.position = pose.position
+                client.camera.look_at = pose.look_at
+        return pose
+
+    def _follow_pelvis(self, k: int) -> None:
+        """Move every page's camera with the pelvis (its orbit and zoom kept)."""
+        if self.trial is None:
+            return
+        target = self.trial.body_position[k, 0, :]
+        for client in self.server.get_clients().values():
+            pos, look = followed(client.camera.position, client.camera.look_at, target)
+            with client.atomic():
+                client.camera.position = tuple(pos)
+                client.camera.look_at = tuple(look)
 
     # ================================================================== drawing
     def render(self, k: int, *, force_plots: bool = False) -> None:
@@ -351,6 +377,8 @@ class ReviewApp:
         if self.scene is None or self.playback is None or self.trial is None:
             return
         self.scene.show(k, self._banner(k))
+        if self.panel.follow.value:
+            self._follow_pelvis(k)
         with self._quiet_updates():
             self.panel.frame.value = k
         self.panel.status.content = self._status(k)
@@ -651,6 +679,7 @@ class ReviewApp:
         p.speed.on_update(on("Speed", lambda e: self._with_playback(lambda pb: pb.set_speed(e.target.value, time.monotonic()))))
         p.loop.on_update(on("Loop", lambda e: self._with_playback(lambda pb: setattr(pb, "loop", bool(e.target.value)))))
         p.jump.on_click(on("Jump", lambda e: self.jump(e.target.value)))
+        p.views.on_click(on("View", lambda e: self.camera_view(e.target.value)))
         p.toggle_flag.on_click(on("Flag", lambda e: self.toggle_flag()))
         p.marks.on_click(on("Range", lambda e: self.mark(e.target.value)))
         p.range_flags.on_click(on("Range flags", lambda e: self.range_edit(e.target.value)))
