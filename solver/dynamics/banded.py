@@ -20,6 +20,48 @@ from scipy.linalg.lapack import dpbtrf, dpbtrs
 FloatArray = NDArray[np.float64]
 
 
+class BlockBands:
+    """Zeroed upper block bands of a symmetric block-banded matrix, to accumulate into.
+
+    ``blocks[i, o]`` (``(T, nb + 1, nf, nf)``, a writable view) is H(i, i + o). The
+    storage is row panels ``(T, nf, (nb + 2) nf)``: row r of block row i holds
+    H(i nf + r, i nf ... (i + nb + 1) nf) followed by nf zeros, so the band storage LAPACK
+    takes is one strided copy of it (:meth:`lower_band_storage`), and the bands of one
+    block row, ``blocks[i, o:o + m]``, are the contiguous columns ``panel[i, :, o nf:(o + m) nf]``.
+
+    Parameters
+    ----------
+    t, nbp1, nf
+        Block rows T, block bands nb + 1 (the diagonal one included), block size nf.
+    """
+
+    def __init__(self, t: int, nbp1: int, nf: int) -> None:
+        self.t, self.nbp1, self.nf = t, nbp1, nf
+        width = nbp1 * nf
+        self.panel = np.zeros((t, nf, width + nf))
+        self.blocks = self.panel[:, :, :width].reshape(t, nf, nbp1, nf).transpose(0, 2, 1, 3)
+
+    def lower_band_storage(self) -> FloatArray:
+        """LAPACK lower band storage of the whole symmetric matrix.
+
+        Returns
+        -------
+        ``(u + 1, T nf)`` Fortran-ordered array, ``ab[d, c] = H[c + d, c]`` with bandwidth
+        ``u = (nb + 1) nf - 1``; entries past the matrix end are zero. Blocks past the last
+        frame are ignored (zeroed here), as is the lower triangle of the diagonal blocks.
+        """
+        t, nbp1, nf = self.t, self.nbp1, self.nf
+        width = nbp1 * nf  # u + 1
+        panel = self.panel
+        for o in range(1, nbp1):  # blocks past the last frame
+            panel[max(t - o, 0) :, :, o * nf : (o + 1) * nf] = 0.0
+        panel[:, :, width:] = 0.0
+        # skewed view: H[c, c + d] is panel[i, r, r + d] for c = i nf + r
+        s = panel.strides
+        view = as_strided(panel, shape=(t, nf, width), strides=(s[0], s[1] + s[2], s[2]), writeable=False)
+        return np.asfortranarray(view.reshape(t * nf, width).T)
+
+
 def lower_band_storage(blocks: FloatArray) -> FloatArray:
     """Upper block bands -> LAPACK lower band storage of the whole symmetric matrix.
 
@@ -36,17 +78,9 @@ def lower_band_storage(blocks: FloatArray) -> FloatArray:
     ``u = (nb + 1) nf - 1``; entries past the matrix end are zero.
     """
     t, nbp1, nf, _ = blocks.shape
-    width = nbp1 * nf  # u + 1
-    # panel[i, r, o nf + j] = H(i nf + r, (i + o) nf + j): row r of block row i, from its
-    # diagonal block on; padded with nf zero columns so every row has u + 1 entries
-    panel = np.zeros((t, nf, width + nf))
-    panel[:, :, :width] = blocks.transpose(0, 2, 1, 3).reshape(t, nf, width)
-    for o in range(1, nbp1):  # blocks past the last frame
-        panel[max(t - o, 0) :, :, o * nf : (o + 1) * nf] = 0.0
-    # skewed view: H[c, c + d] is panel[i, r, r + d] for c = i nf + r
-    s = panel.strides
-    view = as_strided(panel, shape=(t, nf, width), strides=(s[0], s[1] + s[2], s[2]), writeable=False)
-    return np.asfortranarray(view.reshape(t * nf, width).T)
+    bands = BlockBands(t, nbp1, nf)
+    bands.blocks[...] = blocks
+    return bands.lower_band_storage()
 
 
 def banded_cholesky_solve(ab: FloatArray, rhs: FloatArray) -> FloatArray:

@@ -35,7 +35,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
 
-from solver.dynamics.banded import banded_cholesky_solve, lower_band_storage
+from solver.dynamics.banded import BlockBands, banded_cholesky_solve
 from solver.dynamics.spline import derivative_operators
 from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
@@ -169,6 +169,7 @@ class _TrialProblem:
         # (q, qp, vp, ap, hdot, com) of the last evaluated q: the step's accepted point is
         # linearized next, and its centroidal terms are the ones the line search computed
         self._state: tuple[FloatArray, ...] | None = None
+        self._bands: BlockBands | None = None  # the normal matrix's storage, reused
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -235,14 +236,19 @@ class _TrialProblem:
         st, t, nf, free = self.st, self.t, self.nf, self.free
         b = st.band
         nb = 2 * b  # block bandwidth of J^T J
-        blocks = np.zeros((t, nb + 1, nf, nf))  # blocks[i, o] = H(i, i + o)
+        if self._bands is None:  # one buffer per trial problem (fresh zeroed pages cost more than a fill)
+            self._bands = BlockBands(t, nb + 1, nf)
+        else:
+            self._bands.panel.fill(0.0)
+        bands = self._bands
+        blocks = bands.blocks  # blocks[i, o] = H(i, i + o)
         grad = np.zeros((t, nf))
         qp, vp, ap, hdot_all, com_all = self._dynamics_state(q)
         model, data = self.sk.model, self.sk.data
         sm = self.st.marker_sigma
         # markers: frame k depends on q_k only; unseen markers contribute zero rows
-        pos, jac = self.sk.marker_jacobians(q, self.data.markers)  # (T, M, 3), (T, M, 3, n)
-        jm = np.where(self.seen[:, :, None, None], jac[..., free], 0.0).reshape(t, -1, nf) / sm
+        pos, jac = self.sk.marker_jacobians(q, self.data.markers, free)  # (T, M, 3), (T, M, 3, nf)
+        jm = np.where(self.seen[:, :, None, None], jac, 0.0).reshape(t, -1, nf) / sm
         rm = (np.where(self.seen[..., None], pos - self.y, 0.0) / sm).reshape(t, -1, 1)
         jmt = jm.transpose(0, 2, 1)
         blocks[:, 0] += jmt @ jm
@@ -277,15 +283,15 @@ class _TrialProblem:
                                 + (dq[ok] if o == 0 else 0.0))
         gres = np.einsum("kroi,kr->koi", jb, res)  # (T, 2b + 1, nf)
         for o1 in range(-b, b + 1):
-            s1 = idx + o1
-            ok1 = (s1 >= 0) & (s1 < t)
-            # idx + o1 is a set of distinct frames: plain fancy-index accumulation is exact
-            grad[s1[ok1]] += gres[ok1, o1 + b]
-            j1t = jb[:, :, o1 + b].transpose(0, 2, 1)
-            for o2 in range(o1, b + 1):
-                s2 = idx + o2
-                both = ok1 & (s2 >= 0) & (s2 < t)
-                blocks[s1[both], o2 - o1] += j1t[both] @ jb[both, :, o2 + b]
+            # frames k with k + o1 inside the trial: k in [lo, hi), a contiguous range
+            lo, hi = max(0, -o1), min(t, t - o1)
+            grad[lo + o1 : hi + o1] += gres[lo:hi, o1 + b]
+            # blocks H(k + o1, k + o2) for every o2 >= o1 at once: the bands o2 - o1 = 0..b - o1
+            # of block row k + o1 are contiguous panel columns (terms with k + o2 past the
+            # end are zero, as jb is there)
+            m = b - o1 + 1
+            j1t = jb[lo:hi, :, o1 + b].transpose(0, 2, 1)  # (k, nf, 6)
+            bands.panel[lo + o1 : hi + o1, :, : m * nf] += j1t @ jb[lo:hi, :, o1 + b :].reshape(hi - lo, 6, m * nf)
         # smoothness: central second differences
         ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
         sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
@@ -294,8 +300,8 @@ class _TrialProblem:
         for a in range(3):
             grad[a : a + t - 2] += coef[a] * sd
             for c in range(a, 3):
-                blocks[np.arange(t - 2)[:, None] + a, c - a, diag, diag] += coef[a] * coef[c]
-        return lower_band_storage(blocks), grad.reshape(-1)
+                blocks[a : a + t - 2, c - a][:, diag, diag] += coef[a] * coef[c]
+        return bands.lower_band_storage(), grad.reshape(-1)
 
     def _coupling_free(self, q: FloatArray) -> FloatArray:
         """``(T, nv, nf)`` coupling Jacobian d q_pin / d q restricted to the free coordinates."""

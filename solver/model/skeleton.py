@@ -415,7 +415,9 @@ class Skeleton:
         m = local.shape[0]
         return pm, (jm.reshape(3 * m, self.nv) @ cmat).reshape(m, 3, self.n)
 
-    def marker_jacobians(self, q: FloatArray, markers: IntArray) -> tuple[FloatArray, FloatArray]:
+    def marker_jacobians(
+        self, q: FloatArray, markers: IntArray, columns: IntArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
         """:meth:`marker_jacobian` for many frames at once (batched forward kinematics in numpy).
 
         The DoF columns are the ones pinocchio's world-frame joint Jacobian gives: a revolute
@@ -429,13 +431,16 @@ class Skeleton:
             ``(T, n)`` or ``(n,)`` coordinates (rad or m).
         markers
             ``(M,)`` indices into :attr:`marker_names`.
+        columns
+            ``(k,)`` coordinate indices whose Jacobian columns to return, in that order
+            (default: all n).
 
         Returns
         -------
         positions
             ``(T, M, 3)`` ground frame, m.
         jacobian
-            ``(T, M, 3, n)`` d position / d q (m per rad or m/m); columns of dependent
+            ``(T, M, 3, k)`` d position / d q (m per rad or m/m); columns of dependent
             (coupled) coordinates are zero, their effect is in the independent coordinate's.
         """
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
@@ -444,13 +449,16 @@ class Skeleton:
         mj = self.marker_joint[markers]
         pm = pos[mj] + np.einsum("mijt,mj->mit", rot[mj], self.marker_in_joint[markers])  # (M, 3, T)
         vals, cols = self.cmap.jacobian_batch(q2)  # (T, nv), (nv,)
+        out_col = np.arange(self.n) if columns is None else np.full(self.n, -1)
+        if columns is not None:
+            out_col[np.asarray(columns, dtype=np.intp)] = np.arange(len(columns))
         t, m = q2.shape[0], markers.size
-        jac = np.zeros((m, 3, self.n, t))
+        jac = np.zeros((m, 3, self.n if columns is None else len(columns), t))
         support = self._support[mj]  # (M, nv)
         for j in range(1, self._parents.size):
             dof = self._idx_v[j]
             moved = np.flatnonzero(support[:, dof])
-            if moved.size == 0:
+            if moved.size == 0 or out_col[cols[dof]] < 0:
                 continue
             w = np.einsum("ijt,j->it", rot[j], self._jaxis[j])  # (3, T) world axis
             if self._jtype[j] == 0:
@@ -461,7 +469,7 @@ class Skeleton:
                 )
             else:
                 col = np.broadcast_to(w[None], (moved.size, 3, t))
-            jac[moved, :, cols[dof]] += col * vals[:, dof]
+            jac[moved, :, out_col[cols[dof]]] += col * vals[:, dof]
         return pm.transpose(2, 0, 1), jac.transpose(3, 0, 1, 2)
 
     # ------------------------------------------------------------------ dynamics
