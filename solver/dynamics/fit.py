@@ -371,13 +371,19 @@ def mass_regression(
     ext = [ExternalWrench(b, w[idx, :3], np.zeros((idx.size, 3)), w[idx, 3:]) for b, w in wrenches]
     tau_ext = sk.inverse_dynamics(q[idx], qd[idx], qdd[idx], ext).tau - sk.inverse_dynamics(q[idx], qd[idx], qdd[idx]).tau
     root = list(sk.root_transform_axes())
-    a = np.zeros((idx.size, 6, len(joints)))
+    # column c of p_mat holds joint c's inertial parameters at that joint's regressor columns
+    p_mat = np.zeros((10 * (model.njoints - 1), len(joints)))
+    for c, j in enumerate(joints):
+        p_mat[10 * (j - 1) : 10 * j, c] = params[j]
+    tau_pin = np.empty((idx.size, sk.nv, len(joints)))  # expanded joint forces of each factor
     for k in range(idx.size):
-        y = pin.computeJointTorqueRegressor(model, data, qp[k], vp[k], ap[k])
-        cmat = sk.cmap.jacobian(q[idx[k]])
-        for c, j in enumerate(joints):
-            tau_pin = y[:, 10 * (j - 1) : 10 * j] @ params[j]
-            a[k, :, c] = (cmat.T @ tau_pin)[root]
+        tau_pin[k] = pin.computeJointTorqueRegressor(model, data, qp[k], vp[k], ap[k]) @ p_mat
+    # C^T tau_pin on the root coordinates (C has one nonzero per expanded DoF)
+    vals, cols = sk.cmap.jacobian_batch(q[idx])  # (K, nv), (nv,)
+    a = np.zeros((idx.size, 6, len(joints)))
+    for i, r in enumerate(root):
+        for dof in np.flatnonzero(cols == r):
+            a[:, i] += vals[:, dof, None] * tau_pin[:, dof]
     return a.reshape(-1, len(joints)), tau_ext[:, root].reshape(-1), joints
 
 
