@@ -223,6 +223,29 @@ class TrialEditor:
             edits.append(self.store.add_note(self.trial, text, start=s, stop=e))
         return edits
 
+    def accept_range(self, start: int, stop: int) -> Edit | None:
+        """Accept the pending proposals inside frames ``[start, stop)`` as flags; None when
+        none is pending there."""
+        rng = self._range(start, stop)
+        frames = [f for f in rng if self.view().pending[f]]
+        if not frames:
+            return None
+        return self.store.set_unmeasured(self.trial, frames, True, source="proposal_accepted")
+
+    def reject_range(self, start: int, stop: int) -> list[Edit]:
+        """Reject the pending proposals inside frames ``[start, stop)`` (each run clipped to
+        the range); one edit per run, empty when none is pending there."""
+        rng = self._range(start, stop)
+        inside = np.zeros(self.n_frames, bool)
+        inside[rng.start : rng.stop] = True
+        pending = self.view().pending & inside
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], pending.astype(np.int8), [0]))))
+        edits = []
+        for s, e in zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True):
+            reason = self.reasons[s] if s < len(self.reasons) else ""
+            edits.append(self.store.add_note(self.trial, f"{REJECTED_NOTE}: {reason}" if reason else REJECTED_NOTE, start=s, stop=e))
+        return edits
+
     # ------------------------------------------------------------------ other
     def set_reviewed(self, reviewed: bool = True) -> Edit:
         """Mark the trial as reviewed (or not)."""

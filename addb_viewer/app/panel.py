@@ -12,10 +12,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import viser
 
 from addb_viewer.app.camera import VIEWS
 from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
+from addb_viewer.app.timeline import legend_markdown
 
 #: Command label -> (hotkey, description).
 HOTKEYS: dict[str, tuple[str, str]] = {
@@ -28,7 +30,14 @@ HOTKEYS: dict[str, tuple[str, str]] = {
     "Next flagged frame": ("N", "jump to the next flagged range"),
     "Next frame over Hicks threshold": ("H", "jump to the next range whose residual is too large"),
     "Undo": ("U", "undo your last edit"),
+    "Flag selection": ("G", "flag the timeline's selected frames (selected foot)"),
+    "Unflag selection": ("X", "clear the flags of the timeline's selected frames"),
+    "Accept selection": ("Y", "accept the pending proposals in the timeline's selection"),
+    "Reject selection": ("Z", "reject the pending proposals in the timeline's selection"),
 }
+
+#: Width of the timeline-and-plots panel docked left of the 3D view, px.
+SIDE_WIDTH_PX = 560
 
 LEGEND = (
     "<small>"
@@ -82,6 +91,13 @@ class ReviewPanel:
     marker_threshold_cm: viser.GuiNumberHandle
     m_per_bw: viser.GuiNumberHandle
     plots_folder: viser.GuiFolderHandle
+    side: viser.PanelHandle
+    timeline_tab: viser.GuiTabHandle
+    timeline_image: viser.GuiImageHandle
+    timeline_frame: viser.GuiSliderHandle
+    selection: viser.GuiMultiSliderHandle
+    selection_info: viser.GuiMarkdownHandle
+    selection_edit: viser.GuiButtonGroupHandle
     record_name: viser.GuiTextHandle
     record: viser.GuiButtonHandle
     record_status: viser.GuiMarkdownHandle
@@ -126,7 +142,6 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["comparison"] = gui.add_markdown("")
     with gui.add_folder("Diagnosis", expand_by_default=False):
         h["diagnosis"] = gui.add_markdown("")
-    h["plots_folder"] = gui.add_folder("Plots")
     with gui.add_folder("Display", expand_by_default=False):
         h["show_labels"] = gui.add_checkbox("Marker names", initial_value=False)
         h["show_markers"] = gui.add_checkbox("Markers", initial_value=True)
@@ -139,6 +154,20 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["record_name"] = gui.add_text("File name", initial_value="trial.rrd")
         h["record"] = gui.add_button("Record to Rerun")
         h["record_status"] = gui.add_markdown("")
+    # the timeline and the plots: a panel of their own docked left of the 3D view, always
+    # visible (the dataset queue adds a tab to it)
+    h["side"] = gui.add_panel()
+    h["timeline_tab"] = h["side"].add_tab("Timeline and plots")
+    with h["timeline_tab"]:
+        h["timeline_image"] = gui.add_image(np.full((8, 8, 3), 255, np.uint8), format="png")
+        gui.add_markdown(legend_markdown())
+        h["timeline_frame"] = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0, disabled=True)
+        h["selection"] = gui.add_multi_slider("Selection", min=0, max=1, step=1, initial_value=(0, 0), disabled=True)
+        h["selection_info"] = gui.add_markdown("Drag the ends of Selection to choose frames.")
+        h["selection_edit"] = gui.add_button_group("Selected frames", ("Flag", "Unflag", "Accept", "Reject"))
+        h["plots_folder"] = gui.add_folder("Plots")
+    h["side"].dock_left()
+    h["side"].set_width(SIDE_WIDTH_PX)
     h["commands"] = {
         label: gui.add_command(label, description=desc, hotkey=key)  # type: ignore[arg-type]
         for label, (key, desc) in HOTKEYS.items()

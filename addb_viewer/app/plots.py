@@ -15,7 +15,9 @@ dynamics before the dynamics stage ran) is hidden and the chart says so in its t
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import viser
@@ -196,7 +198,7 @@ class Chart:
             scales=scales,
             axes=tuple(axes),
             title=title + (f" — {note}" if note else ""),
-            legend={"show": True},
+            legend={"show": False},  # the series are named in the title (space beside the 3D view)
             height=height,
             aspect=2.0,
         )
@@ -211,7 +213,7 @@ class Chart:
             shade_floors=[0.0, PROPOSAL_BAND],
         )
 
-    def update(self, *, frame: int | None = None, flagged=None, proposed=None) -> None:  # noqa: ANN001
+    def update(self, *, frame: int | None = None, flagged=None, proposed=None) -> None:
         """Move the cursor and/or change the shaded frames, then re-send the data."""
         if frame is not None:
             self.frame = int(frame)
@@ -264,8 +266,22 @@ def residual_lines(trial: ProcessedTrial) -> list[Line]:
     ]
 
 
+#: Height of each chart, px (four charts and the timeline fit beside the 3D view at 1000 px).
+CHART_HEIGHT = 96
+#: The joint torque shown first (when the model has it).
+DEFAULT_TORQUE = "knee_angle_r"
+
+
+def torque_line(trial: ProcessedTrial, coordinate: str) -> Line:
+    """The generalized force of ``coordinate`` (joint torque N·m, or force N for a
+    translational coordinate) as a chart line."""
+    j = list(trial.coordinate_names).index(coordinate)
+    return Line(f"{coordinate}", np.asarray(trial.tau[:, j], float), "rgb(90, 60, 160)")
+
+
 class TrialPlots:
-    """The three charts of a trial: vertical GRF, residuals, marker RMS per frame.
+    """The four charts of a trial: vertical GRF, residuals, marker RMS per frame, and one
+    joint torque picked from a list.
 
     Parameters
     ----------
@@ -273,28 +289,54 @@ class TrialPlots:
         Where to add the charts.
     trial
         The processed trial.
+    container
+        The GUI folder the charts live in (a chart added later, on picking another joint
+        torque, goes there too); None: the current context.
     """
 
-    def __init__(self, gui: viser.GuiApi, trial: ProcessedTrial) -> None:
+    def __init__(self, gui: viser.GuiApi, trial: ProcessedTrial, container: Any = None) -> None:
         t = trial.time
+        self.gui, self.trial, self.container = gui, trial, container
         no_plates = "no force plates" if not trial.plates else ""
-        no_dyn = "" if trial.has_dynamics else "no dynamics yet"
+        self.no_dyn = "" if trial.has_dynamics else "no dynamics yet"
+        h = CHART_HEIGHT
         self.charts = [
-            Chart(gui, "Vertical GRF", t, grf_lines(trial), ("N",), note=no_plates),
-            Chart(gui, "Residuals", t, residual_lines(trial), ("N", "N·m"), note=no_dyn),
+            Chart(gui, "Vertical GRF: left · right · m(a+g) dashed", t, grf_lines(trial), ("N",), note=no_plates, height=h),
+            Chart(gui, "Residual |F| (N, red) · |M| (N·m, blue); dashed: Hicks", t, residual_lines(trial), ("N", "N·m"),
+                  note=self.no_dyn, height=h),
             Chart(
-                gui, "Marker RMS", t,
+                gui, "Marker RMS (cm)", t,
                 [Line("marker RMS (cm)", 100 * trial.marker_rms_per_frame, "rgb(0, 120, 120)")],
-                ("cm",),
+                ("cm",), height=h,
             ),
-        ]
+        ]  # fmt: skip
+        names = tuple(trial.coordinate_names)
+        first = DEFAULT_TORQUE if DEFAULT_TORQUE in names else names[0]
+        self.torque_choice = gui.add_dropdown("Joint torque", names, initial_value=first)
+        self.charts.append(self._torque_chart(first))
+        self.torque_choice.on_update(lambda e: self.show_torque(e.target.value))
 
-    def update(self, *, frame: int | None = None, flagged=None, proposed=None) -> None:  # noqa: ANN001
+    def _torque_chart(self, coordinate: str) -> Chart:
+        return Chart(self.gui, f"Joint torque: {coordinate}", self.trial.time, [torque_line(self.trial, coordinate)],
+                     ("N·m",), note=self.no_dyn, height=CHART_HEIGHT)  # fmt: skip
+
+    def show_torque(self, coordinate: str) -> None:
+        """Show ``coordinate``'s generalized force in the last chart (same cursor and shading)."""
+        old = self.charts[-1]
+        with self.container if self.container is not None else contextlib.nullcontext():
+            new = self._torque_chart(coordinate)
+        new.frame, new.flagged, new.proposed = old.frame, old.flagged, old.proposed
+        old.remove()
+        new.update()
+        self.charts[-1] = new
+
+    def update(self, *, frame: int | None = None, flagged=None, proposed=None) -> None:
         """Move every chart's cursor and/or change the shaded frames."""
         for c in self.charts:
             c.update(frame=frame, flagged=flagged, proposed=proposed)
 
     def remove(self) -> None:
-        """Remove the charts from the page."""
+        """Remove the charts (and the torque list) from the page."""
         for c in self.charts:
             c.remove()
+        self.torque_choice.remove()

@@ -38,6 +38,7 @@ from addb_viewer.app.reprocess import Reprocessor
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
+from addb_viewer.app.timeline import TrackData, timeline_image, track_data
 from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
 from solver.errors import AddbError
@@ -129,6 +130,7 @@ class ReviewApp:
         self.editor: TrialEditor | None = None
         self.view: FlagView | None = None
         self.hicks: np.ndarray | None = None
+        self.tracks: TrackData | None = None
         self.rms: np.ndarray | None = None
         self._last_plot = 0.0
         self.jobs = Reprocessor(self)
@@ -188,7 +190,7 @@ class ReviewApp:
         self.jobs.cancel(wait=True)
         with self._lock:
             self._drop_trial()
-            self.trial = self.playback = self.editor = self.view = None
+            self.trial = self.playback = self.editor = self.view = self.tracks = None
             self.trials = []
             if self.store is not None:
                 with contextlib.suppress(AnnotationError):
@@ -291,10 +293,12 @@ class ReviewApp:
             self.playback = Playback(trial.n_frames, trial.rate_hz or 100.0, frame=frame)
             self.scene = TrialScene(self.server, trial, meshes, self.settings)
             with self.panel.plots_folder:
-                self.plots = TrialPlots(self.server.gui, trial)
+                self.plots = TrialPlots(self.server.gui, trial, container=self.panel.plots_folder)
             if view is not None:
                 self.plots.update(flagged=view.flagged, proposed=view.pending)
+            self.tracks = track_data(trial, view, self.hicks)
             self._sync_controls(name)
+            self._setup_timeline(trial)
             self.panel.diagnosis.content = diagnosis_markdown(self.paths.out_dir, self.paths.subject_dir, name)
             self._aim_camera(trial)
             self.render(self.playback.frame, force_plots=True)
@@ -381,10 +385,12 @@ class ReviewApp:
             self._follow_pelvis(k)
         with self._quiet_updates():
             self.panel.frame.value = k
+            self.panel.timeline_frame.value = k
         self.panel.status.content = self._status(k)
         now = time.monotonic()
         if self.plots is not None and (force_plots or not self.playback.playing or now - self._last_plot >= PLOT_INTERVAL_S):
             self.plots.update(frame=k)
+            self.draw_timeline()
             self._last_plot = now
 
     def _banner(self, k: int) -> str | None:
@@ -581,6 +587,8 @@ class ReviewApp:
             if self.editor is not editor:
                 return
             self.view = view
+            if self.trial is not None:
+                self.tracks = track_data(self.trial, view, self.hicks)
             if self.plots is not None:
                 self.plots.update(flagged=view.flagged, proposed=view.pending)
                 self._last_plot = time.monotonic()
@@ -613,15 +621,76 @@ class ReviewApp:
             if pb is None:
                 return
             {"Set in": pb.mark_in, "Set out": pb.mark_out, "Clear marks": pb.clear_marks}[what]()
+            sel = pb.selection()
+            if sel is not None:
+                with self._quiet_updates():
+                    self.panel.selection.value = (sel[0], sel[1] - 1)
+            self.draw_timeline()
         self._show_range_info()
+
+    def _setup_timeline(self, trial: ProcessedTrial) -> None:
+        """Size the timeline's sliders to the trial (no selection yet)."""
+        last = max(trial.n_frames - 1, 1)
+        p = self.panel
+        with self._quiet_updates():
+            p.timeline_frame.max = last
+            p.timeline_frame.disabled = False
+            p.selection.max = last
+            p.selection.value = (0, 0)
+            p.selection.disabled = False
+        p.selection_info.content = "Drag the ends of Selection to choose frames."
+
+    def draw_timeline(self) -> float:
+        """Redraw the timeline strip (tracks, playhead, selection); returns the seconds it
+        took server-side (image built and handed to viser)."""
+        t0 = time.perf_counter()
+        pb, tracks = self.playback, self.tracks
+        if pb is None or tracks is None:
+            return 0.0
+        self.panel.timeline_image.image = timeline_image(tracks, frame=pb.frame, selection=pb.selection())
+        return time.perf_counter() - t0
+
+    def select(self, start: int, end: int) -> None:
+        """Select frames ``start``..``end`` (inclusive, either order) on the timeline; they
+        become the in and out points of the range edits."""
+        with self._lock:
+            pb = self.playback
+            if pb is None:
+                return
+            pb.mark_in(min(start, end))
+            pb.mark_out(max(start, end))
+            with self._quiet_updates():
+                self.panel.selection.value = (pb.in_point, pb.out_point)
+            self.draw_timeline()
+        self._show_range_info()
+
+    def selection_edit(self, what: str) -> None:
+        """"Flag", "Unflag", "Accept" or "Reject" the timeline's selected frames."""
+        pb = self.playback
+        sel = pb.selection() if pb is not None else None
+        if sel is None:
+            self.panel.saved.content = "Select frames on the timeline first (drag the ends of Selection)."
+            return
+        s, e = sel
+        if what == "Flag":
+            self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
+        elif what == "Unflag":
+            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
+        elif what == "Accept":
+            self.edit(f"accept proposals in {s}–{e - 1}", lambda ed, _k, _f: ed.accept_range(s, e))
+        else:
+            self.edit(f"reject proposals in {s}–{e - 1}", lambda ed, _k, _f: ed.reject_range(s, e))
 
     def _show_range_info(self) -> None:
         pb = self.playback
         sel = pb.selection() if pb is not None else None
         if sel is None:
             self.panel.range_info.content = "Range: no in/out points (press I / O)"
+            self.panel.selection_info.content = "Drag the ends of Selection to choose frames."
         else:
-            self.panel.range_info.content = f"Range: frames {sel[0]}–{sel[1] - 1} ({sel[1] - sel[0]} frames)"
+            text = f"frames {sel[0]}–{sel[1] - 1} ({sel[1] - sel[0]} frames)"
+            self.panel.range_info.content = f"Range: {text}"
+            self.panel.selection_info.content = f"Selected: {text}; G flag · X unflag · Y accept · Z reject"
 
     def range_edit(self, what: str) -> None:
         """"Flag range" (for the selected foot) or "Unflag range" over the in/out points."""
@@ -675,6 +744,9 @@ class ReviewApp:
         on = self._guard
         p.trial.on_update(on("Trial", lambda e: self.load_trial(e.target.value)))
         p.frame.on_update(on("Seek", lambda e: self.seek(int(e.target.value))))
+        p.timeline_frame.on_update(on("Seek", lambda e: self.seek(int(e.target.value))))
+        p.selection.on_update(on("Selection", lambda e: self.select(*(int(v) for v in e.target.value))))
+        p.selection_edit.on_click(on("Selected frames", lambda e: self.selection_edit(e.target.value)))
         p.transport.on_click(on("Playback", lambda e: self._transport(e.target.value)))
         p.speed.on_update(on("Speed", lambda e: self._with_playback(lambda pb: pb.set_speed(e.target.value, time.monotonic()))))
         p.loop.on_update(on("Loop", lambda e: self._with_playback(lambda pb: setattr(pb, "loop", bool(e.target.value)))))
@@ -704,6 +776,10 @@ class ReviewApp:
             "Next flagged frame": lambda: self.jump("Flagged"),
             "Next frame over Hicks threshold": lambda: self.jump("Over Hicks"),
             "Undo": lambda: self.history("Undo"),
+            "Flag selection": lambda: self.selection_edit("Flag"),
+            "Unflag selection": lambda: self.selection_edit("Unflag"),
+            "Accept selection": lambda: self.selection_edit("Accept"),
+            "Reject selection": lambda: self.selection_edit("Reject"),
         }
         for label, cmd in commands.items():
             p.commands[label].on_trigger(on(label, lambda _e, cmd=cmd: cmd()))

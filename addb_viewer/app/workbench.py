@@ -1,6 +1,6 @@
 """The review workbench: ``addb view DATASET_DIR``, a queue over a whole dataset.
 
-A "Dataset queue" panel docked left of the 3D view shows the queue (:mod:`addb_viewer.app.queue`):
+A "Dataset queue" tab beside the timeline (in the panel docked left of the 3D view) shows the queue (:mod:`addb_viewer.app.queue`):
 every subject and trial with its processing state, review state, pending proposals,
 Hicks verdicts and marker RMS, sorted by what needs attention. "Open" switches the app
 to the chosen subject and trial (:meth:`ReviewApp.open_subject`); "Next trial to review"
@@ -34,8 +34,6 @@ from addb_viewer.app.queue import (
     next_to_review,
 )
 
-#: Width of the queue's panel, px (docked left of the 3D view).
-PANEL_WIDTH = 560
 #: Rows shown in the queue table (the dropdown lists them all).
 TABLE_ROWS = 25
 #: Seconds between two readings of the queue from disk.
@@ -103,15 +101,13 @@ class Workbench:
         self._stop = threading.Event()
         self.processing_done = threading.Event()
         gui = app.server.gui
-        # a panel of its own, docked left of the 3D view: the queue table needs the width
-        self.panel = gui.add_panel()
-        with self.panel.add_tab("Dataset queue"):
+        # a tab beside the timeline in the panel docked left of the 3D view (the table needs
+        # the width)
+        with app.panel.side.add_tab("Dataset queue"):
             self.table = gui.add_markdown("Reading the dataset…")
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
             self.run_status = gui.add_markdown("")
-        self.panel.dock_left()
-        self.panel.set_width(PANEL_WIDTH)
         self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))

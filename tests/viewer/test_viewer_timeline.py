@@ -1,0 +1,131 @@
+"""The timeline: its tracks against the trial's own values, the strip's pixels, and the
+selection edits (flag / unflag / accept / reject) written to the review record exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from addb_viewer.app.flags import build_view
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.app.scene import plate_feet
+from addb_viewer.app.timeline import (
+    GAP_PX,
+    PLAYHEAD,
+    ROW_PX,
+    TRACKS,
+    WIDTH_PX,
+    column_of,
+    frame_columns,
+    kinematic_contact,
+    timeline_image,
+    track_data,
+)
+from addb_viewer.demo import DEMO_SUBJECT
+from annotations import UNMEASURED_FORCE
+
+
+@pytest.fixture(scope="module")
+def demo_dynamics(tmp_path_factory: pytest.TempPathFactory):
+    """The demo walk through the whole pipeline (proposals, plates assigned to the feet)."""
+    from solver.pipeline import process_subject
+
+    out = tmp_path_factory.mktemp("demo_dyn") / "out"
+    process_subject(DEMO_SUBJECT, out)
+    return out
+
+
+@pytest.fixture
+def dyn_paths(demo_dynamics, tmp_path, monkeypatch) -> ReviewPaths:
+    import shutil
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    shutil.copytree(demo_dynamics, tmp_path / "out")
+    return ReviewPaths.for_subject(DEMO_SUBJECT, tmp_path / "out")
+
+
+def test_tracks_follow_the_trial(dyn_paths, make_app) -> None:
+    app = make_app(dyn_paths)
+    trial, view = app.trial, app.view
+    data = track_data(trial, view, app.hicks)
+    assert set(data.masks) == set(TRACKS)
+    np.testing.assert_array_equal(data.masks["proposal"], view.proposed)
+    np.testing.assert_array_equal(data.masks["over Hicks"], app.hicks)
+    # measured force per foot: the vertical force of the plates assigned to that foot
+    feet = plate_feet(trial)
+    for foot in ("left", "right"):
+        fy = sum(np.where(feet[i] == foot, np.nan_to_num(p.force[:, 1]), 0.0) for i, p in enumerate(trial.plates))
+        expected = (fy > 20.0) & ~trial.unobserved
+        np.testing.assert_array_equal(data.masks[f"force {foot}"], expected)
+        assert expected.any()
+    # kinematic contact covers most frames with measured force on that foot (stance)
+    contact = kinematic_contact(trial)
+    for foot in ("left", "right"):
+        loaded = data.masks[f"force {foot}"]
+        assert contact[foot][loaded].mean() > 0.6, foot
+
+
+def test_strip_pixels_show_tracks_playhead_and_selection() -> None:
+    n = 2000
+    state = np.zeros(n, np.int8)
+    state[100:200] = 1
+    state[300:310] = 2
+    masks = {name: np.zeros(n, bool) for name in TRACKS}
+    masks["flag left"][1000:1500] = True
+    masks["proposal"] = state > 0
+    from addb_viewer.app.timeline import ACCEPTED, TrackData
+
+    img = timeline_image(TrackData(masks, state), frame=1999, selection=(40, 61))
+    assert img.shape == (len(TRACKS) * (ROW_PX + GAP_PX), WIDTH_PX, 3) and img.dtype == np.uint8
+    row = {name: r * (ROW_PX + GAP_PX) + GAP_PX + ROW_PX // 2 for r, name in enumerate(TRACKS)}
+    edges = frame_columns(n)
+    on = [c for c in range(WIDTH_PX) if (img[row["flag left"], c] == TRACKS["flag left"]).all()]
+    assert edges[on[0]] <= 1000 < edges[on[0] + 1] and edges[on[-1]] < 1500 <= edges[on[-1] + 1]
+    accepted = [c for c in range(WIDTH_PX) if (img[row["proposal"], c] == ACCEPTED).all()]
+    assert accepted and all(300 <= edges[c + 1] and edges[c] < 310 for c in accepted)
+    assert (img[:, column_of(1999, n)] == PLAYHEAD).all()
+    for frame in (0, 4, 9):  # fewer frames than columns: the column shows that frame
+        c, e = column_of(frame, 10), frame_columns(10)
+        assert frame in range(e[c], max(e[c + 1], e[c] + 1))
+
+
+def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) -> None:
+    app = make_app(dyn_paths)
+    app.select(40, 20)  # either order
+    assert app.playback.selection() == (20, 41)
+    assert tuple(app.panel.selection.value) == (20, 40)
+    app.panel.foot.value = "left"
+    app.selection_edit("Flag")
+    assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(20, 41))
+    assert np.flatnonzero(app.tracks.masks["flag left"]).tolist() == list(range(20, 41))
+    assert not app.tracks.masks["flag right"].any()
+    app.select(30, 34)
+    app.selection_edit("Unflag")
+    assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == [*range(20, 30), *range(35, 41)]
+    # proposals: accept one part of a pending run, reject another
+    pending = np.flatnonzero(app.view.pending)
+    assert pending.size > 10
+    a, b = int(pending[0]), int(pending[0]) + 3
+    app.select(a, b)
+    app.selection_edit("Accept")
+    view = build_view(app.store.review("walk"), app.trial.proposed)
+    assert view.accepted[a : b + 1].all() and not view.pending[a : b + 1].any()
+    app.select(b + 1, b + 2)
+    app.selection_edit("Reject")
+    view = build_view(app.store.review("walk"), app.trial.proposed)
+    assert view.rejected[b + 1 : b + 3].all() and not view.rejected[: b + 1].any()
+    assert app.tracks.proposal_state[a] == 2 and app.tracks.proposal_state[b + 1] == 3
+    mask = app.store.mask("walk", app.trial.n_frames, kind=UNMEASURED_FORCE)
+    assert mask[a : b + 1].all() and not mask[b + 1 : b + 3].any()
+
+
+def test_selection_hotkeys_edit_the_selection(dyn_paths, make_app) -> None:
+    """The G and X commands run the same edits as the buttons (their trigger handlers)."""
+    from addb_viewer.app.panel import HOTKEYS
+
+    app = make_app(dyn_paths)
+    assert HOTKEYS["Flag selection"][0] == "G" and HOTKEYS["Unflag selection"][0] == "X"
+    app.select(50, 59)
+    for cb in app.panel.commands["Flag selection"]._impl.trigger_cb:  # as viser calls them
+        cb(type("Event", (), {"client_id": None, "client": None})())
+    assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(50, 60))
