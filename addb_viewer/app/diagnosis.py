@@ -81,7 +81,7 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
     path = Path(out_dir) / trial / DIAGNOSIS_FILE
     blocks: list[str] = []
     if not path.is_file():
-        blocks.append(f"Not diagnosed yet: run `addb diagnose {Path(subject_dir).name} --trial {trial}`.")
+        blocks.append(f"Not diagnosed yet: press **Diagnose this trial** (or run `addb diagnose {Path(subject_dir).name} --trial {trial}`).")
     else:
         report, problem = _read_json(path)
         if problem is not None or not isinstance(report, dict) or report.get("schema") != "addb.diagnosis":

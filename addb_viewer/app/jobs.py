@@ -1,7 +1,8 @@
 """The solver in a separate process, with progress and cancel, never blocking the server.
 
 :class:`SolverJob` starts ``python -m addb_viewer.app.jobs SPEC.json`` in a child process.
-The child runs :func:`solver.pipeline.process_subject` and reports on its standard
+The child runs :func:`solver.pipeline.process_subject` (or, for a diagnosis job,
+:func:`solver.diagnose.core.diagnose_trial` and writes its report) and reports on its standard
 output, one JSON object per line after :data:`PREFIX` (other output is ignored):
 ``{"progress": message, "fraction": f}``, then ``{"done": true}`` or
 ``{"error": {type, message, path, line, where, traceback}}``. A thread of the parent reads
@@ -50,12 +51,16 @@ class JobSpec:
         Trials to write (all trials are used for scaling); None: all.
     unmeasured
         Trial -> ``(T,)`` bool frames with unmeasured force (the reviewer's flags).
+    kind
+        ``"process"`` (the pipeline) or ``"diagnose"`` (``addb diagnose`` of the single
+        trial in ``trials``: writes ``OUT/<trial>/diagnosis.json``).
     """
 
     subject_dir: Path
     out_dir: Path
     trials: tuple[str, ...] | None = None
     unmeasured: dict[str, np.ndarray] = field(default_factory=dict)
+    kind: str = "process"
 
 
 @dataclass(frozen=True)
@@ -137,6 +142,7 @@ class SolverJob:
                     "trials": list(self.spec.trials) if self.spec.trials is not None else None,
                     "mask_trials": list(self.spec.unmeasured),
                     "masks": str(masks),
+                    "kind": self.spec.kind,
                 }
             )
         )
@@ -248,6 +254,16 @@ def _child(spec_path: str) -> int:
 
         trials = tuple(spec["trials"]) if spec["trials"] is not None else None
         _emit({"progress": "loading the subject", "fraction": 0.0})
+        if spec.get("kind") == "diagnose":
+            from solver.diagnose.core import diagnose_trial
+            from solver.diagnose.report import write_report
+
+            (trial,) = trials or ("",)
+            diag = diagnose_trial(spec["subject_dir"], trial, spec["out_dir"], flags=masks.get(trial),
+                                  progress=lambda m, f: _emit({"progress": m, "fraction": f}))  # fmt: skip
+            write_report(diag, spec["out_dir"], trial)
+            _emit({"done": True})
+            return 0
         process_subject(
             spec["subject_dir"],
             spec["out_dir"],

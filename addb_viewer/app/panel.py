@@ -84,6 +84,9 @@ class ReviewPanel:
     job_status: viser.GuiMarkdownHandle
     comparison: viser.GuiMarkdownHandle
     diagnosis: viser.GuiMarkdownHandle
+    diagnosis_folder: viser.GuiFolderHandle
+    diagnose: viser.GuiButtonHandle
+    apply_diagnosis: viser.GuiButtonHandle
     show_labels: viser.GuiCheckboxHandle
     show_markers: viser.GuiCheckboxHandle
     show_bones: viser.GuiCheckboxHandle
@@ -140,7 +143,12 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["cancel"] = gui.add_button("Cancel", disabled=True, color="red")
         h["job_status"] = gui.add_markdown("")
         h["comparison"] = gui.add_markdown("")
-    with gui.add_folder("Diagnosis", expand_by_default=False):
+    h["diagnosis_folder"] = gui.add_folder("Diagnosis", expand_by_default=False)
+    with h["diagnosis_folder"]:
+        h["diagnose"] = gui.add_button("Diagnose this trial", hint="why its residuals remain: eight candidate causes, "
+                                       "fitted and cross-validated (about 10 s; progress and Cancel above)")
+        h["apply_diagnosis"] = gui.add_button("Apply the named cause and reprocess", hint="saves the correction in "
+                                              "addb_extensions.json (as addb diagnose --apply) and reprocesses")
         h["diagnosis"] = gui.add_markdown("")
     with gui.add_folder("Display", expand_by_default=False):
         h["show_labels"] = gui.add_checkbox("Marker names", initial_value=False)

@@ -37,6 +37,7 @@ class ReprocessHost(Protocol):
     def show_error(self, context: str, exc: BaseException | str) -> None: ...
     def after_processing(self) -> None: ...
     def load_trial(self, name: str, *, frame: int = 0) -> None: ...
+    def show_diagnosis(self, trial: str | None) -> None: ...
     def set_trial_options(self, selected: str) -> None: ...
 
 
@@ -74,6 +75,50 @@ class Reprocessor:
         spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks())
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
+    def diagnose(self, trial: str | None = None) -> None:
+        """Run ``addb diagnose`` on ``trial`` (default: the one shown) with the reviewer's
+        flags, in the background (progress and Cancel as for a Reprocess); the report
+        appears in the Diagnosis folder when it ends."""
+        app = self.app
+        name = trial or (app.trial.trial if app.trial is not None else None)
+        if name is None:
+            self._say("No trial to diagnose.")
+            return
+        if app.trial is not None and app.trial.trial == name and not app.trial.has_dynamics:
+            self._say(f"{name} has no dynamics (no force plates): nothing to diagnose.")
+            return
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks(), kind="diagnose")
+        self._start(spec, new_work_dir(app.paths.jobs_dir, f"diagnose-{name}"), label=f"Diagnosing {name}",
+                    trial=name, kind="diagnose")  # fmt: skip
+
+    def apply_diagnosis(self, trial: str | None = None) -> dict | None:
+        """Save the extension the trial's diagnosis chose (``addb diagnose --apply``) and
+        reprocess the trial with it (the before/after table follows); returns the saved
+        entry, None when the diagnosis named no cause."""
+        import json
+
+        from solver.corrections import save_extension
+
+        app = self.app
+        name = trial or (app.trial.trial if app.trial is not None else None)
+        if name is None:
+            self._say("No trial shown.")
+            return None
+        path = app.paths.out_dir / name / "diagnosis.json"
+        try:
+            report = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            self._say("Run the diagnosis first (Diagnose this trial).")
+            return None
+        entry = report.get("extension")
+        if not entry:
+            self._say("The diagnosis named no cause: nothing to apply.")
+            return None
+        saved = save_extension(app.paths.subject_dir, entry)
+        self._say(f"Saved `{entry['cause']}` in {saved.name}; reprocessing {name} with it…")
+        self.reprocess(name)
+        return entry
+
     def _masks(self) -> dict[str, np.ndarray]:
         """Every trial's unmeasured-force mask whose length the store knows."""
         store = self.app.store
@@ -89,7 +134,7 @@ class Reprocessor:
                     self.app.show_error(f"Flags of {name} not used", exc)
         return out
 
-    def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None) -> None:
+    def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str = "process") -> None:
         with self._lock:
             if self.running:
                 self._say("A solver run is already in progress; cancel it first.")
@@ -107,7 +152,7 @@ class Reprocessor:
                 spec,
                 work,
                 on_progress=lambda m, f: self._progress(label, m, f),
-                on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work),
+                on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work, kind=kind),
             )
             self.job.start()
 
@@ -119,10 +164,14 @@ class Reprocessor:
         if self.app.trial is None:
             self.app.set_status(f"{label}: {message} ({100 * fraction:.0f} %)")
 
-    def _done(self, result: JobResult, *, label: str, trial: str | None, before: dict | None, work: Any) -> None:
+    def _done(self, result: JobResult, *, label: str, trial: str | None, before: dict | None, work: Any,
+              kind: str = "process") -> None:  # fmt: skip
         app, p = self.app, self.app.panel
         try:
-            if result.status == "done":
+            if result.status == "done" and kind == "diagnose":
+                p.job_status.content = f"{label}: done in {result.seconds:.1f} s; the report is in Diagnosis."
+                app.show_diagnosis(trial)
+            elif result.status == "done":
                 p.job_status.content = f"{label}: done in {result.seconds:.1f} s."
                 if trial is None:
                     app.after_processing()

@@ -628,6 +628,13 @@ class ReviewApp:
             self.draw_timeline()
         self._show_range_info()
 
+    def show_diagnosis(self, trial: str | None) -> None:
+        """Show ``trial``'s diagnosis report (``OUT/<trial>/diagnosis.json``) in the
+        Diagnosis folder when that trial is on screen."""
+        if trial is None or self.trial is None or self.trial.trial != trial:
+            return
+        self.panel.diagnosis.content = diagnosis_markdown(self.paths.out_dir, self.paths.subject_dir, trial)
+
     def _setup_timeline(self, trial: ProcessedTrial) -> None:
         """Size the timeline's sliders to the trial (no selection yet)."""
         last = max(trial.n_frames - 1, 1)
@@ -762,6 +769,8 @@ class ReviewApp:
             lambda ed, _k, _f: ed.set_reviewed(bool(e.target.value)))))
         p.history.on_click(on("Undo", lambda e: self.history(e.target.value)))
         p.reprocess.on_click(on("Reprocess", lambda e: self.jobs.reprocess()))
+        p.diagnose.on_click(on("Diagnose", lambda e: self.jobs.diagnose()))
+        p.apply_diagnosis.on_click(on("Apply the diagnosis", lambda e: self.jobs.apply_diagnosis()))
         p.cancel.on_click(on("Cancel", lambda e: self.jobs.cancel()))
         for h in (p.show_labels, p.show_markers, p.show_bones, p.show_forces, p.marker_threshold_cm, p.m_per_bw):
             h.on_update(on("Display", lambda e: self._apply_display()))

@@ -36,9 +36,9 @@ def reviewer_masks(annotations: Path, subject_dir: str | Path) -> dict:
 def run(args: argparse.Namespace) -> int:
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
-    from solver.diagnose.core import DiagnoseOptions, diagnose_trial
     from solver.corrections import save_extension
-    from solver.diagnose.report import to_json, to_text
+    from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+    from solver.diagnose.report import to_json, to_text, write_report
     from solver.errors import DiagnosisError, SubjectFolderError
     from solver.io.subject import load_subject, load_trial
     from solver.results import processed_trials
@@ -69,10 +69,7 @@ def run(args: argparse.Namespace) -> int:
         progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
     )
     report = to_json(diag)
-    target = out / args.trial / "diagnosis.json"
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    tmp.replace(target)  # atomic: the review app never reads half a file
+    write_report(diag, out, args.trial)
     applied = None
     if args.apply:
         if diag.extension is None:

@@ -40,6 +40,7 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -116,6 +117,18 @@ def candidate_json(ev: Evaluation, alternatives: list[Evaluation]) -> dict[str, 
             for a in sorted(alternatives, key=lambda e: e.score, reverse=True)
         ]
     return out
+
+
+def write_report(diag: Any, out_dir: str | Path, trial: str) -> Path:
+    """Write ``out_dir/<trial>/diagnosis.json`` (:func:`to_json`) atomically (a temporary
+    file renamed into place, so the review app never reads half a file); returns its path."""
+    import json as _json
+
+    target = Path(out_dir) / trial / "diagnosis.json"
+    tmp = target.with_name(target.name + ".tmp")
+    tmp.write_text(_json.dumps(to_json(diag), indent=1) + "\n", encoding="utf-8")
+    tmp.replace(target)
+    return target
 
 
 def to_json(diag: Diagnosis) -> dict[str, Any]:

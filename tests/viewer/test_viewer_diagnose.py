@@ -1,0 +1,64 @@
+"""Diagnosis from the page: the button runs ``addb diagnose`` of the shown trial in the
+background job runner and shows its report; "Apply" saves the named cause's correction
+(as ``addb diagnose --apply``) and reprocesses the trial, with the before/after table."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from addb_viewer.app.paths import ReviewPaths
+from solver.corrections import read_extensions
+from tests.conftest import SHARED_DATA, writable_copy
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def walk_processed(tmp_path_factory: pytest.TempPathFactory):
+    from solver.pipeline import process_subject
+
+    base = tmp_path_factory.mktemp("diag")
+    subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", base / "walk")
+    process_subject(subject, base / "out")
+    return subject, base / "out"
+
+
+def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_processed, make_app, tmp_path) -> None:
+    subject0, out0 = walk_processed
+    subject = shutil.copytree(subject0, tmp_path / "walk")
+    out = shutil.copytree(out0, tmp_path / "out")
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    assert app.trial.trial == "walk" and "Not diagnosed yet" in app.panel.diagnosis.content
+    app.jobs.diagnose()
+    assert app.jobs.finished.wait(600), app.panel.job_status.content
+    assert app.jobs.last_result.status == "done", app.jobs.last_result.message
+    report = json.loads((out / "walk" / "diagnosis.json").read_text())
+    assert report["trial"] == "walk" and report["candidates"]
+    shown = app.panel.diagnosis.content
+    assert "Not diagnosed yet" not in shown
+    assert (report["chosen"] or "no cause") in shown or "No cause" in shown
+    # Apply: a correction the diagnosis names (here written into its report: +3 kg of body mass)
+    report["extension"] = {"cause": "body_mass", "trial": None, "mass_change_kg": 3.0}
+    (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
+    before_mass = app.trial.mass_kg
+    entry = app.jobs.apply_diagnosis()
+    assert entry == report["extension"]
+    saved = read_extensions(subject)
+    assert [e["cause"] for e in saved] == ["body_mass"] and saved[0]["mass_change_kg"] == 3.0
+    assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    assert "Reprocess result" in app.panel.comparison.content
+    assert app.trial.mass_kg != pytest.approx(before_mass, abs=1e-6)  # the subject's mass moved
+
+
+def test_apply_without_a_named_cause_changes_nothing(walk_processed, make_app, tmp_path) -> None:
+    subject0, out0 = walk_processed
+    subject = shutil.copytree(subject0, tmp_path / "walk")
+    out = shutil.copytree(out0, tmp_path / "out")
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    assert app.jobs.apply_diagnosis() is None and "Run the diagnosis first" in app.panel.job_status.content
+    (out / "walk" / "diagnosis.json").write_text(json.dumps({"extension": None}))
+    assert app.jobs.apply_diagnosis() is None and "named no cause" in app.panel.job_status.content
+    assert not (subject / "addb_extensions.json").exists()
