@@ -87,7 +87,8 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
         ``marker_rms_cm``, ``marker_max_cm`` (over all markers and frames),
         ``residual_force_rms_n``, ``residual_force_max_n``, ``residual_moment_rms_nm``,
         ``residual_moment_max_nm``, ``hicks_frames`` (frames over a threshold),
-        ``unobserved_frames`` (left out of the dynamic fit), ``mass_kg``.
+        ``unobserved_frames`` (left out of the dynamic fit), ``measured_frames`` (frames
+        with measured force, in the fit; None without dynamics), ``mass_kg``.
     """
     err = trial.marker_errors
     f = np.linalg.norm(trial.residual_force, axis=1)
@@ -103,6 +104,7 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
         "residual_moment_max_nm": _max(m),
         "hicks_frames": int(hicks_exceeded(trial).sum()) if trial.has_dynamics else None,
         "unobserved_frames": int(np.count_nonzero(trial.unobserved)),
+        "measured_frames": int(np.count_nonzero(~np.asarray(trial.unobserved, bool))) if trial.has_dynamics else None,
         "mass_kg": float(trial.mass_kg),
     }
 
@@ -116,6 +118,7 @@ _ROWS = (
     ("residual_moment_max_nm", "residual moment max (N·m)", 1),
     ("hicks_frames", "frames over Hicks threshold", 0),
     ("unobserved_frames", "frames left out of dynamics", 0),
+    ("measured_frames", "frames with measured force", 0),
     ("mass_kg", "mass (kg)", 2),
 )
 

@@ -1,6 +1,6 @@
 """The review workbench: ``addb view DATASET_DIR``, a queue over a whole dataset.
 
-A "Dataset queue" tab beside the timeline (in the panel docked left of the 3D view) shows the queue (:mod:`addb_viewer.app.queue`):
+A "Dataset queue" window floating over the top of the 3D view shows the queue (:mod:`addb_viewer.app.queue`):
 every subject and trial with its processing state, review state, pending proposals,
 Hicks verdicts and marker RMS, sorted by what needs attention. "Open" switches the app
 to the chosen subject and trial (:meth:`ReviewApp.open_subject`); "Next trial to review"
@@ -34,6 +34,9 @@ from addb_viewer.app.queue import (
     next_to_review,
 )
 
+#: Size of the queue's floating window, px.
+QUEUE_WIDTH_PX = 620
+QUEUE_HEIGHT_PX = 300
 #: Rows shown in the queue table (the dropdown lists them all).
 TABLE_ROWS = 25
 #: Seconds between two readings of the queue from disk.
@@ -101,13 +104,16 @@ class Workbench:
         self._stop = threading.Event()
         self.processing_done = threading.Event()
         gui = app.server.gui
-        # a tab beside the timeline in the panel docked left of the 3D view (the table needs
-        # the width)
-        with app.panel.side.add_tab("Dataset queue"):
+        # a window of its own floating over the top of the 3D view (the subject is framed
+        # below it), movable and minimizable; not a tab beside the timeline, whose charts
+        # would be drawn while hidden, at zero width
+        self.panel = gui.add_panel()
+        with self.panel.add_tab("Dataset queue"):
             self.table = gui.add_markdown("Reading the dataset…")
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
             self.run_status = gui.add_markdown("")
+        self.panel.float(x=10, y=10, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
         self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))

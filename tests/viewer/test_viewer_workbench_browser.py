@@ -1,0 +1,179 @@
+"""The review workbench in a real browser (headless Debian Chromium, Playwright): a dataset
+tree of two shared subjects without a Geometry folder, processed by ``addb process``, then
+``addb view DATASET_DIR`` in a subprocess at 1600x1000. The queue lists both subjects and
+their trials; opening the second works (its bones drawn, no axes fallback); the timeline's
+plots lie inside the viewport; a selection over frames 20-40 and the flag hotkey write
+exactly that range to the record on disk; Reprocess ends with the before/after table: the
+frames with measured force drop to the frames the reviewer did not flag (the flags replace
+the solver's own choice, and the range adds frames that were in the fit) and the residuals
+change. Writes the README's screenshot of the workbench (docs/images/workbench.png)."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.cli import main as cli
+from annotations import AnnotationStore
+from solver.results import load_processed
+from tests.conftest import SHARED_DATA, import_tool, needs_tool, tool_available, writable_copy
+
+CHROMIUM = "/usr/bin/chromium"
+PLAYWRIGHT_REASON = "the playwright package (test extra) is not installed"
+REPO = Path(__file__).resolve().parents[2]
+SCREENSHOT = REPO / "docs" / "images" / "workbench.png"
+ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]  # fmt: skip
+SUBJECTS = {"labA/walk": "rajagopal2016_walk", "labB/run": "rajagopal2016_run"}
+REPROCESS_TIMEOUT_MS = 600_000
+
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.slow,
+    needs_tool("chromium", Path(CHROMIUM).exists(), f"{CHROMIUM} is not installed (Debian: apt-get install chromium)"),
+    needs_tool("playwright", tool_available("playwright"), PLAYWRIGHT_REASON),
+]
+
+
+@pytest.fixture
+def workbench(tmp_path: Path):
+    """The processed dataset and ``addb view`` serving it (no background processing)."""
+    ds = tmp_path / "dataset"
+    for rel, name in SUBJECTS.items():
+        writable_copy(SHARED_DATA / "subjects" / name, ds / rel)
+    out = ds / "addb_out"
+    assert cli(["process", str(ds), "--out", str(out), "--workers", "2"]) == 0
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "addb_viewer.cli", "view", str(ds), "--port", "0", "--workers", "0", "--reviewer", "e2e"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
+    lines: list[str] = []
+    url = None
+    for line in proc.stdout:
+        lines.append(line)
+        m = re.search(r" at (http://127\.0\.0\.1:\d+)", line)
+        url = url or (m.group(1) if m else None)
+        if "first frame shown" in line or proc.poll() is not None:
+            break
+    assert url, "".join(lines)
+    threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
+    yield url, ds, out, lines
+    proc.send_signal(signal.SIGTERM)
+    try:
+        assert proc.wait(60) == 0, "".join(lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def _selection(page) -> tuple[int, int] | None:
+    text = page.get_by_text(re.compile(r"^(Selected: frames|Drag the ends)")).first.inner_text()
+    m = re.search(r"Selected: frames (\d+)–(\d+)", text)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def _drag_selection(page, start: int, end: int, last_frame: int) -> None:
+    """Drag the Selection slider's two thumbs (the timeline's range) to frames ``start`` and
+    ``end``: a drag from each thumb to the frame's place on the track, then, while the
+    page reports another frame, a nudge by the difference."""
+    slider_id = page.get_by_text("Selection", exact=True).get_attribute("for")
+    track = page.locator(f"[id='{slider_id}'] .multi-slider-track").bounding_box()
+    thumbs = page.locator(f"[id='{slider_id}'] .multi-slider-thumb")
+    px = track["width"] / last_frame
+    for index, frame in ((1, end), (0, start)):  # both start at frame 0: the top thumb first
+        shift = 0.0
+        for _ in range(10):
+            sel = _selection(page)
+            now = sel[index] if sel is not None else None
+            if now == frame:
+                break
+            if now is not None:
+                shift += 0.6 * (frame - now) * px
+            box = thumbs.nth(index).bounding_box()
+            y = box["y"] + box["height"] / 2
+            page.mouse.move(box["x"] + box["width"] / 2, y)
+            page.mouse.down()
+            page.mouse.move(track["x"] + frame * px + shift, y, steps=6)
+            page.mouse.up()
+            page.wait_for_timeout(400)
+    assert _selection(page) == (start, end), _selection(page)
+
+
+def test_workbench_in_the_browser(workbench) -> None:
+    sync_api = import_tool("playwright.sync_api", reason=PLAYWRIGHT_REASON)
+    url, ds, out, log = workbench
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1600, "height": 1000})
+            page.goto(url)
+            page.get_by_text(re.compile(r"walk · frame \d+ / \d+")).wait_for(timeout=60_000)
+
+            # the queue lists both subjects and their trials
+            for label in ("labA/walk / walk", "labA/walk / static", "labB/run / run", "labB/run / static"):
+                page.get_by_text(label, exact=False).first.wait_for(timeout=20_000)
+
+            # open the second subject's dynamic trial from the queue
+            open_box = page.get_by_label("Open")
+            open_box.click()
+            page.get_by_role("option", name="labB/run / run", exact=True).click()
+            page.get_by_text(re.compile(r"run · run · frame \d+ / \d+")).wait_for(timeout=60_000)
+            assert page.get_by_text("drawn as axes").count() == 0  # every bone found (bundled meshes)
+
+            # the timeline and its plots lie inside the viewport
+            page.wait_for_timeout(1500)
+            charts = page.locator(".uplot")
+            assert charts.count() >= 4
+            for i in range(charts.count()):
+                box = charts.nth(i).bounding_box()
+                assert box and box["x"] >= 0 and box["y"] >= 0 and box["width"] > 300 and box["height"] > 60, box
+                assert box["x"] + box["width"] <= 1600 and box["y"] + box["height"] <= 1000, (i, box)
+
+            # accept the solver's proposals, select frames 20-40 by dragging the timeline's
+            # range, and flag them with the hotkey G
+            page.get_by_role("button", name="Accept all", exact=True).click()
+            page.get_by_text(re.compile(r"✓ saved: accept proposal")).wait_for(timeout=20_000)
+            last = int(re.search(r"frame \d+ / (\d+)", page.get_by_text(re.compile(r"run · run · frame")).inner_text()).group(1))
+            _drag_selection(page, 20, 40, last)
+            page.get_by_text("Selected: frames 20–40 (21 frames)").wait_for(timeout=20_000)
+            page.locator("body").click(position={"x": 800, "y": 900})  # focus the page, not an input
+            page.keyboard.press("g")
+            page.get_by_text(re.compile(r"✓ saved: flag frames 20–40")).wait_for(timeout=20_000)
+            SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(SCREENSHOT))
+
+            # exactly that range (besides the accepted proposals) is in the record on disk
+            before = load_processed(out / "labB" / "run", "run")
+            with AnnotationStore.open(ds / "labB" / "run", reviewer="checker") as disk:
+                mask = disk.mask("run", before.n_frames)
+                selected = np.isin(np.arange(before.n_frames), range(20, 41))
+                assert np.array_equal(mask, selected | before.proposed)
+                assert disk.flag("run", 30).provenance.reviewer == "e2e"
+            # the reviewer's flags replace the solver's own choice: after the Reprocess the frames
+            # left out are exactly the flags (the accepted proposals and the new range)
+            newly = int((selected & ~before.proposed & ~before.unobserved).sum())
+            assert newly > 0  # the range adds frames that were in the fit
+
+            page.get_by_role("button", name="Reprocess", exact=True).click()
+            page.get_by_text("Reprocess result").wait_for(timeout=REPROCESS_TIMEOUT_MS)
+            row = page.get_by_role("row").filter(has_text="frames with measured force").inner_text()
+            b, a = (int(x) for x in re.findall(r"\d+", row)[:2])
+            assert b == int((~before.unobserved).sum()), row
+            assert a == before.n_frames - int(mask.sum()) and a < b, row
+            after = load_processed(out / "labB" / "run", "run")
+            assert np.array_equal(after.unobserved, mask)
+            res = page.get_by_role("row").filter(has_text="residual force RMS (N)").inner_text()
+            rb, ra = (float(x) for x in re.findall(r"\d+\.\d", res)[:2])
+            assert rb != ra, res
+        finally:
+            browser.close()
+    assert "Traceback" not in "".join(log), "".join(log)
