@@ -89,7 +89,7 @@ def bench_frame_update(out: Path, passes: int = 3) -> None:
                 with app._lock:
                     app.render(k, force_plots=True)
                 times.append(time.perf_counter() - t0)
-            print(f"  {'whole render incl. 3 chart updates (seek)':<46} {_stats(times)}")
+            print(f"  {'whole render incl. 4 chart updates (seek)':<46} {_stats(times)}")
         finally:
             client.close()
             app.stop()
@@ -146,6 +146,53 @@ print(json.dumps({"base": base, "loaded": loaded, "after": after, "peak": peak, 
 """
 
 
+def tiled_trial(out: Path, n_frames: int):
+    """The processed demo walk with its arrays tiled to ``n_frames`` frames (trial "walk2000")."""
+    walk = load_processed(out, "walk")
+    reps = -(-n_frames // walk.n_frames)
+
+    def tile(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a] * reps)[:n_frames]
+
+    arrays = {f.name: tile(getattr(walk, f.name)) for f in dataclasses.fields(walk)
+              if isinstance(getattr(walk, f.name), np.ndarray) and getattr(walk, f.name).shape[:1] == (walk.n_frames,)}
+    arrays["time"] = np.arange(n_frames) / walk.rate_hz
+    plates = tuple(dataclasses.replace(p, force=tile(p.force), cop=tile(p.cop), free_moment=tile(p.free_moment),
+                                       body=tile(p.body)) for p in walk.plates)
+    return dataclasses.replace(walk, trial="walk2000", plates=plates,
+                               proposal_reasons=tuple(np.resize(np.array(walk.proposal_reasons, dtype=object), n_frames)),
+                               **arrays)  # fmt: skip
+
+
+def bench_timeline(out: Path, n_frames: int = 2000, edits: int = 20) -> None:
+    """Server-side timeline redraw after an edit on a ``n_frames`` trial: the tracks read
+    again from the review state and the strip drawn and handed to viser (target < 20 ms)."""
+    from addb_viewer.app.server import ReviewApp
+    from addb_viewer.app.timeline import track_data
+
+    long = tiled_trial(out, n_frames)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "out"
+        save_processed(folder / "walk2000" / "trial.npz", long)
+        os.environ["XDG_CACHE_HOME"] = tmp
+        app = ReviewApp(ReviewPaths.for_subject(DEMO_SUBJECT, folder), reviewer="bench", port=0, background=False)
+        try:
+            times, edit_times = [], []
+            for k in range(edits):
+                app.select(50 * k, 50 * k + 30)
+                t0 = time.perf_counter()
+                app.selection_edit("Flag")  # the store edit (journal fsync) and the redraw it triggers
+                edit_times.append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                app.tracks = track_data(app.trial, app.editor.view(), app.hicks)
+                app.draw_timeline()
+                times.append(time.perf_counter() - t0)
+        finally:
+            app.stop()
+    print(f"timeline redraw after an edit, {n_frames}-frame trial (review state read, tracks, strip, image "
+          f"handed to viser): {_stats(times)}; the whole edit incl. the durable store write: {_stats(edit_times)}")
+
+
 def bench_memory(out: Path, n_frames: int = 2000) -> None:
     """RSS of an ``addb view`` process showing a ``n_frames`` trial (demo arrays tiled)."""
     walk = load_processed(out, "walk")
@@ -175,7 +222,7 @@ def bench_memory(out: Path, n_frames: int = 2000) -> None:
     print(f"memory, {n_frames}-frame trial (demo tiled; arrays {nbytes / 1e6:.1f} MB): process RSS "
           f"{m['base']:.0f} MB after imports, {m['loaded']:.0f} MB with the trial shown (+{m['loaded'] - m['base']:.0f} MB), "
           f"{m['after']:.0f} MB after {n_frames // 10} seeks, peak {m['peak']:.0f} MB")
-    print(f"  render with 3 chart updates at {n_frames} frames: median {m['render_ms']:.1f} ms")
+    print(f"  render with 4 chart updates at {n_frames} frames: median {m['render_ms']:.1f} ms")
 
 
 def main() -> None:
@@ -194,6 +241,7 @@ def main() -> None:
         print(f"processed the demo (full pipeline) in {time.perf_counter() - t0:.1f} s")
     try:
         bench_frame_update(out)
+        bench_timeline(out)
         bench_startup(out)
         bench_memory(out)
     finally:
