@@ -30,15 +30,18 @@ PARAMETER_END = 13 * 512  # header block + 12 parameter blocks in both files; da
 
 # The child: reads every path given on the command line with read_c3d and summarize and
 # prints one JSON line per file, flushed before the next file, so a crash points at the
-# file being read.
+# file being read; a file that takes over 15 s (a normal read takes well under 1 s) ends
+# the child with SIGALRM, reported like any other signal.
 CHILD = r"""
-import json, sys, warnings
+import json, signal, sys, warnings
 warnings.simplefilter("ignore")
+signal.signal(signal.SIGALRM, signal.SIG_DFL)  # an alarm ends the process, even inside C++
 from solver.errors import AddbError
 from solver.io.c3d import read_c3d
 from solver.io.summary import summarize
 for index, path in enumerate(sys.argv[1:]):
     print(json.dumps({"index": index, "state": "start"}), flush=True)
+    signal.alarm(PER_FILE_S)  # a file that hangs the reader: SIGALRM, reported for it
     result = {"index": index, "state": "ok"}
     for reader in (read_c3d, summarize):
         try:
@@ -49,7 +52,8 @@ for index, path in enumerate(sys.argv[1:]):
             result = {"index": index, "state": "other", "error": repr(exc)}
             break
     print(json.dumps(result), flush=True)
-"""
+signal.alarm(0)
+""".replace("PER_FILE_S", "15")
 
 
 CHILD_MEMORY = 4 << 30  # bytes of address space: a normal read needs far less
