@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import viser
 
 from addb_viewer.app.camera import VIEWS
@@ -96,7 +95,7 @@ class ReviewPanel:
     plots_folder: viser.GuiFolderHandle
     side: viser.PanelHandle
     timeline_tab: viser.GuiTabHandle
-    timeline_image: viser.GuiImageHandle
+    timeline: viser.GuiHtmlHandle
     timeline_frame: viser.GuiSliderHandle
     selection: viser.GuiMultiSliderHandle
     selection_info: viser.GuiMarkdownHandle
@@ -167,7 +166,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     h["side"] = gui.add_panel()
     h["timeline_tab"] = h["side"].add_tab("Timeline and plots")
     with h["timeline_tab"]:
-        h["timeline_image"] = gui.add_image(np.full((8, 8, 3), 255, np.uint8), format="png")
+        h["timeline"] = gui.add_html("")
         gui.add_markdown(legend_markdown())
         h["timeline_frame"] = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0, disabled=True)
         h["selection"] = gui.add_multi_slider("Selection", min=0, max=1, step=1, initial_value=(0, 0), disabled=True)

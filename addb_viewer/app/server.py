@@ -38,7 +38,7 @@ from addb_viewer.app.reprocess import Reprocessor
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
-from addb_viewer.app.timeline import TrackData, timeline_image, track_data
+from addb_viewer.app.timeline import TrackData, timeline_html, track_data
 from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
 from solver.errors import AddbError
@@ -649,12 +649,13 @@ class ReviewApp:
 
     def draw_timeline(self) -> float:
         """Redraw the timeline strip (tracks, playhead, selection); returns the seconds it
-        took server-side (image built and handed to viser)."""
+        took server-side (HTML built and handed to viser)."""
         t0 = time.perf_counter()
         pb, tracks = self.playback, self.tracks
         if pb is None or tracks is None:
             return 0.0
-        self.panel.timeline_image.image = timeline_image(tracks, frame=pb.frame, selection=pb.selection())
+        reasons = self.trial.proposal_reasons if self.trial is not None else ()
+        self.panel.timeline.content = timeline_html(tracks, reasons=reasons, frame=pb.frame, selection=pb.selection())
         return time.perf_counter() - t0
 
     def select(self, start: int, end: int) -> None:

@@ -5,18 +5,21 @@ Tracks, top to bottom (:data:`TRACKS`): the reviewer's unmeasured-force flags pe
 (left, right; "both" and "no foot said" count for each), the solver's proposals (pending,
 accepted, rejected), frames with measured force per foot (vertical ground reaction force
 applied to that foot above 20 N on a frame the dynamics fit trusts), foot contact from
-the kinematics per foot (the foot's lowest body origin at stance level and nearly still:
-:func:`kinematic_contact`, the same thresholds as the dynamics stage's contact), and the
+the kinematics per foot (the foot's lowest body origin at stance level and nearly still relative to the ground
+under it: :func:`kinematic_contact`), and the
 frames whose residual is over the Hicks thresholds.
 
-The strip is drawn here as an RGB image (:func:`timeline_image`, numpy only, a few
-milliseconds for thousands of frames); the page shows it with a frame slider (click to
-seek), a range slider (drag its ends to select frames) and the buttons and hotkeys that
-flag, unflag, accept or reject the selection (wired in :mod:`addb_viewer.app.server`).
+The strip is drawn here as HTML with inline styles (:func:`timeline_html`: one positioned
+block per run of frames, so hovering a run shows its frames and, for a proposal, its state
+and reason; a few milliseconds for thousands of frames); the page shows it with a frame
+slider (click to seek), a range slider (drag its ends to select frames) and the buttons
+and hotkeys that flag, unflag, accept or reject the selection (wired in
+:mod:`addb_viewer.app.server`).
 """
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +27,7 @@ from numpy.typing import NDArray
 
 from addb_viewer.app.flags import FlagView
 from addb_viewer.app.scene import foot_of_body, plate_feet
+from annotations import mask_to_ranges
 from solver.results import ProcessedTrial
 
 BoolArray = NDArray[np.bool_]
@@ -42,13 +46,13 @@ TRACKS: dict[str, tuple[int, int, int]] = {
 #: Colours of accepted and rejected proposals on the proposal track.
 ACCEPTED = (0, 160, 80)
 REJECTED = (150, 150, 150)
-BACKGROUND = (245, 245, 245)
+BACKGROUND = (235, 235, 235)
 PLAYHEAD = (20, 20, 20)
 SELECTION = (255, 230, 120)
-#: Image size: width in pixels (frames are binned or repeated to fit), and per track.
-WIDTH_PX = 640
+#: Strip layout: height of a track and the gap between tracks, width of the label column, px.
 ROW_PX = 11
 GAP_PX = 3
+LABEL_PX = 78
 #: Vertical force on a foot above which its force counts as measured, N.
 FORCE_THRESHOLD_N = 20.0
 
@@ -69,11 +73,19 @@ class TrackData:
     proposal_state: NDArray[np.int8]
 
 
-def kinematic_contact(trial: ProcessedTrial, *, height_m: float = 0.03, speed_m_s: float = 0.6) -> dict[str, BoolArray]:
-    """Foot contact from the motion alone: per foot ("left", "right"), frames where the
-    lowest origin of the foot's bodies (calcaneus, toes, talus) is within ``height_m`` of
-    its stance level (its 5th percentile over the trial) and moves slower than
-    ``speed_m_s``. ``(T,)`` masks; all False when the trial has no such bodies."""
+def kinematic_contact(
+    trial: ProcessedTrial, loaded: dict[str, BoolArray] | None = None, *, height_m: float = 0.03, speed_m_s: float = 1.0
+) -> dict[str, BoolArray]:
+    """Foot contact from the motion: per foot ("left", "right"), frames where the lowest
+    origin of the foot's bodies (calcaneus, toes, talus) is within ``height_m`` of its
+    stance level (its 5th percentile over the trial) and moves slower than ``speed_m_s``
+    relative to the ground under it. On a treadmill the ground moves: where the foot is
+    ``loaded`` (its measured force), its median velocity is the belt's, and it is taken
+    off when faster than ``speed_m_s`` (the dynamics stage's rule, :mod:`solver.dynamics.contact`).
+    The speed limit is looser than that stage's 0.6 m/s because the body origins roll with
+    the foot where its lowest point stays put (on the shared walk and run, 1 m/s finds
+    contact on 58-91 % of the frames with measured force, 0.6 m/s on 28-82 %).
+    ``(T,)`` masks; all False when the trial has no such bodies."""
     out = {}
     dt = float(np.median(np.diff(trial.time))) if trial.n_frames > 1 else 0.01
     for foot in ("left", "right"):
@@ -84,10 +96,15 @@ def kinematic_contact(trial: ProcessedTrial, *, height_m: float = 0.03, speed_m_
             continue
         pos = trial.body_position[:, idx, :]  # (T, k, 3)
         low = np.argmin(pos[:, :, 1], axis=1)
-        lowest = pos[np.arange(trial.n_frames), low]  # (T, 3)
-        height = lowest[:, 1]
+        height = pos[np.arange(trial.n_frames), low, 1]
         level = np.nanpercentile(height, 5) if np.isfinite(height).any() else 0.0
-        speed = np.linalg.norm(np.gradient(pos.mean(axis=1), dt, axis=0), axis=1)
+        velocity = np.gradient(pos.mean(axis=1), dt, axis=0)
+        on = None if loaded is None else loaded.get(foot)
+        ground = np.zeros(3)
+        if on is not None and on.any():
+            belt = np.nanmedian(velocity[on], axis=0)
+            ground = belt if np.linalg.norm(belt) > speed_m_s else ground
+        speed = np.linalg.norm(velocity - ground, axis=1)
         out[foot] = (height <= level + height_m) & (speed <= speed_m_s)
     return out
 
@@ -115,74 +132,86 @@ def track_data(trial: ProcessedTrial, view: FlagView | None, hicks: BoolArray | 
             on = feet[i] == foot
             fy[on] += np.nan_to_num(p.force[on, 1])
         masks[f"force {foot}"] = (fy > FORCE_THRESHOLD_N) & measured
-    contact = kinematic_contact(trial)
+    contact = kinematic_contact(trial, {f: masks[f"force {f}"] for f in ("left", "right")})
     masks["contact left"], masks["contact right"] = contact["left"], contact["right"]
     masks["over Hicks"] = np.asarray(hicks, bool) if hicks is not None else none
     return TrackData(masks, state)
 
 
-def frame_columns(n_frames: int, width: int = WIDTH_PX) -> NDArray[np.intp]:
-    """``(width + 1,)`` the first frame of each pixel column (and the end): frames are
-    binned (many per column) or repeated (one frame over several columns)."""
-    return np.floor(np.linspace(0, n_frames, width + 1)).astype(np.intp)
+def _pct(x: float) -> str:
+    return f"{100.0 * x:.3f}%"
 
 
-def column_of(frame: int, n_frames: int, width: int = WIDTH_PX) -> int:
-    """The pixel column that shows ``frame``."""
-    return int(min(width - 1, max(0, np.floor((frame + 0.5) * width / max(n_frames, 1)))))
+def _runs(mask: BoolArray) -> list[tuple[int, int]]:
+    return mask_to_ranges(np.asarray(mask, dtype=bool))
 
 
-def _binned_any(mask: BoolArray, edges: NDArray[np.intp]) -> BoolArray:
-    """Per column: any frame of its bin set (a column with no own frame takes the frame it
-    repeats)."""
-    n = mask.size
-    csum = np.concatenate([[0], np.cumsum(mask.astype(np.int64))])
-    start = np.minimum(edges[:-1], n - 1)
-    stop = np.maximum(edges[1:], start + 1)
-    return (csum[stop] - csum[start]) > 0
+def track_runs(data: TrackData, reasons: tuple[str, ...] = ()) -> list[tuple[str, int, int, tuple[int, int, int], str]]:
+    """Every coloured run of the strip: ``(track, start, stop, colour, tooltip)`` with
+    half-open frame ranges; the proposals' tooltips give their state and reason."""
+    out = []
+    for name, color in TRACKS.items():
+        if name == "proposal":
+            for value, state, c in ((1, "pending", color), (2, "accepted", ACCEPTED), (3, "rejected", REJECTED)):
+                for s, e in _runs(data.proposal_state == value):
+                    reason = reasons[s] if s < len(reasons) and reasons[s] else "no reason given"
+                    out.append((name, s, e, c, f"proposal ({state}), frames {s}–{e - 1}: {reason}"))
+            continue
+        for s, e in _runs(data.masks[name]):
+            out.append((name, s, e, color, f"{name}, frames {s}–{e - 1}"))
+    return out
 
 
-def timeline_image(data: TrackData, *, frame: int | None = None, selection: tuple[int, int] | None = None,
-                   width: int = WIDTH_PX) -> NDArray[np.uint8]:  # fmt: skip
-    """The timeline strip: ``(len(TRACKS) * (ROW_PX + GAP_PX), width, 3)`` uint8 RGB.
+def timeline_html(data: TrackData, *, reasons: tuple[str, ...] = (), frame: int | None = None,
+                  selection: tuple[int, int] | None = None) -> str:  # fmt: skip
+    """The timeline strip as HTML (inline styles only, no script): a label column and,
+    per track, coloured runs placed by frame; hovering a run shows its frames (and, for a
+    proposal, its state and reason); the selection is shaded and the playhead is a dark
+    line.
 
     Parameters
     ----------
     data
         From :func:`track_data`.
+    reasons
+        ``(T,)`` the reason of each proposed frame (the trial's ``proposal_reasons``).
     frame
-        The playhead's frame (a dark column), or None.
+        The playhead's frame, or None.
     selection
-        Half-open frame range ``(start, stop)`` shaded on the gaps between tracks, or None.
+        Half-open frame range ``(start, stop)`` to shade, or None.
     """
-    n = data.proposal_state.size
-    edges = frame_columns(n, width)
-    rows = len(TRACKS)
-    img = np.empty((rows * (ROW_PX + GAP_PX), width, 3), np.uint8)
-    img[:] = 255
+    n = max(int(data.proposal_state.size), 1)
+    row = ROW_PX + GAP_PX
+    height = len(TRACKS) * row + GAP_PX
+    parts = [
+        (f"<div style='display:flex;font-size:10px;line-height:{ROW_PX}px;font-family:sans-serif'>"
+         f"<div style='width:{LABEL_PX}px;flex-shrink:0;padding-top:{GAP_PX}px'>")
+    ]
+    parts += [f"<div style='height:{ROW_PX}px;margin-bottom:{GAP_PX}px;color:#444'>{name}</div>" for name in TRACKS]
+    parts.append(f"</div><div class='addb-timeline' style='position:relative;flex-grow:1;height:{height}px'>")
     if selection is not None:
         s, e = selection
-        cols = _binned_any((np.arange(n) >= s) & (np.arange(n) < e), edges)
-        img[:, cols] = SELECTION
-    for r, (name, color) in enumerate(TRACKS.items()):
-        top = r * (ROW_PX + GAP_PX) + GAP_PX
-        band = img[top : top + ROW_PX]
-        band[:] = BACKGROUND
-        if name == "proposal":
-            for value, c in ((1, color), (2, ACCEPTED), (3, REJECTED)):
-                band[:, _binned_any(data.proposal_state == value, edges)] = c
-        else:
-            band[:, _binned_any(data.masks[name], edges)] = color
-    if frame is not None and n:
-        img[:, column_of(frame, n, width)] = PLAYHEAD
-    return img
+        parts.append(f"<div class='sel' title='selected: frames {s}–{e - 1}' style='position:absolute;left:{_pct(s / n)};"
+                     f"width:{_pct((e - s) / n)};top:0;bottom:0;background:rgb{SELECTION}'></div>")  # fmt: skip
+    for r, name in enumerate(TRACKS):
+        parts.append(f"<div style='position:absolute;left:0;right:0;top:{GAP_PX + r * row}px;height:{ROW_PX}px;"
+                     f"background:rgba{(*BACKGROUND, 0.8)}'></div>")  # fmt: skip
+    for name, s, e, color, tip in track_runs(data, reasons):
+        r = list(TRACKS).index(name)
+        parts.append(f"<div class='run' data-track='{name}' title='{html.escape(tip, quote=True)}' "
+                     f"style='position:absolute;left:{_pct(s / n)};width:max({_pct((e - s) / n)},1px);"
+                     f"top:{GAP_PX + r * row}px;height:{ROW_PX}px;background:rgb{color}'></div>")  # fmt: skip
+    if frame is not None:
+        parts.append(f"<div class='playhead' title='frame {frame}' style='position:absolute;left:{_pct((frame + 0.5) / n)};"
+                     f"width:2px;margin-left:-1px;top:0;bottom:0;background:rgb{PLAYHEAD}'></div>")  # fmt: skip
+    parts.append("</div></div>")
+    return "".join(parts)
 
 
 def legend_markdown() -> str:
-    """The track names in their colours, top to bottom (the image carries no text)."""
+    """The proposal track's colours (the other tracks are named beside their strip)."""
     def chip(c: tuple[int, int, int]) -> str:
         return f"<span style='color:rgb{c}'>■</span>"
 
-    parts = [f"{chip(c)} {name}" for name, c in TRACKS.items()]
-    parts[2] += f" ({chip(ACCEPTED)} accepted, {chip(REJECTED)} rejected)"
-    return "<small>" + " · ".join(parts) + "</small>"
+    return (f"<small>proposal: {chip(TRACKS['proposal'])} pending, {chip(ACCEPTED)} accepted, "
+            f"{chip(REJECTED)} rejected; hover a run for its frames and reason</small>")  # fmt: skip

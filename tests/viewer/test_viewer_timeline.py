@@ -3,24 +3,16 @@ selection edits (flag / unflag / accept / reject) written to the review record e
 
 from __future__ import annotations
 
+import html
+import re
+
 import numpy as np
 import pytest
 
 from addb_viewer.app.flags import build_view
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.app.scene import plate_feet
-from addb_viewer.app.timeline import (
-    GAP_PX,
-    PLAYHEAD,
-    ROW_PX,
-    TRACKS,
-    WIDTH_PX,
-    column_of,
-    frame_columns,
-    kinematic_contact,
-    timeline_image,
-    track_data,
-)
+from addb_viewer.app.timeline import TRACKS, TrackData, kinematic_contact, timeline_html, track_data
 from addb_viewer.demo import DEMO_SUBJECT
 from annotations import UNMEASURED_FORCE
 
@@ -59,13 +51,28 @@ def test_tracks_follow_the_trial(dyn_paths, make_app) -> None:
         np.testing.assert_array_equal(data.masks[f"force {foot}"], expected)
         assert expected.any()
     # kinematic contact covers most frames with measured force on that foot (stance)
-    contact = kinematic_contact(trial)
+    contact = kinematic_contact(trial, {f: data.masks[f"force {f}"] for f in ("left", "right")})
     for foot in ("left", "right"):
         loaded = data.masks[f"force {foot}"]
         assert contact[foot][loaded].mean() > 0.6, foot
 
 
-def test_strip_pixels_show_tracks_playhead_and_selection() -> None:
+def _blocks(html_text: str) -> list[dict]:
+    """The positioned blocks of the strip: class, track, left/width (% of the trial), title."""
+    out = []
+    for m in re.finditer(r"<div class='(run|sel|playhead)'([^>]*)>", html_text):
+        attrs = m.group(2)
+        left = re.search(r"left:([\d.]+)%", attrs)
+        width = re.search(r"width:(?:max\()?([\d.]+)%", attrs)
+        track = re.search(r"data-track='([^']+)'", attrs)
+        title = re.search(r"title='([^']*)'", attrs)
+        out.append({"kind": m.group(1), "track": track.group(1) if track else None,
+                    "left": float(left.group(1)), "width": float(width.group(1)) if width else 0.0,
+                    "title": html.unescape(title.group(1)) if title else ""})  # fmt: skip
+    return out
+
+
+def test_strip_places_runs_playhead_and_selection_by_frame_with_tooltips() -> None:
     n = 2000
     state = np.zeros(n, np.int8)
     state[100:200] = 1
@@ -73,20 +80,21 @@ def test_strip_pixels_show_tracks_playhead_and_selection() -> None:
     masks = {name: np.zeros(n, bool) for name in TRACKS}
     masks["flag left"][1000:1500] = True
     masks["proposal"] = state > 0
-    from addb_viewer.app.timeline import ACCEPTED, TrackData
-
-    img = timeline_image(TrackData(masks, state), frame=1999, selection=(40, 61))
-    assert img.shape == (len(TRACKS) * (ROW_PX + GAP_PX), WIDTH_PX, 3) and img.dtype == np.uint8
-    row = {name: r * (ROW_PX + GAP_PX) + GAP_PX + ROW_PX // 2 for r, name in enumerate(TRACKS)}
-    edges = frame_columns(n)
-    on = [c for c in range(WIDTH_PX) if (img[row["flag left"], c] == TRACKS["flag left"]).all()]
-    assert edges[on[0]] <= 1000 < edges[on[0] + 1] and edges[on[-1]] < 1500 <= edges[on[-1] + 1]
-    accepted = [c for c in range(WIDTH_PX) if (img[row["proposal"], c] == ACCEPTED).all()]
-    assert accepted and all(300 <= edges[c + 1] and edges[c] < 310 for c in accepted)
-    assert (img[:, column_of(1999, n)] == PLAYHEAD).all()
-    for frame in (0, 4, 9):  # fewer frames than columns: the column shows that frame
-        c, e = column_of(frame, 10), frame_columns(10)
-        assert frame in range(e[c], max(e[c + 1], e[c] + 1))
+    reasons = tuple("calcn_l in contact with no plate force" if 100 <= k < 200 else "" for k in range(n))
+    text = timeline_html(TrackData(masks, state), reasons=reasons, frame=1999, selection=(40, 61))
+    blocks = _blocks(text)
+    flag = [b for b in blocks if b["track"] == "flag left"]
+    assert len(flag) == 1 and flag[0]["left"] == pytest.approx(50.0) and flag[0]["width"] == pytest.approx(25.0)
+    assert flag[0]["title"] == "flag left, frames 1000–1499"
+    props = {b["title"] for b in blocks if b["track"] == "proposal"}
+    assert props == {"proposal (pending), frames 100–199: calcn_l in contact with no plate force",
+                     "proposal (accepted), frames 300–309: no reason given"}  # fmt: skip
+    sel = next(b for b in blocks if b["kind"] == "sel")
+    assert sel["left"] == pytest.approx(2.0) and sel["width"] == pytest.approx(21 / 20)
+    head = next(b for b in blocks if b["kind"] == "playhead")
+    assert head["left"] == pytest.approx(100 * 1999.5 / 2000) and head["title"] == "frame 1999"
+    assert all(name in text for name in TRACKS)  # every track is labelled
+    assert not [b for b in blocks if b["track"] not in (None, "flag left", "proposal")]
 
 
 def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) -> None:

@@ -139,6 +139,9 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
                 assert box and box["x"] >= 0 and box["y"] >= 0 and box["width"] > 300 and box["height"] > 60, box
                 assert box["x"] + box["width"] <= 1600 and box["y"] + box["height"] <= 1000, (i, box)
 
+            # the timeline's proposals carry their reason on hover (a title on each run)
+            tip = page.locator("div.run[data-track='proposal']").first.get_attribute("title")
+            assert re.match(r"proposal \(pending\), frames \d+–\d+: \S", tip), tip
             # accept the solver's proposals, select frames 20-40 by dragging the timeline's
             # range, and flag them with the hotkey G
             page.get_by_role("button", name="Accept all", exact=True).click()
