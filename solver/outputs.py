@@ -80,10 +80,18 @@ def staged_output(out_dir: str | Path, *, merge: bool = False) -> Iterator[Path]
         shutil.rmtree(trash, ignore_errors=True)
         shutil.rmtree(tmp, ignore_errors=True)
         return
+    replace_folder(tmp, out, aside_prefix=f".{out.name}.old-")
+
+
+def replace_folder(src: Path, dst: Path, *, aside_prefix: str) -> None:
+    """Move folder ``src`` to ``dst`` in two renames: an existing ``dst`` is first moved
+    into a new temporary folder ``<aside_prefix>*/previous`` beside it (deleted at the end),
+    so ``dst`` is at every moment either the old or the new folder, or (between the two
+    renames of a killed process) absent with the old one in ``previous``."""
     old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-        os.replace(out, old / "previous")
-    os.replace(tmp, out)
+    if dst.exists():
+        old = Path(tempfile.mkdtemp(prefix=aside_prefix, dir=dst.parent))
+        os.replace(dst, old / "previous")
+    os.replace(src, dst)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)

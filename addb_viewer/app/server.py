@@ -680,10 +680,8 @@ class ReviewApp:
             self.panel.saved.content = "Select frames on the timeline first (drag the ends of Selection)."
             return
         s, e = sel
-        if what == "Flag":
-            self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
-        elif what == "Unflag":
-            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
+        if what in ("Flag", "Unflag"):
+            self._flag_frames(what == "Flag", s, e)
         elif what == "Accept":
             self.edit(f"accept proposals in {s}–{e - 1}", lambda ed, _k, _f: ed.accept_range(s, e))
         else:
@@ -707,8 +705,11 @@ class ReviewApp:
         if sel is None:
             self.panel.saved.content = "Set an in point and an out point first (I / O)."
             return
-        s, e = sel
-        if what == "Flag range":
+        self._flag_frames(what == "Flag range", *sel)
+
+    def _flag_frames(self, flag: bool, s: int, e: int) -> None:
+        """Flag frames ``[s, e)`` for the selected foot, or clear their flags."""
+        if flag:
             self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
         else:
             self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.errors import AddbError
-from solver.outputs import write_json
+from solver.outputs import replace_folder, write_json
 
 LOG_NAME = "process.log"
 #: Prefix of a subject's private work folder (beside its final output folder).
@@ -93,14 +93,9 @@ def _error_record(exc: BaseException) -> dict[str, Any]:
 
 
 def _replace_dir(src: Path, dst: Path) -> None:
-    """Move folder ``src`` to ``dst``, replacing ``dst`` in two renames."""
-    old = None
-    if dst.exists():
-        old = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}old-{dst.name}-", dir=dst.parent))
-        os.replace(dst, old / "previous")
-    os.replace(src, dst)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    """Move folder ``src`` to ``dst``, replacing ``dst`` in two renames (the old output
+    waits in ``.addb-work-old-<name>-*/previous``, see :func:`remove_stale_work`)."""
+    replace_folder(src, dst, aside_prefix=f"{WORK_PREFIX}old-{dst.name}-")
 
 
 def _record_failure(final: Path, log: Path, manifest: dict[str, Any]) -> None:

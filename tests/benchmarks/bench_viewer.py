@@ -34,9 +34,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path[:0] = [str(REPO), str(REPO / "tests" / "viewer")]
 
-from addb_viewer.app.paths import ReviewPaths  # noqa: E402
-from addb_viewer.demo import DEMO_SUBJECT  # noqa: E402
-from solver.results import load_processed, save_processed  # noqa: E402
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.demo import DEMO_SUBJECT
+from solver.results import load_processed, save_processed
 
 
 def _stats(seconds: list[float]) -> str:
@@ -195,20 +195,10 @@ def bench_timeline(out: Path, n_frames: int = 2000, edits: int = 20) -> None:
 
 def bench_memory(out: Path, n_frames: int = 2000) -> None:
     """RSS of an ``addb view`` process showing a ``n_frames`` trial (demo arrays tiled)."""
-    walk = load_processed(out, "walk")
-    reps = -(-n_frames // walk.n_frames)
-
-    def tile(a: np.ndarray) -> np.ndarray:
-        return np.concatenate([a] * reps)[:n_frames]
-
-    arrays = {f.name: tile(getattr(walk, f.name)) for f in dataclasses.fields(walk)
-              if isinstance(getattr(walk, f.name), np.ndarray) and getattr(walk, f.name).shape[:1] == (walk.n_frames,)}
-    arrays["time"] = np.arange(n_frames) / walk.rate_hz
-    plates = tuple(dataclasses.replace(p, force=tile(p.force), cop=tile(p.cop), free_moment=tile(p.free_moment),
-                                       body=tile(p.body)) for p in walk.plates)
-    long = dataclasses.replace(walk, trial="walk2000", plates=plates,
-                               proposal_reasons=tuple(np.resize(np.array(walk.proposal_reasons, dtype=object), n_frames)),
-                               **arrays)
+    long = tiled_trial(out, n_frames)
+    arrays = {f.name: getattr(long, f.name) for f in dataclasses.fields(long)
+              if isinstance(getattr(long, f.name), np.ndarray) and getattr(long, f.name).shape[:1] == (n_frames,)}
+    plates = long.plates
     nbytes = sum(a.nbytes for a in arrays.values()) + sum(p.force.nbytes * 3 + p.body.nbytes for p in plates)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "out"

@@ -8,11 +8,7 @@ failed under ``CI=true``); the HTTP and websocket checks need neither.
 
 from __future__ import annotations
 
-import os
 import re
-import signal
-import subprocess
-import sys
 import threading
 import urllib.error
 import urllib.request
@@ -23,7 +19,7 @@ import pytest
 import viser
 import websockets.exceptions
 import websockets.sync.client
-from viewer_support import ProtocolClient, wait_for
+from viewer_support import ProtocolClient, ViewProcess, wait_for
 
 from addb_viewer.app.access import AccessGate, is_loopback
 from addb_viewer.demo import DEMO_SUBJECT
@@ -89,28 +85,10 @@ def test_loopback_app_needs_no_token(demo_paths, make_app) -> None:
 @pytest.fixture
 def lab_server(demo_out: Path, tmp_path: Path):
     """``addb view --host 0.0.0.0 --port 0`` on the processed demo copy, in a subprocess."""
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "addb_viewer.cli", "view", str(DEMO_SUBJECT), "--out", str(demo_out),
-           "--host", "0.0.0.0", "--port", "0", "--reviewer", "lab"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
-    lines: list[str] = []
-    url = None
-    for line in proc.stdout:
-        lines.append(line)
-        m = re.search(r" at (http://\S+)", line)
-        url = url or (m.group(1) if m else None)
-        if "first frame shown" in line or proc.poll() is not None:
-            break
-    assert url, "".join(lines)
-    drain = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    drain.start()
-    yield url, lines
-    proc.send_signal(signal.SIGTERM)
-    try:
-        assert proc.wait(60) == 0, "".join(lines)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    view = ViewProcess([str(DEMO_SUBJECT), "--out", str(demo_out), "--host", "0.0.0.0", "--port", "0", "--reviewer", "lab"],
+                       tmp_path, url_pattern=r" at (http://\S+)")  # fmt: skip
+    yield view.url, view.lines
+    view.stop()
 
 
 def test_lab_server_requires_the_token(lab_server) -> None:

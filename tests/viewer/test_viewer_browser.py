@@ -10,15 +10,11 @@ frame rate or timing is asserted: software WebGL on a loaded 2-core machine is s
 
 from __future__ import annotations
 
-import os
 import re
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import pytest
+from viewer_support import ViewProcess
 
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.demo import DEMO_SUBJECT
@@ -44,28 +40,9 @@ pytestmark = [
 @pytest.fixture
 def view_server(demo_out: Path, tmp_path: Path):
     """``addb view`` (as the console script runs it) serving the processed demo copy."""
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "addb_viewer.cli", "view", str(DEMO_SUBJECT), "--out", str(demo_out),
-           "--port", "0", "--reviewer", "e2e"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
-    lines: list[str] = []
-    url = None
-    for line in proc.stdout:
-        lines.append(line)
-        m = re.search(r" at (http://127\.0\.0\.1:\d+)", line)
-        url = url or (m.group(1) if m else None)
-        if "first frame shown" in line or proc.poll() is not None:
-            break
-    assert url, "".join(lines)
-    drain = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    drain.start()
-    yield url, ReviewPaths.for_subject(DEMO_SUBJECT, demo_out), lines
-    proc.send_signal(signal.SIGTERM)
-    try:
-        assert proc.wait(60) == 0, "".join(lines)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    view = ViewProcess([str(DEMO_SUBJECT), "--out", str(demo_out), "--port", "0", "--reviewer", "e2e"], tmp_path)
+    yield view.url, ReviewPaths.for_subject(DEMO_SUBJECT, demo_out), view.lines
+    view.stop()
 
 
 def _colored_pixels(png: bytes) -> tuple[int, int]:

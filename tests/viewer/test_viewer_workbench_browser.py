@@ -13,14 +13,11 @@ from __future__ import annotations
 
 import os
 import re
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
+from viewer_support import ViewProcess
 
 from addb_viewer.cli import main as cli
 from annotations import AnnotationStore
@@ -54,26 +51,9 @@ def workbench(tmp_path: Path):
         writable_copy(SHARED_DATA / "subjects" / name, ds / rel)
     out = ds / "addb_out"
     assert cli(["process", str(ds), "--out", str(out), "--workers", "2"]) == 0
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"), PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "addb_viewer.cli", "view", str(ds), "--port", "0", "--workers", "0", "--reviewer", "e2e"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
-    lines: list[str] = []
-    url = None
-    for line in proc.stdout:
-        lines.append(line)
-        m = re.search(r" at (http://127\.0\.0\.1:\d+)", line)
-        url = url or (m.group(1) if m else None)
-        if "first frame shown" in line or proc.poll() is not None:
-            break
-    assert url, "".join(lines)
-    threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
-    yield url, ds, out, lines
-    proc.send_signal(signal.SIGTERM)
-    try:
-        assert proc.wait(60) == 0, "".join(lines)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    view = ViewProcess([str(ds), "--port", "0", "--workers", "0", "--reviewer", "e2e"], tmp_path)
+    yield view.url, ds, out, view.lines
+    view.stop()
 
 
 def _selection(page) -> tuple[int, int] | None:

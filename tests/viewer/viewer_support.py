@@ -84,3 +84,61 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 60.0, what: str = "c
             return value
         time.sleep(0.05)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class ViewProcess:
+    """``addb view ARGS`` in a subprocess, as the console script runs it.
+
+    Starts the command, reads its output until it says "first frame shown" (or exits) and
+    keeps the printed address in :attr:`url`; a thread keeps reading the rest into
+    :attr:`lines`. :meth:`stop` sends SIGTERM and asserts a clean exit.
+
+    Parameters
+    ----------
+    args
+        The arguments after ``addb view``.
+    cwd
+        Working folder; the user cache (``XDG_CACHE_HOME``) goes to ``cwd/cache``.
+    url_pattern
+        Regular expression of the address in the output (group 1).
+    """
+
+    def __init__(self, args: list[str], cwd: Any, url_pattern: str = r" at (http://127\.0\.0\.1:\d+)") -> None:
+        import os
+        import re
+        import subprocess
+        import sys
+        from pathlib import Path
+
+        repo = Path(__file__).resolve().parents[2]
+        env = dict(os.environ, XDG_CACHE_HOME=str(Path(cwd) / "cache"), PYTHONPATH=str(repo))
+        cmd = [sys.executable, "-m", "addb_viewer.cli", "view", *args]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=cwd)
+        self.lines: list[str] = []
+        self.url: str | None = None
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            m = re.search(url_pattern, line)
+            self.url = self.url or (m.group(1) if m else None)
+            if "first frame shown" in line or self.proc.poll() is not None:
+                break
+        assert self.url, "".join(self.lines)
+        threading.Thread(target=lambda: self.lines.extend(self.proc.stdout), daemon=True).start()
+
+    @property
+    def output(self) -> str:
+        """Everything the process printed so far."""
+        return "".join(self.lines)
+
+    def stop(self) -> None:
+        """SIGTERM, then assert the process exited with 0 (killed after 60 s)."""
+        import signal
+        import subprocess
+
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            assert self.proc.wait(60) == 0, self.output
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            raise
