@@ -1,7 +1,10 @@
 """``addb view [SUBJECT_DIR]``: review a subject in the browser (default: the bundled demo).
 
 ``addb view FILE.b3d`` converts the AddBiomechanics file into a cached subject folder
-first (:func:`b3d_subject`), then reviews that.
+first (:func:`b3d_subject`), then reviews that; ``addb view FOLDER`` of .b3d files converts
+each and reviews them as a dataset, in the workbench's queue (:func:`b3d_dataset`).
+``addb view DATASET_DIR`` (subject folders at any depth, or a dataset output tree) opens the
+review workbench (:mod:`addb_viewer.app.workbench`).
 
 Prints the page's address, then serves until Ctrl-C (or SIGTERM). A subject without
 processed output is processed first, with the progress in the page; a subject that
@@ -54,6 +57,44 @@ def b3d_subject(path: Path) -> Path:
     return folder
 
 
+def b3d_dataset(folder: Path) -> Path:
+    """A dataset tree for a folder of .b3d files: each file converted once into its cached
+    subject folder (:func:`b3d_subject`), linked as ``<cache>/b3d-datasets/<folder>-<hash>/<stem>``;
+    the tree's outputs go to its ``addb_out``.
+
+    Raises
+    ------
+    SubjectFolderError
+        The folder holds no .b3d file.
+    B3dFormatError
+        A file is damaged (names the file and byte offset).
+    """
+    import hashlib
+
+    from addb_viewer.locations import cache_root
+    from solver.errors import SubjectFolderError
+
+    files = sorted(p for p in folder.glob("*.b3d") if p.is_file())
+    if not files:
+        raise SubjectFolderError("no .b3d file in this folder", path=folder)
+    digest = hashlib.sha1(str(folder.resolve()).encode()).hexdigest()[:8]
+    root = cache_root() / "b3d-datasets" / f"{folder.resolve().name}-{digest}"
+    root.mkdir(parents=True, exist_ok=True)
+    for f in files:
+        subject = b3d_subject(f)
+        link = root / f.stem
+        if link.is_symlink() and link.resolve() != subject.resolve():
+            link.unlink()
+        if not link.exists():
+            link.symlink_to(subject, target_is_directory=True)
+    return root
+
+
+def is_b3d_folder(path: Path) -> bool:
+    """A folder holding .b3d files (and no subject folder of its own)."""
+    return path.is_dir() and not (path / "_subject.json").is_file() and any(path.glob("*.b3d"))
+
+
 def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, object]:
     """The review app on a dataset's queue (:mod:`addb_viewer.app.workbench`), showing the
     next trial to review (or the first subject)."""
@@ -86,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.server import ReviewApp
 
     subject = Path(args.subject) if args.subject else None
+    if subject is not None and is_b3d_folder(subject):
+        subject = b3d_dataset(subject)  # a folder of published subjects: reviewed as a dataset
     if subject is not None and is_dataset(subject):
         from addb_viewer.geometry import mesh_search_path
 

@@ -24,3 +24,25 @@ def test_b3d_subject_is_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     stamp = (folder / "_subject.json").stat().st_mtime_ns
     assert b3d_subject(B3D) == folder
     assert (folder / "_subject.json").stat().st_mtime_ns == stamp  # not converted again
+
+
+def test_a_folder_of_b3d_files_opens_as_a_dataset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import shutil
+
+    from addb_viewer.app.queue import NOT_PROCESSED, build_queue, dataset_subjects, is_dataset
+    from addb_viewer.commands.view import b3d_dataset, is_b3d_folder
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    folder = tmp_path / "published"
+    folder.mkdir()
+    for name in ("s01.b3d", "s02.b3d"):
+        shutil.copyfile(B3D, folder / name)
+    assert is_b3d_folder(folder) and not is_b3d_folder(tmp_path / "cache")
+    root = b3d_dataset(folder)
+    assert is_dataset(root) and b3d_dataset(folder) == root  # converted once, then reused
+    _, out, subjects = dataset_subjects(root)
+    assert [s.rel for s in subjects] == ["s01", "s02"] and out == root / "addb_out"
+    rows = build_queue(subjects)
+    assert {(r.subject.rel, r.processing) for r in rows} == {("s01", NOT_PROCESSED), ("s02", NOT_PROCESSED)}
+    # each subject keeps the file's missing-GRF labels as its review record
+    assert all((s.subject_dir / "annotations.json").is_file() for s in subjects)
