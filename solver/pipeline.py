@@ -4,10 +4,20 @@
 trials) and, when the trials have force plates, the dynamics stage, then writes the
 output folder (:mod:`solver.outputs`) atomically. Stages are pure functions of their
 inputs; the functions here only load, sequence and write.
+
+``process_subject`` also saves the kinematics stage's result in
+``OUT/.addb_cache/kinematics.pkl`` (:func:`save_kinematics_cache`), keyed by everything
+that stage depends on. :func:`reprocess_dynamics` (the review app's Reprocess after a flag
+edit) reuses it: the reviewer's flags (unmeasured-force masks) enter the dynamics stage
+only (``run_dynamics(unmeasured=...)``), never scaling or IK, so a flag edit invalidates
+the dynamics alone.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -230,20 +240,237 @@ def process_subject(
         return _process_subject(subject_dir, out_dir, options, unmeasured, progress)
 
 
+def reprocess_dynamics(
+    subject_dir: str | Path,
+    out_dir: str | Path,
+    trials: Sequence[str],
+    unmeasured: dict[str, np.ndarray] | None = None,
+    progress: Progress | None = None,
+    *,
+    options: ProcessOptions | None = None,
+    warm_start: bool = False,
+) -> ProcessResult:
+    """Rerun the dynamics stage only (after a flag edit) and write ``trials`` into ``out_dir``.
+
+    The kinematics stage (scaling + IK of every trial) is read from the cache that the last
+    :func:`process_subject` into ``out_dir`` saved (:func:`load_kinematics_cache`); the
+    reviewer's flags do not enter that stage, so a flag edit leaves it valid. When the cache
+    is missing or stale (an input file, ``addb_extensions.json``, the kinematics options, the
+    solver's code or version changed), this is a full :func:`process_subject` run, and the
+    progress messages say why.
+
+    The dynamics stage still runs on every trial with force plates (the subject's mass and
+    body mass factors are fitted over all of them), with the same settings as a full run.
+    By default nothing is warm-started: the cached kinematics are bit for bit those a full
+    run computes, so the result *equals* a full run with the same flags (the tests check
+    it), only without the kinematics stage's time.
+
+    With ``warm_start`` the dynamics fit of each trial starts from that trial's previous
+    solution (the coordinates ``q`` of ``OUT/<trial>/trial.npz``, used when its frame times
+    equal the stage's common frames) instead of the filtered, centre-of-mass shifted IK.
+    Contact, the centre-of-mass mass fit (so the mass and the unobserved frames stay exactly
+    those of a full run) and the bounds are computed as in a full run; the body mass
+    factors start from 1 (each mass solve's prior pulls toward the current factors, so
+    starting from the previous ones would change the answer). The fit is about 3x faster
+    then, but it does not land on the full run's answer: the fit stops on a relative cost
+    decrease below ``FitSettings.tolerance`` or after ``rounds x iterations`` steps, well
+    before the coordinates stop moving, so its end point depends on its start (measured on
+    the walk with frames 100-120 flagged: marker RMS 2 % apart, linear residual RMS 4.3 N
+    vs 2.7 N, coordinates up to 0.43 rad apart). It is therefore off by default and the
+    review app does not use it.
+
+    Parameters
+    ----------
+    subject_dir
+        AddBiomechanics subject folder.
+    out_dir
+        Output folder of a previous :func:`process_subject` of that subject; the named
+        trial folders, the model and subject.json are replaced (merged), as a Reprocess does.
+    trials
+        Names of the trials to write (at least one).
+    unmeasured
+        Trial name -> ``(T,)`` bool mask at the marker rate (the reviewer's flags), as for
+        :func:`process_subject`.
+    progress
+        Called with (message, fraction done).
+    options
+        Stage options (its ``trials`` is replaced by ``trials``); the kinematics options
+        are part of the cache key.
+    warm_start
+        Start the dynamics fit from the previous solutions (see above).
+
+    Returns
+    -------
+    ProcessResult
+
+    Raises
+    ------
+    SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
+        As :func:`process_subject`.
+    """
+    opts = replace(options or ProcessOptions(), trials=tuple(trials))
+    if not opts.trials:
+        raise KinematicsError("reprocess_dynamics: name at least one trial to write")
+    with single_threaded_blas():
+        return _process_subject(subject_dir, out_dir, opts, unmeasured, progress, dynamics_only=True, warm_start=warm_start)
+
+
+# ---------------------------------------------------------------------- kinematics cache
+CACHE_DIR = ".addb_cache"
+"""Folder of the output folder holding caches of the stages (not a trial)."""
+KINEMATICS_CACHE = "kinematics.pkl"
+"""The kinematics stage's cached result inside :data:`CACHE_DIR`."""
+_CACHE_SCHEMA = "addb.kinematics_cache/1"
+
+
+def _file_digest(path: Path) -> str:
+    h = hashlib.blake2b(digest_size=16)
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _solver_code_digest() -> str:
+    """Digest of the solver package's source files (a code change invalidates caches)."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.blake2b(digest_size=16)
+    for f in sorted(root.rglob("*.py")):
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _addb_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("addb")
+    except Exception:  # noqa: BLE001 - not installed as a package
+        return "unknown"
+
+
+def kinematics_cache_key(subject: Subject, options: KinematicsOptions | None = None) -> dict[str, Any]:
+    """What the kinematics stage of ``subject`` depends on, as a JSON-like dict.
+
+    The subject folder's top-level files (``_subject.json``, the model,
+    ``addb_extensions.json`` / ``.osim``, marker settings) and every file under ``trials/``
+    (links followed), each by size, modification time (ns) and content digest; the model
+    file the subject names (it may live elsewhere); the kinematics options; addb's version
+    and a digest of the solver's source. The reviewer's flags are not part of it: they
+    enter the dynamics stage only.
+    """
+    folder = Path(subject.path).resolve()
+    files = [f for f in folder.iterdir() if f.is_file()]
+    if (folder / "trials").is_dir():
+        files += [f for f in (folder / "trials").rglob("*") if f.is_file()]
+    inputs = {}
+    for f in sorted(files):
+        st = f.stat()
+        inputs[str(f.relative_to(folder))] = [st.st_size, st.st_mtime_ns, _file_digest(f)]
+    model = Path(subject.model_path).resolve()
+    mst = model.stat()
+    return {
+        "schema": _CACHE_SCHEMA,
+        "subject_dir": str(folder),
+        "inputs": inputs,
+        "model": [str(model), mst.st_size, mst.st_mtime_ns, _file_digest(model)],
+        "options": repr(options or KinematicsOptions()),
+        "addb_version": _addb_version(),
+        "solver_code": _solver_code_digest(),
+    }
+
+
+def save_kinematics_cache(folder: Path, sk: SubjectKinematics, key: dict[str, Any]) -> Path:
+    """Write ``folder/.addb_cache/kinematics.pkl`` (the key and ``sk``); returns its path."""
+    path = Path(folder) / CACHE_DIR / KINEMATICS_CACHE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "wb") as f:
+        pickle.dump({"schema": _CACHE_SCHEMA, "key": key, "kinematics": sk}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(tmp, path)
+    return path
+
+
+def load_kinematics_cache(out_dir: str | Path, key: dict[str, Any]) -> tuple[SubjectKinematics | None, str]:
+    """The cached kinematics of ``out_dir`` when its key equals ``key``.
+
+    Returns
+    -------
+    (SubjectKinematics or None, reason)
+        None with the reason (missing, unreadable, or which part of the key changed) when
+        the cache cannot be used; never raises for a bad cache file.
+    """
+    path = Path(out_dir) / CACHE_DIR / KINEMATICS_CACHE
+    if not path.is_file():
+        return None, f"no kinematics cache ({path})"
+    try:
+        with open(path, "rb") as f:
+            data = pickle.load(f)  # our own output folder: trusted as its other files are
+    except Exception as exc:  # noqa: BLE001 - any unreadable cache means a full run
+        return None, f"kinematics cache {path} unreadable ({type(exc).__name__}: {exc})"
+    if not isinstance(data, dict) or data.get("schema") != _CACHE_SCHEMA or not isinstance(data.get("kinematics"), SubjectKinematics):
+        return None, f"kinematics cache {path} has another format"
+    old = data.get("key") or {}
+    if old != key:
+        changed = [k for k in key if old.get(k) != key[k]]
+        if "inputs" in changed:
+            a, b = old.get("inputs") or {}, key["inputs"]
+            files = sorted(n for n in set(a) | set(b) if a.get(n) != b.get(n))
+            changed[changed.index("inputs")] = "input files " + ", ".join(files[:5]) + (" ..." if len(files) > 5 else "")
+        return None, f"kinematics cache is stale ({'; '.join(changed) or 'key'} changed)"
+    return data["kinematics"], "kinematics cache is valid"
+
+
+def previous_solutions(out_dir: str | Path, names: Sequence[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Trial -> ``(time (T,), q (T, n))`` of the dynamics solution in
+    ``out_dir/<trial>/trial.npz`` (trials without dynamics or without the file: absent)."""
+    out = {}
+    for name in names:
+        path = Path(out_dir) / name / "trial.npz"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if "q" not in data.files or "time" not in data.files or "residual_force" not in data.files:
+                    continue
+                if not np.isfinite(data["residual_force"]).any():
+                    continue  # a kinematics-only trial
+                out[name] = (np.array(data["time"], dtype=float), np.array(data["q"], dtype=float))
+        except (OSError, ValueError, KeyError):
+            continue
+    return out
+
+
 def _process_subject(
     subject_dir: str | Path,
     out_dir: str | Path,
     options: ProcessOptions | None,
     unmeasured: dict[str, np.ndarray] | None,
     progress: Progress | None,
+    *,
+    dynamics_only: bool = False,
+    warm_start: bool = False,
 ) -> ProcessResult:
     opts = options or ProcessOptions()
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
     subject = extend_subject(subject)  # mass and model saved by `addb diagnose --apply`
-    sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f))
+    key = kinematics_cache_key(subject, opts.kinematics)
+    sk = None
+    start_q = None
+    if dynamics_only:
+        sk, why = load_kinematics_cache(out_dir, key)
+        if sk is None:
+            say(f"{why}: running the kinematics stage too (full run)", 0.0)
+            dynamics_only = False
+        else:
+            say("kinematics reused from the cache (flags change the dynamics only)", 0.4)
+            if warm_start:
+                start_q = previous_solutions(out_dir, [t.name for t in sk.kinematics.trials])
+    if sk is None:
+        sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f))
     t_kin = time.perf_counter()
+    load_s = t_kin - t0 if dynamics_only else sk.load_seconds  # from the cache: loading is all it took
     dyn = None
     if not subject.disable_dynamics:
         from solver.dynamics.stage import DynamicsOptions, run_dynamics
@@ -258,6 +485,7 @@ def _process_subject(
             known_unmeasured=extension_masks(subject) or None,
             options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),
+            start_q=start_q or None,
         )
     t_dyn = time.perf_counter()
     say("writing results", 0.96)
@@ -274,7 +502,7 @@ def _process_subject(
                 continue
             folder = tmp / trial.name
             metrics = kinematics_metrics(trial)
-            seconds = {"load": sk.load_seconds, "kinematics": t_kin - t0 - sk.load_seconds, "ik_trial": trial.seconds}
+            seconds = {"load": load_s, "kinematics": t_kin - t0 - load_s, "ik_trial": trial.seconds}
             td = _trial_dynamics(dyn, trial.name)
             if td is None:
                 write_trial_kinematics(folder, trial, rotational)
@@ -305,8 +533,11 @@ def _process_subject(
                 "dynamics_settings": dyn.settings if dyn else None,
                 "total_seconds": time.perf_counter() - t0,
                 "stage_seconds": {"kinematics": t_kin - t0, "dynamics": t_dyn - t_kin},
+                **({"kinematics_from_cache": True} if dynamics_only else {}),
             },
         )
+        if not dynamics_only:
+            save_kinematics_cache(tmp, sk, key)
     say("done", 1.0)
     return ProcessResult(sk, dyn, out_path)
 

@@ -1,7 +1,8 @@
 """The solver in a separate process, with progress and cancel, never blocking the server.
 
 :class:`SolverJob` starts ``python -m addb_viewer.app.jobs SPEC.json`` in a child process.
-The child runs :func:`solver.pipeline.process_subject` (or, for a diagnosis job,
+The child runs :func:`solver.pipeline.process_subject` (for a Reprocess after a flag edit
+:func:`solver.pipeline.reprocess_dynamics`, which skips the kinematics stage; for a diagnosis job,
 :func:`solver.diagnose.core.diagnose_trial` and writes its report) and reports on its standard
 output, one JSON object per line after :data:`PREFIX` (other output is ignored):
 ``{"progress": message, "fraction": f}``, then ``{"done": true}`` or
@@ -54,6 +55,11 @@ class JobSpec:
     kind
         ``"process"`` (the pipeline) or ``"diagnose"`` (``addb diagnose`` of the single
         trial in ``trials``: writes ``OUT/<trial>/diagnosis.json``).
+    dynamics_only
+        For ``"process"`` with ``trials``: rerun the dynamics stage only, on the kinematics
+        cached in ``out_dir`` by the last full run
+        (:func:`solver.pipeline.reprocess_dynamics`; a full run when that cache is missing
+        or stale). The reviewer's flags do not change the kinematics.
     """
 
     subject_dir: Path
@@ -61,6 +67,7 @@ class JobSpec:
     trials: tuple[str, ...] | None = None
     unmeasured: dict[str, np.ndarray] = field(default_factory=dict)
     kind: str = "process"
+    dynamics_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -143,6 +150,7 @@ class SolverJob:
                     "mask_trials": list(self.spec.unmeasured),
                     "masks": str(masks),
                     "kind": self.spec.kind,
+                    "dynamics_only": self.spec.dynamics_only,
                 }
             )
         )
@@ -262,6 +270,18 @@ def _child(spec_path: str) -> int:
             diag = diagnose_trial(spec["subject_dir"], trial, spec["out_dir"], flags=masks.get(trial),
                                   progress=lambda m, f: _emit({"progress": m, "fraction": f}))  # fmt: skip
             write_report(diag, spec["out_dir"], trial)
+            _emit({"done": True})
+            return 0
+        if spec.get("dynamics_only") and trials:
+            from solver.pipeline import reprocess_dynamics
+
+            reprocess_dynamics(
+                spec["subject_dir"],
+                spec["out_dir"],
+                trials,
+                masks or None,
+                lambda m, f: _emit({"progress": m, "fraction": f}),
+            )
             _emit({"done": True})
             return 0
         process_subject(

@@ -2,7 +2,8 @@
 and the "Record to Rerun" export, with their progress, cancel and results in the panel.
 
 One run at a time. A Reprocess gives the solver every trial's reviewer flags (frames with
-unmeasured force) and its name: the solver replaces only that trial's folder (plus the
+unmeasured force) and its name; the solver reruns the dynamics stage only, on the
+kinematics cached by the last full run (:func:`solver.pipeline.reprocess_dynamics`), and replaces only that trial's folder (plus the
 model and subject.json) in the output folder when it succeeds; the app then reloads the
 trial at the same frame and shows the before/after table. A failed or cancelled run leaves the previous
 result on screen and on disk, and says why in the page.
@@ -72,7 +73,9 @@ class Reprocessor:
             self._say("No trial to reprocess.")
             return
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
-        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks())
+        # flags change the dynamics only: the child reuses the kinematics cached by the last
+        # full run (a full run when that cache is missing or stale, e.g. after an extension)
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks(), dynamics_only=True)
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
     def diagnose(self, trial: str | None = None) -> None:

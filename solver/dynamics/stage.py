@@ -214,6 +214,7 @@ def run_dynamics(
     progress: Progress | None = None,
     known_unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
     proposal_q: Mapping[str, NDArray[np.float64]] | None = None,
+    start_q: Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
 ) -> DynamicsResult | None:
     """Run the dynamics stage on the trials that have force data.
 
@@ -245,6 +246,12 @@ def run_dynamics(
         assigned to the plates and unmeasured frames proposed, instead of the kinematics'
         own (which the fit still starts from). A refit that starts from a processed motion
         passes the inverse kinematics here, so that it proposes what the pipeline would.
+    start_q
+        Trial name -> ``(time (T,), q (T, n))``: a previous solution of the dynamics fit to
+        start that trial's fit from (warm start), used when ``time`` equals the trial's
+        common frames (to 1e-9 s) and ``q`` has the model's coordinates; otherwise the
+        trial starts as usual. Only the fit's starting coordinates change: contact, the
+        mass fit and the root shift are computed from the kinematics as without it.
 
     Returns
     -------
@@ -332,9 +339,14 @@ def run_dynamics(
         inputs = []
         for p in prepared:
             f_tot, m_tot = _totals(wrenches[p.name], p.time.size)
+            q_start = p.q
+            if start_q is not None and p.name in start_q:
+                t_prev, q_prev = (np.asarray(a, dtype=float) for a in start_q[p.name])
+                if q_prev.shape == p.q.shape and t_prev.shape == p.time.shape and np.allclose(t_prev, p.time, rtol=0.0, atol=1e-9):
+                    q_start = q_prev
             inputs.append(
                 FitTrialInput(
-                    q=p.q,
+                    q=q_start,
                     markers=sk_m.marker_index(list(p.marker_names)),
                     observed_markers=p.obs,
                     observed=~p.unobserved,

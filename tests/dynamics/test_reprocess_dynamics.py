@@ -1,0 +1,233 @@
+"""Reprocess after a flag edit: the dynamics stage only, on the kinematics cached by the
+last full run (``solver.pipeline.reprocess_dynamics``), gives what a full run with the same
+flags gives; a stale or missing cache means a full run; the review app's Reprocess uses it.
+
+All on the real walk (rajagopal2016_walk: a static trial and a walk with force plates).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import solver.pipeline as pipeline
+from solver.pipeline import CACHE_DIR, KINEMATICS_CACHE, ProcessOptions, process_subject, reprocess_dynamics
+from solver.results import load_processed
+from tests.conftest import SHARED_DATA, writable_copy
+
+pytestmark = pytest.mark.slow
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+KEYS = ("marker_rms_m", "marker_max_m", "linear_residual_rms_N", "angular_residual_rms_Nm", "mass_kg", "unobserved_frames")
+ARRAYS = ("q", "tau", "residual_force", "residual_moment", "unobserved", "com")
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(subject copy, output of a full run without flags)."""
+    root = tmp_path_factory.mktemp("reprocess")
+    subject = writable_copy(WALK, root / "rajagopal2016_walk")
+    out = root / "out"
+    process_subject(subject, out)
+    return subject, out
+
+
+def _copy_out(out: Path, dst: Path) -> Path:
+    shutil.copytree(out, dst, symlinks=True)
+    return dst
+
+
+def _flags(out: Path) -> dict[str, np.ndarray]:
+    """The walk's current unmeasured frames (the proposals) plus frames 100-120 flagged:
+    mid-stance on the plates, measured in the unflagged run."""
+    r = json.loads((out / "walk" / "results.json").read_text())
+    mask = np.zeros(r["n_frames"], dtype=bool)
+    mask[r["unobserved_frames"]] = True
+    assert not mask[100:121].any()
+    mask[100:121] = True
+    return {"walk": mask}
+
+
+def _no_kinematics(monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(*a: object, **k: object) -> None:
+        raise AssertionError("the kinematics stage ran")
+
+    monkeypatch.setattr(pipeline, "subject_kinematics", boom)
+    monkeypatch.setattr(pipeline, "run_kinematics", boom)
+
+
+def _counting_kinematics(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    calls: list[int] = []
+    real = pipeline.subject_kinematics
+
+    def counted(*a: object, **k: object) -> pipeline.SubjectKinematics:
+        calls.append(1)
+        return real(*a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pipeline, "subject_kinematics", counted)
+    return calls
+
+
+def _results(out: Path) -> dict:
+    return json.loads((out / "walk" / "results.json").read_text())
+
+
+def test_full_run_writes_the_kinematics_cache(base: tuple[Path, Path]) -> None:
+    subject, out = base
+    assert (out / CACHE_DIR / KINEMATICS_CACHE).is_file()
+    sk, why = pipeline.load_kinematics_cache(out, pipeline.kinematics_cache_key(pipeline.extend_subject(pipeline.load_subject(subject))))
+    assert sk is not None, why
+    assert [t.name for t in sk.kinematics.trials] == ["static", "walk"]
+    # the cache is not a trial
+    assert sorted(p.parent.name for p in out.glob("*/trial.npz")) == ["static", "walk"]
+
+
+def test_flag_edit_reruns_the_dynamics_only_and_equals_a_full_run(
+    base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    subject, out = base
+    flags = _flags(out)
+    reference = tmp_path / "full"
+    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured=flags)
+
+    fast = _copy_out(out, tmp_path / "fast")
+    before_static = (fast / "static" / "trial.npz").stat().st_mtime_ns
+    _no_kinematics(monkeypatch)
+    messages: list[str] = []
+    result = reprocess_dynamics(subject, fast, ("walk",), flags, lambda m, f: messages.append(m))
+    assert any("kinematics reused from the cache" in m for m in messages), messages
+
+    a, b = _results(fast), _results(reference)
+    # the flags took effect: frames 100-120 are unobserved now
+    assert set(range(100, 121)) <= set(a["unobserved_frames"])
+    # no warm start: the cached kinematics are bit for bit the full run's, so the numbers are equal
+    for key in KEYS:
+        assert a[key] == b[key], key
+    pa, pb = load_processed(fast, "walk"), load_processed(reference, "walk")
+    for name in ARRAYS:
+        np.testing.assert_array_equal(getattr(pa, name), getattr(pb, name), err_msg=name)
+    assert result.dynamics is not None and result.dynamics.mass_kg == b["mass_kg"]
+    # only the named trial was replaced; the summary says where the kinematics came from
+    assert (fast / "static" / "trial.npz").stat().st_mtime_ns == before_static
+    summary = json.loads((fast / "subject.json").read_text())
+    assert summary["kinematics_from_cache"] is True
+    assert a["stage_seconds"]["kinematics"] < 0.05  # nothing but reading the cache
+
+
+def test_warm_start_skips_kinematics_and_keeps_mass_and_flags_exact(
+    base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The opt-in warm start: mass and unobserved frames are a full run's exactly (they come
+    from the centre-of-mass fit on the kinematics); the fitted motion lands elsewhere (the
+    fit stops on its relative-decrease tolerance, so its end point depends on its start):
+    measured 2 % on the marker RMS, which is what this bounds."""
+    subject, out = base
+    flags = _flags(out)
+    reference = tmp_path / "full"
+    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured=flags)
+    warm = _copy_out(out, tmp_path / "warm")
+    _no_kinematics(monkeypatch)
+    reprocess_dynamics(subject, warm, ("walk",), flags, warm_start=True)
+    a, b = _results(warm), _results(reference)
+    assert a["mass_kg"] == b["mass_kg"]
+    assert a["unobserved_frames"] == b["unobserved_frames"]
+    assert abs(a["marker_rms_m"] - b["marker_rms_m"]) < 0.05 * b["marker_rms_m"]
+    assert a["linear_residual_rms_BW"] < 0.03 and a["angular_residual_rms_BWh"] < 0.05
+
+
+def test_stale_or_missing_cache_falls_back_to_a_full_run(
+    base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    subject0, out0 = base
+    subject = writable_copy(subject0, tmp_path / "rajagopal2016_walk")
+    out = _copy_out(out0, tmp_path / "out")
+    flags = _flags(out)
+    calls = _counting_kinematics(monkeypatch)
+
+    # the copied subject lives elsewhere: the key names the folder, so the cache is stale
+    marker_file = subject / "trials" / "walk" / "markers.trc"
+    messages: list[str] = []
+    reprocess_dynamics(subject, out, ("walk",), flags, lambda m, f: messages.append(m))
+    assert len(calls) == 1
+    assert any("stale" in m and "full run" in m for m in messages), messages
+
+    # the fallback rewrote the cache: the next flag edit reuses it
+    reprocess_dynamics(subject, out, ("walk",), flags)
+    assert len(calls) == 1
+
+    # touching an input file makes it stale, naming the file
+    st = marker_file.stat()
+    os.utime(marker_file, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+    messages.clear()
+    reprocess_dynamics(subject, out, ("walk",), flags, lambda m, f: messages.append(m))
+    assert len(calls) == 2
+    assert any("trials/walk/markers.trc" in m for m in messages), messages
+
+    # a saved extension (addb_extensions.json) makes it stale too
+    (subject / "addb_extensions.json").write_text(json.dumps({"schema": "addb.extensions", "version": 1, "extensions": []}))
+    messages.clear()
+    reprocess_dynamics(subject, out, ("walk",), flags, lambda m, f: messages.append(m))
+    assert len(calls) == 3
+    assert any("addb_extensions.json" in m for m in messages), messages
+
+    # no cache at all
+    shutil.rmtree(out / CACHE_DIR)
+    messages.clear()
+    reprocess_dynamics(subject, out, ("walk",), flags, lambda m, f: messages.append(m))
+    assert len(calls) == 4
+    assert any("no kinematics cache" in m for m in messages), messages
+    assert (out / CACHE_DIR / KINEMATICS_CACHE).is_file()
+
+
+def test_app_reprocess_job_reruns_the_dynamics_only(
+    base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The Reprocessor asks for a dynamics-only job; the job's child runs it without the
+    kinematics stage (run in this process, so the monkeypatch holds)."""
+    from addb_viewer.app import jobs, reprocess
+
+    subject, out0 = base
+    out = _copy_out(out0, tmp_path / "out")
+    flags = _flags(out)
+
+    specs: list[jobs.JobSpec] = []
+
+    class Recorder:
+        def __init__(self, spec: jobs.JobSpec, work: Path, **kw: object) -> None:
+            specs.append(spec)
+            self.running = False
+
+        def start(self) -> None:
+            pass
+
+    monkeypatch.setattr(reprocess, "SolverJob", Recorder)
+    widget = SimpleNamespace
+    panel = widget(trial=widget(value="walk"), progress=widget(value=0, visible=False), cancel=widget(disabled=True),
+                   reprocess=widget(disabled=False), job_status=widget(content=""), comparison=widget(content=""))  # fmt: skip
+    app = SimpleNamespace(paths=SimpleNamespace(subject_dir=subject, out_dir=out, jobs_dir=tmp_path / "jobs"),
+                          store=None, trial=None, trials=["static", "walk"], panel=panel)  # fmt: skip
+    reprocess.Reprocessor(app).reprocess("walk")  # type: ignore[arg-type]
+    assert len(specs) == 1 and specs[0].dynamics_only and specs[0].trials == ("walk",)
+    reprocess.Reprocessor(app).process_subject()  # type: ignore[arg-type]
+    assert not specs[1].dynamics_only  # the first processing stays a full run
+
+    # the child with that spec (and the reviewer's flags)
+    work = tmp_path / "work"
+    work.mkdir()
+    np.savez(work / "unmeasured.npz", m0=flags["walk"])
+    spec_file = work / "job.json"
+    spec_file.write_text(json.dumps({"subject_dir": str(subject), "out_dir": str(out), "trials": ["walk"],
+                                     "mask_trials": ["walk"], "masks": str(work / "unmeasured.npz"),
+                                     "kind": "process", "dynamics_only": True}))  # fmt: skip
+    _no_kinematics(monkeypatch)
+    lines: list[str] = []
+    monkeypatch.setattr(jobs, "_emit", lambda obj: lines.append(json.dumps(obj)))
+    assert jobs._child(str(spec_file)) == 0, lines
+    assert any("kinematics reused" in line for line in lines), lines
+    assert set(range(100, 121)) <= set(_results(out)["unobserved_frames"])
