@@ -1,0 +1,127 @@
+"""Reprocess after a flag edit: time from the button to the updated before/after table.
+
+    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [walk] [camargo]
+
+For each subject (the shared rajagopal2016_walk; the Camargo level-ground circuit assembled
+by scripts/make_example_subject.py) in a temporary folder: one full ``process_subject``
+(which writes the kinematics cache), then the trial's flags = its proposed unmeasured
+frames plus 20 frames of stance, and ``--repeat`` times each (median and range printed):
+
+* ``dynamics only``: the app's Reprocess as it is now: a :class:`SolverJob` child running
+  :func:`solver.pipeline.reprocess_dynamics` on the cached kinematics;
+* ``full run``: the same job with ``dynamics_only=False`` (the Reprocess before: scaling +
+  IK of every trial, then the dynamics);
+* both measured from ``SolverJob.start`` to the table: the child's end, then
+  ``load_processed`` of the trial and ``comparison_markdown`` of the before/after summaries
+  (what the app does in ``Reprocessor._install``; the 3-D scene reload is not counted);
+* ``in process``: ``reprocess_dynamics`` called in this process (no child start and
+  imports), without and with the opt-in warm start, to show where the time goes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))
+
+from addb_viewer.app.jobs import JobSpec, SolverJob  # noqa: E402
+from addb_viewer.app.summary import comparison_markdown, trial_summary  # noqa: E402
+from solver.pipeline import process_subject, reprocess_dynamics  # noqa: E402
+from solver.results import load_processed  # noqa: E402
+
+SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
+
+
+def _subject(which: str, root: Path) -> tuple[Path, str]:
+    if which == "walk":
+        dst = root / "rajagopal2016_walk"
+        shutil.copytree(SUBJECTS / "rajagopal2016_walk", dst)
+        for p in [dst, *dst.rglob("*")]:
+            p.chmod(0o644 if p.is_file() else 0o755)
+        return dst, "walk"
+    dst = root / "camargo2021_levelground"
+    subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), "camargo2021_levelground", str(dst)], check=True)
+    return dst, "levelground"
+
+
+def _flags(out: Path, trial: str) -> dict[str, np.ndarray]:
+    r = json.loads((out / trial / "results.json").read_text())
+    mask = np.zeros(r["n_frames"], dtype=bool)
+    mask[r["unobserved_frames"]] = True
+    free = np.flatnonzero(~mask)
+    start = int(free[len(free) // 2])  # 20 frames from the middle of the measured frames
+    mask[start : start + 20] = True
+    return {trial: mask}
+
+
+def _job_to_table(subject: Path, out: Path, trial: str, flags: dict[str, np.ndarray], dynamics_only: bool, work: Path) -> float:
+    before = trial_summary(load_processed(out, trial))
+    t0 = time.perf_counter()
+    job = SolverJob(JobSpec(subject, out, (trial,), flags, dynamics_only=dynamics_only), work,
+                    on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
+    job.start()
+    result = job.wait(600)
+    if result is None or result.status != "done":
+        raise RuntimeError(f"job failed: {result and result.message}")
+    table = comparison_markdown(before, trial_summary(load_processed(out, trial)))
+    seconds = time.perf_counter() - t0
+    assert table
+    job.cleanup()
+    return seconds
+
+
+def _fmt(xs: list[float]) -> str:
+    return f"{statistics.median(xs):.2f} ({min(xs):.2f}-{max(xs):.2f})"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("which", nargs="*", default=["walk", "camargo"], choices=["walk", "camargo"])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for which in args.which:
+            root = Path(tmp) / which
+            root.mkdir()
+            subject, trial = _subject(which, root)
+            out = root / "out"
+            t0 = time.perf_counter()
+            process_subject(subject, out)
+            first = time.perf_counter() - t0
+            flags = _flags(out, trial)
+            times: dict[str, list[float]] = {"dynamics only": [], "full run": [], "in process": [], "in process, warm": []}
+            for i in range(args.repeat):
+                times["dynamics only"].append(_job_to_table(subject, out, trial, flags, True, root / f"job-d{i}"))
+                times["full run"].append(_job_to_table(subject, out, trial, flags, False, root / f"job-f{i}"))
+                t0 = time.perf_counter()
+                reprocess_dynamics(subject, out, (trial,), flags)
+                times["in process"].append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                reprocess_dynamics(subject, out, (trial,), flags, warm_start=True)
+                times["in process, warm"].append(time.perf_counter() - t0)
+                reprocess_dynamics(subject, out, (trial,), flags)  # back to the cold answer for the next round
+            r = json.loads((out / trial / "results.json").read_text())
+            rows.append((which, trial, r["n_frames"], first, times, r["stage_seconds"]))
+    print(f"Reprocess after a flag edit, button to table, s (median (range) of {args.repeat}); {time.strftime('%Y-%m-%d')}")
+    print("| subject | trial | frames | first full process (in process) | Reprocess: dynamics only (job) | Reprocess: full run (job) | dynamics only, in process | same, warm start |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for which, trial, n, first, t, _ in rows:
+        print(f"| {which} | {trial} | {n} | {first:.2f} | {_fmt(t['dynamics only'])} | {_fmt(t['full run'])} | {_fmt(t['in process'])} | {_fmt(t['in process, warm'])} |")
+    for which, trial, _, _, _, stage in rows:
+        print(f"{which} stage_seconds of the last dynamics-only run: " + json.dumps({k: round(v, 3) for k, v in stage.items()}))
+
+
+if __name__ == "__main__":
+    main()
