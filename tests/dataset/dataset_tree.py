@@ -70,8 +70,10 @@ def assert_same_results(dataset_out: Path, serial_out: Path, tol: float = 1e-9) 
 
 
 def no_work_folders(out: Path) -> list[Path]:
-    """Leftovers of unfinished writes below ``out`` (must be empty)."""
-    return [p for p in out.rglob("*") if p.name.startswith((".addb-work-", ".")) and p.is_dir()]
+    """Leftovers of unfinished writes below ``out`` (must be empty): work folders of the
+    dataset tasks and the pipeline's staging folders (``.<name>.tmp-*``, ``.<name>.old-*``);
+    the kinematics cache (``.addb_cache``) is part of a finished output."""
+    return [p for p in out.rglob("*") if p.is_dir() and (p.name.startswith(".addb-work-") or ".tmp-" in p.name or ".old-" in p.name)]
 
 
 def rm(path: Path) -> None:
