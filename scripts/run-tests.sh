@@ -4,8 +4,9 @@
 # Usage: bash scripts/run-tests.sh [pytest arguments]
 # The tests run in ADDB_TEST_WORKERS processes (default 2, this machine's cores; pytest-xdist),
 # each test file on one worker (--dist loadfile: module and session fixtures, such as the
-# diagnosis's neutral bases, are built once). Serially the suite took 28 min on 2026-11-23,
-# with two workers 20.5 min (14 min on 2026-11-23, ninth session); ADDB_TEST_WORKERS=0 runs it serially.
+# diagnosis's neutral bases, are built once). With two workers the suite took 8.5 min on
+# 2026-11-24 (14 min on 2026-11-23, before the dynamics fit's speed-ups); ADDB_TEST_WORKERS=0
+# runs it serially.
 # -rfEs lists failures, errors and every skipped test with its reason at the end. A test that
 # needs Chromium, Playwright, OpenSim or PyTorch skips without it, but fails under CI=true
 # (tests/conftest.py: require_tool).
