@@ -97,6 +97,7 @@ class Workbench:
         self.dataset_dir, self.out_dir, self.subjects = dataset_subjects(dataset_dir, out_dir)
         self.by_rel = {s.rel: s for s in self.subjects}
         self.running: dict[str, str] = {}
+        self.progress_seen: list[tuple[str, float]] = []  # (subject, fraction) as reported
         self.rows: list[QueueRow] = []
         self.labels: dict[str, tuple[str, str | None]] = {}
         self.current: tuple[str, str | None] | None = None
@@ -184,6 +185,9 @@ class Workbench:
                     self.running.update(dict.fromkeys(data["rels"], "queued"))
                 elif kind == "done":
                     self.running.pop(data["rel"], None)
+                elif kind == "progress" and data.get("rel") in self.running:
+                    self.running[data["rel"]] = f"{100 * data['fraction']:.0f} %: {data['message']}"
+                    self.progress_seen.append((data["rel"], float(data["fraction"])))
             self.refresh()
             if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:
                 self.open(data["rel"])  # the subject on screen was waiting for its output

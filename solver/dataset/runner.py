@@ -24,6 +24,7 @@ stored error); ``force`` reprocesses both. One run at a time per output folder.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -36,7 +37,13 @@ from typing import Any
 from solver.dataset.discover import DatasetSubject, find_subjects
 from solver.dataset.manifest import addb_version, current_manifest, manifest_key
 from solver.dataset.summary import dataset_totals
-from solver.dataset.task import MaskLoader, SubjectJob, remove_stale_work, run_subject
+from solver.dataset.task import (
+    PROGRESS_TOPIC,
+    MaskLoader,
+    SubjectJob,
+    remove_stale_work,
+    run_subject,
+)
 from solver.errors import DatasetError
 from solver.outputs import write_json
 
@@ -169,7 +176,9 @@ def process_dataset(
         Called with one-line messages for the user (the dashboard address, retries).
     events
         Called with ``("queued", {"rels": [...]})`` once the subjects to process are known
-        and ``("done", outcome)`` as each finishes (the review workbench's queue).
+        ``("progress", {"rel", "message", "fraction"})`` while a subject runs (from its
+        worker, at most twice a second) and ``("done", outcome)`` as each finishes (the
+        review workbench's queue).
     stop
         A ``threading.Event``: once set, the subjects not finished are cancelled (their
         outputs stay as they were) and listed with status ``"cancelled"``.
@@ -285,6 +294,7 @@ def _run_jobs(
             futures.append(client.submit(run_subject, job, key=key, pure=False, retries=0))
             return futures[-1]
 
+        client.subscribe_topic(PROGRESS_TOPIC, lambda event: notify("progress", dict(event[1])))
         pending = as_completed([submit(j) for j in jobs])
         if stop is not None:  # cancel what is left once asked to stop (while the run lasts)
             def watch() -> None:
@@ -326,6 +336,8 @@ def _run_jobs(
             frames += sum(r["frames"] for r in outcome.get("trials") or [])
             step(finished, frames)
     finally:
+        with contextlib.suppress(Exception):  # the client may already be closing
+            client.unsubscribe_topic(PROGRESS_TOPIC)
         run_over.set()
         if watcher is not None:
             watcher.join()

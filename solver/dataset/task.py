@@ -32,6 +32,10 @@ from solver.errors import AddbError
 from solver.outputs import replace_folder, write_json
 
 LOG_NAME = "process.log"
+#: Dask event topic of the subjects' progress (``{"rel", "message", "fraction"}``).
+PROGRESS_TOPIC = "addb-subject-progress"
+#: Least time between two progress events of one subject, s.
+PROGRESS_INTERVAL_S = 0.5
 #: Prefix of a subject's private work folder (beside its final output folder).
 WORK_PREFIX = ".addb-work-"
 
@@ -65,18 +69,32 @@ class SubjectJob:
 
 
 class _Log:
-    """``process.log``: timestamped lines, flushed as they come (readable while running)."""
+    """``process.log``: timestamped lines, flushed as they come (readable while running);
+    on a Dask worker, the progress also goes to the client as :data:`PROGRESS_TOPIC`
+    events (at most one per :data:`PROGRESS_INTERVAL_S`)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, rel: str = "") -> None:
         self.path = path
+        self.rel = rel
         self.t0 = time.perf_counter()
         self._f = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
         self._last = ""
+        self._sent = -PROGRESS_INTERVAL_S
+        try:
+            from distributed import get_worker
+
+            self._worker = get_worker()
+        except (ImportError, ValueError):  # not inside a Dask task
+            self._worker = None
 
     def __call__(self, message: str, fraction: float | None = None) -> None:
         if message == self._last:
             return
         self._last = message
+        now = time.perf_counter()
+        if self._worker is not None and fraction is not None and now - self._sent >= PROGRESS_INTERVAL_S:
+            self._sent = now
+            self._worker.log_event(PROGRESS_TOPIC, {"rel": self.rel, "message": message, "fraction": float(fraction)})
         pct = "" if fraction is None else f"[{100 * fraction:5.1f}%] "
         self._f.write(f"{time.perf_counter() - self.t0:8.2f}s {pct}{message}\n")
         self._f.flush()
@@ -132,7 +150,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     final = Path(job.out_dir)
     final.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{final.name}-", dir=final.parent))
-    log = _Log(work / LOG_NAME)
+    log = _Log(work / LOG_NAME, job.rel)
     log(f"subject {job.rel}: {job.subject_dir} -> {job.out_dir} (pid {os.getpid()})")
     outcome: dict[str, Any] = {"rel": job.rel, "worker_pid": os.getpid()}
     try:

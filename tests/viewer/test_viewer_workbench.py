@@ -55,6 +55,9 @@ def test_workbench_processes_in_the_background_and_opens_subjects_from_the_queue
         ("labB/run", "run"): PROCESSED, ("labB/run", "static"): KINEMATICS_ONLY,
     }  # fmt: skip
     assert (out / "labB" / "run" / "manifest.json").is_file()
+    # while a subject ran, the queue showed its progress as its worker reported it
+    assert {rel for rel, _ in bench.progress_seen} == {"labA/walk", "labB/run"}
+    assert all(0.0 <= f <= 1.0 for _, f in bench.progress_seen) and max(f for _, f in bench.progress_seen) > 0.5
     # the subject on screen was waiting for its output: it is shown once processed
     assert app.trial is not None and app.paths.subject_dir == first.subject_dir
     text = queue_markdown(rows)
