@@ -18,7 +18,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from addb_viewer.app.state import run_at
-from annotations import FEET, UNMEASURED_FORCE, AnnotationError, AnnotationStore, Edit, TrialReview
+from annotations import (
+    FEET,
+    UNMEASURED_FORCE,
+    AnnotationError,
+    AnnotationStore,
+    Edit,
+    TrialReview,
+    mask_to_ranges,
+)
 
 REJECTED_NOTE = "[addb] proposal rejected"
 """Text prefix of the notes that record a rejected automatic proposal."""
@@ -214,20 +222,15 @@ class TrialEditor:
             run = run_at(pending, self._frame(frame))
             runs = [] if run is None else [run]
         else:
-            edges = np.flatnonzero(np.diff(np.concatenate(([0], pending.astype(np.int8), [0]))))
-            runs = list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
-        edits = []
-        for s, e in runs:
-            reason = self.reasons[s] if s < len(self.reasons) else ""
-            text = f"{REJECTED_NOTE}: {reason}" if reason else REJECTED_NOTE
-            edits.append(self.store.add_note(self.trial, text, start=s, stop=e))
-        return edits
+            runs = mask_to_ranges(pending)
+        return self._reject_runs(runs)
 
     def accept_range(self, start: int, stop: int) -> Edit | None:
         """Accept the pending proposals inside frames ``[start, stop)`` as flags; None when
         none is pending there."""
         rng = self._range(start, stop)
-        frames = [f for f in rng if self.view().pending[f]]
+        pending = self.view().pending
+        frames = [f for f in rng if pending[f]]
         if not frames:
             return None
         return self.store.set_unmeasured(self.trial, frames, True, source="proposal_accepted")
@@ -238,12 +241,15 @@ class TrialEditor:
         rng = self._range(start, stop)
         inside = np.zeros(self.n_frames, bool)
         inside[rng.start : rng.stop] = True
-        pending = self.view().pending & inside
-        edges = np.flatnonzero(np.diff(np.concatenate(([0], pending.astype(np.int8), [0]))))
+        return self._reject_runs(mask_to_ranges(self.view().pending & inside))
+
+    def _reject_runs(self, runs: list[tuple[int, int]]) -> list[Edit]:
+        """Record each half-open run of proposals as rejected (a note with its reason)."""
         edits = []
-        for s, e in zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True):
+        for s, e in runs:
             reason = self.reasons[s] if s < len(self.reasons) else ""
-            edits.append(self.store.add_note(self.trial, f"{REJECTED_NOTE}: {reason}" if reason else REJECTED_NOTE, start=s, stop=e))
+            text = f"{REJECTED_NOTE}: {reason}" if reason else REJECTED_NOTE
+            edits.append(self.store.add_note(self.trial, text, start=s, stop=e))
         return edits
 
     # ------------------------------------------------------------------ other
