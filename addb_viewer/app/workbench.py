@@ -16,6 +16,7 @@ again every few seconds, so reviews saved from another page or machine show up.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import threading
 from pathlib import Path
@@ -188,6 +189,12 @@ class Workbench:
                 elif kind == "progress" and data.get("rel") in self.running:
                     self.running[data["rel"]] = f"{100 * data['fraction']:.0f} %: {data['message']}"
                     self.progress_seen.append((data["rel"], float(data["fraction"])))
+                    # only that row's text changed: redraw from the rows in memory (no disk reads)
+                    self.rows = [dataclasses.replace(r, detail=self.running[data["rel"]])
+                                 if r.subject.rel == data["rel"] and r.processing == PROCESSING else r
+                                 for r in self.rows]  # fmt: skip
+                    self.table.content = queue_markdown(self.rows, current=self.current)
+                    return
             self.refresh()
             if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:
                 self.open(data["rel"])  # the subject on screen was waiting for its output
