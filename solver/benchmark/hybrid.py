@@ -58,6 +58,7 @@ from scipy.ndimage import minimum_filter1d
 from solver.benchmark.analytical import Prediction, kinematic_contact, torques_from_feet
 from solver.benchmark.dataset import BenchmarkError, BenchmarkTrial, benchmark_input, skeleton_for
 from solver.benchmark.mlp import MlpOptions, _import_torch, _std, fit_network, history_index
+from solver.constants import GRAVITY
 
 FloatArray = NDArray[np.float64]
 
@@ -172,7 +173,7 @@ def split_targets(trial: BenchmarkTrial, frames: NDArray[np.intp], cutoff_hz: fl
     the analytical force of the weight is :func:`total_force` at ``cutoff_hz``)."""
     fy = np.clip(trial.grf[frames, :, 1], 0.0, None)
     measured = fy.sum(axis=1)
-    body_weight = trial.mass_kg * 9.81
+    body_weight = trial.mass_kg * GRAVITY
     analytical = np.abs(total_force(trial, cutoff_hz)[0][frames, 1])
     air = measured < AIRBORNE_BW * body_weight
     shares = np.zeros((len(frames), 3))

@@ -45,7 +45,7 @@ def test_targets_are_the_measured_vertical_shares_or_airborne() -> None:
     # the pelvis does not accelerate vertically: about one body weight on every frame, the
     # flight frames included (there the analytical force, not the zero measured one, counts)
     np.testing.assert_allclose(y[:, 3], 1.0, atol=0.05)
-    analytical = np.abs(total_force(trial)[0][:, 1]) / (trial.mass_kg * 9.81)
+    analytical = np.abs(total_force(trial)[0][:, 1]) / (trial.mass_kg * 9.80665)
     np.testing.assert_allclose(y[25:32, 3], analytical[25:32])
 
 
