@@ -14,10 +14,22 @@ result in place.
 A reprocess of one trial asks the solver for that trial only: the solver stages it and
 then replaces, by renames, that trial's folder, the model and subject.json in the output
 folder (the other trials stay).
+
+Warm children. Python's start and the solver's imports take about 1 s, half the walk's
+Reprocess. :func:`prestart_solver` (called when the app opens a subject, and again after
+every job) starts a spare child, ``python -m addb_viewer.app.jobs --warm``, that imports
+the solver and then waits for a spec path on its standard input; :meth:`SolverJob.start`
+hands the spec to that spare when there is one (started with the same interpreter and
+environment) instead of starting a new process. Each child still runs one job only and
+exits, so a job's numbers are those of a fresh process. A spare that died (or whose
+imports failed) is replaced by a fresh child; a spare exits when its standard input
+closes (the app ended) and the app terminates it at exit. ``ADDB_WARM_SOLVER=0`` turns
+the spares off.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import shutil
@@ -154,20 +166,24 @@ class SolverJob:
                 }
             )
         )
-        env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        env["PYTHONUNBUFFERED"] = "1"
-        log = open(self.work_dir / "child.log", "w")  # noqa: SIM115 (closed by the reader)
         self._t0 = time.monotonic()
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "addb_viewer.app.jobs", str(spec_file)],
-            stdout=subprocess.PIPE,
-            stderr=log,
-            stdin=subprocess.DEVNULL,
-            text=True,
-            env=env,
-        )
+        spare = _take_spare()
+        if spare is not None:  # a warm child: it opens its own log (child.log) beside the spec
+            self._proc = spare
+            assert spare.stdin is not None
+            spare.stdin.write(str(spec_file) + "\n")
+            spare.stdin.close()
+            log = None
+        else:
+            log = open(self.work_dir / "child.log", "w")  # noqa: SIM115 (closed by the reader)
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "addb_viewer.app.jobs", str(spec_file)],
+                stdout=subprocess.PIPE,
+                stderr=log,
+                stdin=subprocess.DEVNULL,
+                text=True,
+                env=_child_env(),
+            )
         self._thread = threading.Thread(target=self._read, args=(log,), name="addb-solver-job", daemon=True)
         self._thread.start()
 
@@ -212,7 +228,9 @@ class SolverJob:
                     error = dict(msg["error"])
             code = self._proc.wait()
         finally:
-            log.close()
+            if log is not None:
+                log.close()
+        prestart_solver(self.work_dir.parent)  # the next job's child imports while the reviewer reads the result
         seconds = time.monotonic() - self._t0
         if self._cancelled.is_set() and not done:
             result = JobResult("cancelled", None, seconds)
@@ -240,6 +258,117 @@ class SolverJob:
         except OSError:
             return "no log"
         return "last output: " + text[-n:].strip() if text.strip() else "no output"
+
+
+def _child_env() -> dict[str, str]:
+    """The child's environment: this one, with the repository first on PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items() if k != "ADDB_WARM_SOLVER"}
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+class _Spare:
+    """A warm child and the thread that waits for its ``ready`` line."""
+
+    def __init__(self, tag: str) -> None:
+        self.env = _child_env()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "addb_viewer.app.jobs", "--warm", tag],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,  # until the spec arrives; then the job's child.log
+            stdin=subprocess.PIPE,
+            text=True,
+            env=self.env,
+        )
+        self.ready = False
+        self._thread = threading.Thread(target=self._wait_ready, name="addb-solver-spare", daemon=True)
+        self._thread.start()
+
+    def _wait_ready(self) -> None:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()  # imports done (or EOF: the child died)
+        self.ready = line.startswith(PREFIX) and '"ready"' in line
+
+    def usable(self, timeout: float) -> bool:
+        """Wait (at most ``timeout`` s) for its imports; True when it is alive and ready."""
+        self._thread.join(timeout)
+        return not self._thread.is_alive() and self.ready and self.proc.poll() is None and self.env == _child_env()
+
+    def kill(self) -> None:
+        """End the child and close its pipes."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        self._thread.join(5.0)
+        for f in (self.proc.stdin, self.proc.stdout):
+            if f is not None:
+                f.close()
+
+
+_spare: _Spare | None = None
+_spare_lock = threading.Lock()
+_closing = False  # set at exit: no new spare after that
+
+
+def warm_children_enabled() -> bool:
+    """False when ``ADDB_WARM_SOLVER=0`` (every job starts a fresh process)."""
+    return os.environ.get("ADDB_WARM_SOLVER", "1") != "0"
+
+
+def prestart_solver(jobs_dir: str | Path | None = None) -> None:
+    """Start a spare solver child (imports done ahead of the next job) unless one exists.
+
+    Returns at once; the child imports in the background (about 1 s of one core). Called
+    when the app opens a subject and after every job; a no-op with ``ADDB_WARM_SOLVER=0``.
+    ``jobs_dir`` (the app's job folder) is only written on the child's command line, so
+    that the app's solver processes can be told apart (``ps``); any job may use the spare.
+    """
+    global _spare
+    if not warm_children_enabled():
+        return
+    with _spare_lock:
+        if _closing or (_spare is not None and _spare.proc.poll() is None and _spare.env == _child_env()):
+            return
+        if _spare is not None:  # dead, or started with another environment
+            _spare.kill()
+        try:
+            _spare = _Spare(str(jobs_dir or ""))
+        except OSError:  # pragma: no cover - no process to spare; jobs start their own
+            _spare = None
+
+
+def wait_for_spare(timeout: float = 60.0) -> bool:
+    """Block until the spare child (if any) has finished its imports; True when one is ready.
+    For benchmarks and tests: the app never waits for it."""
+    with _spare_lock:
+        spare = _spare
+    return spare is not None and spare.usable(timeout)
+
+
+def _take_spare() -> subprocess.Popen[str] | None:
+    """The spare child's process for a job (removed from the pool), or None: no spare, or it
+    died, failed its imports or has another environment (then it is ended)."""
+    global _spare
+    with _spare_lock:
+        spare, _spare = _spare, None
+    if spare is None:
+        return None
+    if warm_children_enabled() and spare.usable(timeout=30.0):
+        return spare.proc
+    spare.kill()
+    return None
+
+
+@atexit.register
+def _end_spare() -> None:
+    global _spare, _closing
+    with _spare_lock:
+        _closing = True
+        spare, _spare = _spare, None
+    if spare is not None:
+        spare.kill()
 
 
 def new_work_dir(jobs_dir: Path, label: str) -> Path:
@@ -300,5 +429,27 @@ def _child(spec_path: str) -> int:
     return 0
 
 
+def _warm_child() -> int:
+    """A spare child: import the solver, say ``ready``, wait for a spec path on standard
+    input (EOF: the app ended, exit), send standard error to ``child.log`` beside the spec,
+    then run that one job (:func:`_child`)."""
+    try:  # what a Reprocess / process job imports; a failure is reported by the job itself
+        import scipy.signal  # noqa: F401  (the dynamics' filter)
+
+        import solver.dynamics.stage  # noqa: F401
+        import solver.pipeline  # noqa: F401
+        import solver.results  # noqa: F401
+    except Exception:  # noqa: BLE001, S110
+        pass
+    _emit({"ready": True})
+    spec_path = sys.stdin.readline().strip()
+    if not spec_path:
+        return 0
+    fd = os.open(Path(spec_path).parent / "child.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    os.dup2(fd, 2)
+    os.close(fd)
+    return _child(spec_path)
+
+
 if __name__ == "__main__":  # pragma: no cover - run as the child process
-    sys.exit(_child(sys.argv[1]))
+    sys.exit(_warm_child() if sys.argv[1] == "--warm" else _child(sys.argv[1]))  # --warm [JOBS_DIR]

@@ -16,7 +16,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir
+from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir, prestart_solver
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError, AnnotationStore
 
@@ -51,6 +51,7 @@ class Reprocessor:
         self._lock = threading.Lock()
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
+        prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
     @property
     def running(self) -> bool:

@@ -8,7 +8,11 @@ by scripts/make_example_subject.py) in a temporary folder: one full ``process_su
 frames plus 20 frames of stance, and ``--repeat`` times each (median and range printed):
 
 * ``dynamics only``: the app's Reprocess as it is now: a :class:`SolverJob` child running
-  :func:`solver.pipeline.reprocess_dynamics` on the cached kinematics;
+  :func:`solver.pipeline.reprocess_dynamics` on the cached kinematics, handed to the warm
+  spare child (:func:`addb_viewer.app.jobs.prestart_solver`, its imports finished before
+  the button, as in the app where the reviewer edits flags meanwhile);
+* ``dynamics only, cold child``: the same with ``ADDB_WARM_SOLVER=0`` (a new process
+  per job: Python's start and the solver's imports inside the timed span);
 * ``full run``: the same job with ``dynamics_only=False`` (the Reprocess before: scaling +
   IK of every trial, then the dynamics);
 * both measured from ``SolverJob.start`` to the table: the child's end, then
@@ -22,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -35,7 +40,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from addb_viewer.app.jobs import JobSpec, SolverJob  # noqa: E402
+from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare  # noqa: E402
 from addb_viewer.app.summary import comparison_markdown, trial_summary  # noqa: E402
 from solver.pipeline import process_subject, reprocess_dynamics  # noqa: E402
 from solver.results import load_processed  # noqa: E402
@@ -65,8 +70,13 @@ def _flags(out: Path, trial: str) -> dict[str, np.ndarray]:
     return {trial: mask}
 
 
-def _job_to_table(subject: Path, out: Path, trial: str, flags: dict[str, np.ndarray], dynamics_only: bool, work: Path) -> float:
+def _job_to_table(subject: Path, out: Path, trial: str, flags: dict[str, np.ndarray], dynamics_only: bool, work: Path,
+                  warm: bool = True) -> float:  # fmt: skip
     before = trial_summary(load_processed(out, trial))
+    os.environ["ADDB_WARM_SOLVER"] = "1" if warm else "0"
+    if warm:
+        prestart_solver()
+        assert wait_for_spare(120), "the warm solver child did not start"
     t0 = time.perf_counter()
     job = SolverJob(JobSpec(subject, out, (trial,), flags, dynamics_only=dynamics_only), work,
                     on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
@@ -78,6 +88,7 @@ def _job_to_table(subject: Path, out: Path, trial: str, flags: dict[str, np.ndar
     seconds = time.perf_counter() - t0
     assert table
     job.cleanup()
+    os.environ["ADDB_WARM_SOLVER"] = "1"
     return seconds
 
 
@@ -101,9 +112,10 @@ def main() -> None:
             process_subject(subject, out)
             first = time.perf_counter() - t0
             flags = _flags(out, trial)
-            times: dict[str, list[float]] = {"dynamics only": [], "full run": [], "in process": [], "in process, warm": []}
+            times: dict[str, list[float]] = {"dynamics only": [], "cold child": [], "full run": [], "in process": [], "in process, warm": []}
             for i in range(args.repeat):
                 times["dynamics only"].append(_job_to_table(subject, out, trial, flags, True, root / f"job-d{i}"))
+                times["cold child"].append(_job_to_table(subject, out, trial, flags, True, root / f"job-c{i}", warm=False))
                 times["full run"].append(_job_to_table(subject, out, trial, flags, False, root / f"job-f{i}"))
                 t0 = time.perf_counter()
                 reprocess_dynamics(subject, out, (trial,), flags)
@@ -115,10 +127,10 @@ def main() -> None:
             r = json.loads((out / trial / "results.json").read_text())
             rows.append((which, trial, r["n_frames"], first, times, r["stage_seconds"]))
     print(f"Reprocess after a flag edit, button to table, s (median (range) of {args.repeat}); {time.strftime('%Y-%m-%d')}")
-    print("| subject | trial | frames | first full process (in process) | Reprocess: dynamics only (job) | Reprocess: full run (job) | dynamics only, in process | same, warm start |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| subject | trial | frames | first full process (in process) | Reprocess: dynamics only (job, warm child) | same, cold child | Reprocess: full run (job, warm child) | dynamics only, in process | same, warm start |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for which, trial, n, first, t, _ in rows:
-        print(f"| {which} | {trial} | {n} | {first:.2f} | {_fmt(t['dynamics only'])} | {_fmt(t['full run'])} | {_fmt(t['in process'])} | {_fmt(t['in process, warm'])} |")
+        print(f"| {which} | {trial} | {n} | {first:.2f} | {_fmt(t['dynamics only'])} | {_fmt(t['cold child'])} | {_fmt(t['full run'])} | {_fmt(t['in process'])} | {_fmt(t['in process, warm'])} |")
     for which, trial, _, _, _, stage in rows:
         print(f"{which} stage_seconds of the last dynamics-only run: " + json.dumps({k: round(v, 3) for k, v in stage.items()}))
 
