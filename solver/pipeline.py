@@ -166,7 +166,7 @@ def process_kinematics(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError
         Bad input, naming the file or trial.
     """
-    with single_threaded_blas():
+    with single_threaded_blas(load_scipy=False):  # the kinematics stage uses numpy's BLAS only
         return _process_kinematics(subject_dir, out_dir, options, progress)
 
 
