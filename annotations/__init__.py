@@ -7,20 +7,17 @@ Main entry points
 -----------------
 :class:`AnnotationStore`
     ``AnnotationStore.open(subject_folder, reviewer="ana")``: durable, multi-writer store.
-:func:`mask_to_ranges`, :func:`ranges_to_mask`, :func:`resample_mask`
-    Conversions between boolean ``(T,)`` masks and half-open frame ranges.
-:func:`import_addb_review`, :func:`export_addb_review`
-    Exchange with AddBiomechanics ``review.json`` files.
+:func:`frames_to_ranges`, :func:`ranges_to_mask`
+    Frame indices -> half-open frame ranges -> boolean ``(T,)`` masks (the store's
+    ``mask``/``set_mask`` give and take masks; runs, resampling and joining of masks are
+    :mod:`solver.masks`' and the app's, :mod:`addb_viewer.review_masks`).
+:func:`export_addb_review`
+    Export to AddBiomechanics ``review.json`` files (the reader is the solver's).
 """
 
-from annotations.addb import (
-    export_addb_review,
-    import_addb_review,
-    read_addb_review,
-    write_addb_review,
-)
+from annotations.addb import encode_addb_review, export_addb_review, write_addb_review
 from annotations.errors import AnnotationError, AnnotationFileError
-from annotations.masks import frames_to_ranges, mask_to_ranges, ranges_to_mask, resample_mask
+from annotations.masks import frames_to_ranges, ranges_to_mask
 from annotations.model import (
     ACTIVITY_LABELS,
     EXCLUDED,
@@ -62,12 +59,9 @@ __all__ = [
     "Provenance",
     "RecoveryReport",
     "TrialReview",
+    "encode_addb_review",
     "export_addb_review",
     "frames_to_ranges",
-    "import_addb_review",
-    "mask_to_ranges",
     "ranges_to_mask",
-    "read_addb_review",
-    "resample_mask",
     "write_addb_review",
 ]

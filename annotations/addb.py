@@ -1,99 +1,38 @@
-"""Exchange with AddBiomechanics review files.
+"""Export of the review record to AddBiomechanics review files.
 
 AddBiomechanics splits each trial into segments and stores the reviewer's decisions for
 a segment in ``<trial>/segment_<k>/review.json``: a single JSON object
 ``{"missing_grf_data":[true,false,...]}`` with one boolean per frame of the segment,
 ``true`` where the ground reaction force is missing (the frame is left out of the
-dynamic fit). The file is written compactly (no spaces, no trailing newline), and the
-reader here is strict where AddBiomechanics only asserts: every entry must be a JSON
-boolean. Frame ``i`` of the file is trial frame ``start_frame + i``.
+dynamic fit). The file is written compactly (no spaces, no trailing newline). Frame ``i``
+of the file is trial frame ``start_frame + i``.
 
-These flags map to ``unmeasured_force`` without a foot. ``import_addb_review`` followed
-by ``export_addb_review`` with the same ``start_frame`` and ``n_frames`` reproduces the
-file byte for byte.
+These flags map to ``unmeasured_force`` without a foot. This module writes them
+(:func:`export_addb_review`, :func:`write_addb_review`: the project's one writer of the
+format); the one reader is :func:`solver.io.review.read_review`, and the app imports a
+file into a record with :func:`addb_viewer.review_masks.import_addb_review` (this package
+imports nothing of the solver). An import followed by an export with the same
+``start_frame`` and ``n_frames`` reproduces the file byte for byte.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import uuid
-import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from annotations.errors import AnnotationError, AnnotationFileError
+from annotations.errors import AnnotationError
 from annotations.journal import atomic_write
-from annotations.model import EXCLUDED, UNMEASURED_FORCE, Edit
+from annotations.model import EXCLUDED, UNMEASURED_FORCE
 
 if TYPE_CHECKING:
     from annotations.store import AnnotationStore
 
 KEY = "missing_grf_data"
-
-
-def read_addb_review(
-    path: str | os.PathLike[str], *, n_frames: int | None = None
-) -> NDArray[np.bool_]:
-    """Read an AddBiomechanics ``review.json``.
-
-    Parameters
-    ----------
-    path
-        The review file.
-    n_frames
-        Expected number of frames of the segment. Extra trailing entries (written by an
-        old AddBiomechanics UI) are dropped with a warning; fewer entries is an error.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(T,)`` bool, ``True`` where the ground reaction force is missing.
-
-    Raises
-    ------
-    AnnotationFileError
-        Naming the file: not JSON, not an object, no ``missing_grf_data`` list, an entry
-        that is not ``true``/``false``, or fewer entries than ``n_frames``.
-    """
-    p = Path(path)
-    try:
-        obj = json.loads(p.read_bytes())
-    except OSError as exc:
-        raise AnnotationFileError(f"cannot read the review file: {exc.strerror}", path=p) from exc
-    except ValueError as exc:
-        raise AnnotationFileError(f"not a JSON review file ({exc})", path=p) from None
-    if type(obj) is not dict:
-        raise AnnotationFileError(f"expected a JSON object, got {type(obj).__name__}", path=p)
-    if KEY not in obj:
-        raise AnnotationFileError(f'no "{KEY}" list in the review file', path=p)
-    flags = obj[KEY]
-    if type(flags) is not list:
-        raise AnnotationFileError(
-            f'"{KEY}" must be a list, got {type(flags).__name__}', path=p, where=KEY
-        )
-    for i, value in enumerate(flags):
-        if type(value) is not bool:
-            raise AnnotationFileError(
-                f"entry {i} is {value!r}; expected true or false", path=p, where=f"{KEY}[{i}]"
-            )
-    others = sorted(set(obj) - {KEY})
-    if others:
-        warnings.warn(f"{p}: fields {others} are not kept (only {KEY} is)", stacklevel=2)
-    if n_frames is not None:
-        if len(flags) < n_frames:
-            raise AnnotationFileError(
-                f"{len(flags)} entries for a segment of {n_frames} frames", path=p, where=KEY
-            )
-        if len(flags) > n_frames:
-            warnings.warn(
-                f"{p}: {len(flags) - n_frames} extra trailing entries dropped", stacklevel=2
-            )
-            flags = flags[:n_frames]
-    return np.array(flags, dtype=bool)
 
 
 def encode_addb_review(mask: NDArray[np.bool_]) -> bytes:
@@ -108,47 +47,6 @@ def encode_addb_review(mask: NDArray[np.bool_]) -> bytes:
 def write_addb_review(path: str | os.PathLike[str], mask: NDArray[np.bool_]) -> None:
     """Write a segment's ``(T,)`` bool mask as an AddBiomechanics ``review.json``, atomically."""
     atomic_write(Path(path), encode_addb_review(mask), tmp_tag=uuid.uuid4().hex[:8])
-
-
-def import_addb_review(
-    store: AnnotationStore,
-    trial: str,
-    path: str | os.PathLike[str],
-    *,
-    start_frame: int = 0,
-    n_frames: int | None = None,
-    source: str = "imported",
-) -> Edit:
-    """Set a trial's ``unmeasured_force`` flags on one segment from a ``review.json``.
-
-    Frames ``[start_frame, start_frame + T)`` become exactly the file's flags, in one
-    edit (one undo step): frames marked ``true`` are flagged (frames already flagged keep
-    their foot and author), frames marked ``false`` are cleared.
-
-    Parameters
-    ----------
-    store
-        Open store.
-    trial
-        Trial name.
-    path
-        The AddBiomechanics review file of the segment.
-    start_frame
-        Trial frame of the segment's first frame.
-    n_frames
-        Segment length, if known (see :func:`read_addb_review`).
-    source
-        Provenance source of the new flags.
-
-    Returns
-    -------
-    Edit
-        The durable edit.
-    """
-    mask = read_addb_review(path, n_frames=n_frames)
-    return store.set_mask(
-        trial, mask, kind=UNMEASURED_FORCE, start_frame=start_frame, source=source
-    )
 
 
 def export_addb_review(

@@ -47,7 +47,7 @@ from annotations.errors import AnnotationError, AnnotationFileError
 from annotations.journal import (
     StorePaths,
 )
-from annotations.masks import mask_to_ranges
+from annotations.masks import frames_to_ranges
 from annotations.model import (
     ACTIVITY_LABELS,
     EXCLUDED,
@@ -211,7 +211,7 @@ class AnnotationStore(JournaledStore):
             if t is None or not t.flags[kind]:
                 return []
             flags = t.flags[kind]
-            return mask_to_ranges(flag_mask(flags, max(flags) + 1, foot))
+            return frames_to_ranges(np.flatnonzero(flag_mask(flags, max(flags) + 1, foot)))
 
     def mask(
         self,
@@ -221,7 +221,8 @@ class AnnotationStore(JournaledStore):
         kind: str = UNMEASURED_FORCE,
         foot: str | None = None,
     ) -> NDArray[np.bool_]:
-        """Boolean mask of the flagged frames, as the solver takes it.
+        """Boolean mask of the flagged frames, on the frames the record has for the trial
+        (the solver's masks are made from it by ``addb_viewer.review_masks.unmeasured_force``).
 
         Parameters
         ----------
@@ -238,7 +239,7 @@ class AnnotationStore(JournaledStore):
         Returns
         -------
         numpy.ndarray
-            ``(T,)`` bool, ``True`` where flagged, at the trial's frame rate.
+            ``(T,)`` bool, ``True`` where flagged, at the trial's frame rate as recorded.
 
         Raises
         ------

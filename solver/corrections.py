@@ -65,6 +65,7 @@ from solver.dynamics.preprocess import cop_from_wrench, moment_about_origin
 from solver.errors import SubjectFolderError
 from solver.io.subject import Subject, Trial
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
+from solver.masks import join_masks
 
 FILE_NAME = "addb_extensions.json"
 MODEL_NAME = "addb_extensions.osim"
@@ -265,43 +266,26 @@ def extend_subject(subject: Subject) -> Subject:
 
 
 def extension_masks(subject: Subject) -> dict[str, BoolArray]:
-    """Trial -> ``(T,)`` marker frames that saved ``unmeasured_force`` extensions mark as
-    unmeasured (several extensions of one trial are OR-ed); {} when there are none.
+    """Trial -> ``(T_markers,)`` bool, at the trial's marker frames, of the frames that saved
+    ``unmeasured_force`` extensions mark as unmeasured (several extensions of one trial
+    joined by :func:`solver.masks.join_masks`); {} when there are none.
 
-    The dynamics stage joins them to the reviewer's flags, or to its automatic proposals
-    when the reviewer gave none, so a later step off the plates is still proposed.
+    The dynamics stage resamples them onto its frames and joins them to the reviewer's
+    flags, or to its automatic proposals when the reviewer gave none, so a later step off
+    the plates is still proposed.
+
+    Raises
+    ------
+    SubjectFolderError
+        A damaged extensions file.
+    DynamicsError
+        Two extensions of one trial with different frame counts (naming the file and trial).
     """
     masks: dict[str, BoolArray] = {}
     for ext in read_extensions(subject.path):
-        if ext["cause"] != "unmeasured_force":
-            continue
-        name, extra = str(ext["trial"]), unmeasured_mask(ext)
-        old = masks.get(name)
-        if old is None:
-            masks[name] = extra
-        else:
-            n = max(old.size, extra.size)
-            merged = np.zeros(n, dtype=bool)
-            merged[: old.size] |= old
-            merged[: extra.size] |= extra
-            masks[name] = merged
+        if ext["cause"] == "unmeasured_force":
+            masks = join_masks(masks, {str(ext["trial"]): unmeasured_mask(ext)}, path=subject.path / FILE_NAME) or {}
     return masks
-
-
-def join_masks(masks: dict[str, BoolArray] | None, extra: Mapping[str, BoolArray]) -> dict[str, BoolArray] | None:
-    """``masks`` with ``extra`` OR-ed in (trial by trial, to the shorter length)."""
-    if not extra:
-        return masks
-    out = dict(masks or {})
-    for name, e in extra.items():
-        if name in out:
-            old = np.asarray(out[name], dtype=bool).copy()
-            n = min(old.size, e.size)
-            old[:n] |= e[:n]
-            out[name] = old
-        else:
-            out[name] = np.asarray(e, dtype=bool)
-    return out
 
 
 def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:

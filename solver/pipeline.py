@@ -9,7 +9,7 @@ inputs; the functions here only load, sequence and write.
 ``OUT/.addb_cache/kinematics.pkl`` (:func:`save_kinematics_cache`), keyed by everything
 that stage depends on. :func:`reprocess_dynamics` (the review app's Reprocess after a flag
 edit) reuses it: the reviewer's flags (unmeasured-force masks) enter the dynamics stage
-only (``run_dynamics(unmeasured=...)``), never scaling or IK, so a flag edit invalidates
+only (``run_dynamics(unmeasured_force=...)``), never scaling or IK, so a flag edit invalidates
 the dynamics alone.
 """
 
@@ -207,7 +207,7 @@ def process_subject(
     out_dir: str | Path,
     *,
     options: ProcessOptions | None = None,
-    unmeasured: dict[str, np.ndarray] | None = None,
+    unmeasured_force: dict[str, np.ndarray] | None = None,
     progress: Progress | None = None,
 ) -> ProcessResult:
     """Run every stage on a subject and write ``out_dir`` (see :mod:`solver.outputs`).
@@ -220,10 +220,11 @@ def process_subject(
         Output folder, replaced atomically (nothing is half-written on an error).
     options
         Stage options and the trials to write.
-    unmeasured
-        Trial name -> ``(T,)`` bool mask, at the trial's marker frame rate, of frames with
-        unmeasured external force (the reviewer's flags); they replace the automatic
-        proposals of the dynamics stage for that trial.
+    unmeasured_force
+        Trial name -> ``(T,)`` bool at the trial's processed frames (those of
+        ``OUT/<trial>/trial.npz``, :func:`solver.dynamics.stage.trial_frames`), True on
+        frames with unmeasured external force (the reviewer's flags); they replace the
+        automatic proposals of the dynamics stage for that trial. See :mod:`solver.masks`.
     progress
         Called with (message, fraction done).
 
@@ -237,14 +238,14 @@ def process_subject(
         Bad input, naming the file or trial.
     """
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, options, unmeasured, progress)
+        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress)
 
 
 def reprocess_dynamics(
     subject_dir: str | Path,
     out_dir: str | Path,
     trials: Sequence[str],
-    unmeasured: dict[str, np.ndarray] | None = None,
+    unmeasured_force: dict[str, np.ndarray] | None = None,
     progress: Progress | None = None,
     *,
     options: ProcessOptions | None = None,
@@ -288,9 +289,9 @@ def reprocess_dynamics(
         trial folders, the model and subject.json are replaced (merged), as a Reprocess does.
     trials
         Names of the trials to write (at least one).
-    unmeasured
-        Trial name -> ``(T,)`` bool mask at the marker rate (the reviewer's flags), as for
-        :func:`process_subject`.
+    unmeasured_force
+        Trial name -> ``(T,)`` bool at the trial's processed frames (the reviewer's flags),
+        as for :func:`process_subject`.
     progress
         Called with (message, fraction done).
     options
@@ -312,7 +313,7 @@ def reprocess_dynamics(
     if not opts.trials:
         raise KinematicsError("reprocess_dynamics: name at least one trial to write")
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, opts, unmeasured, progress, dynamics_only=True, warm_start=warm_start)
+        return _process_subject(subject_dir, out_dir, opts, unmeasured_force, progress, dynamics_only=True, warm_start=warm_start)
 
 
 # ---------------------------------------------------------------------- kinematics cache
@@ -444,7 +445,7 @@ def _process_subject(
     subject_dir: str | Path,
     out_dir: str | Path,
     options: ProcessOptions | None,
-    unmeasured: dict[str, np.ndarray] | None,
+    unmeasured_force: dict[str, np.ndarray] | None,
     progress: Progress | None,
     *,
     dynamics_only: bool = False,
@@ -481,7 +482,7 @@ def _process_subject(
             mass_kg=subject.mass_kg,
             foot_bodies=subject.foot_body_names,
             height_m=subject.height_m,
-            unmeasured=unmeasured,
+            unmeasured_force=unmeasured_force,
             known_unmeasured=extension_masks(subject) or None,
             options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),

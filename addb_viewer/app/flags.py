@@ -20,13 +20,12 @@ from numpy.typing import NDArray
 from addb_viewer.app.state import run_at
 from annotations import (
     FEET,
-    UNMEASURED_FORCE,
     AnnotationError,
     AnnotationStore,
     Edit,
     TrialReview,
-    mask_to_ranges,
 )
+from solver.masks import true_runs
 
 REJECTED_NOTE = "[addb] proposal rejected"
 """Text prefix of the notes that record a rejected automatic proposal."""
@@ -168,10 +167,6 @@ class TrialEditor:
         store has been refreshed)."""
         return build_view(self.store.review(self.trial), self.proposed)
 
-    def solver_mask(self) -> BoolArray:
-        """``(T,)`` frames to give the solver as having unmeasured force."""
-        return self.store.mask(self.trial, self.n_frames, kind=UNMEASURED_FORCE)
-
     # ------------------------------------------------------------------ flags
     def toggle(self, frame: int, foot: str) -> Edit:
         """Toggle ``foot``'s unmeasured-force flag on one frame (see :func:`toggled_foot`)."""
@@ -222,7 +217,7 @@ class TrialEditor:
             run = run_at(pending, self._frame(frame))
             runs = [] if run is None else [run]
         else:
-            runs = mask_to_ranges(pending)
+            runs = true_runs(pending)
         return self._reject_runs(runs)
 
     def accept_range(self, start: int, stop: int) -> Edit | None:
@@ -241,7 +236,7 @@ class TrialEditor:
         rng = self._range(start, stop)
         inside = np.zeros(self.n_frames, bool)
         inside[rng.start : rng.stop] = True
-        return self._reject_runs(mask_to_ranges(self.view().pending & inside))
+        return self._reject_runs(true_runs(self.view().pending & inside))
 
     def _reject_runs(self, runs: list[tuple[int, int]]) -> list[Edit]:
         """Record each half-open run of proposals as rejected (a note with its reason)."""

@@ -62,8 +62,9 @@ class JobSpec:
         Output folder (replaced atomically by the solver).
     trials
         Trials to write (all trials are used for scaling); None: all.
-    unmeasured
-        Trial -> ``(T,)`` bool frames with unmeasured force (the reviewer's flags).
+    unmeasured_force
+        Trial -> ``(T,)`` bool at the trial's processed frames: the reviewer's flags of
+        unmeasured force (:func:`addb_viewer.review_masks.unmeasured_force`).
     kind
         ``"process"`` (the pipeline) or ``"diagnose"`` (``addb diagnose`` of the single
         trial in ``trials``: writes ``OUT/<trial>/diagnosis.json``).
@@ -77,7 +78,7 @@ class JobSpec:
     subject_dir: Path
     out_dir: Path
     trials: tuple[str, ...] | None = None
-    unmeasured: dict[str, np.ndarray] = field(default_factory=dict)
+    unmeasured_force: dict[str, np.ndarray] = field(default_factory=dict)
     kind: str = "process"
     dynamics_only: bool = False
 
@@ -150,8 +151,8 @@ class SolverJob:
     def start(self) -> None:
         """Write the spec and start the child process and its reader thread."""
         self.work_dir.mkdir(parents=True, exist_ok=True)
-        masks = self.work_dir / "unmeasured.npz"
-        np.savez(masks, **{f"m{i}": np.asarray(m, bool) for i, m in enumerate(self.spec.unmeasured.values())})
+        masks = self.work_dir / "unmeasured_force.npz"
+        np.savez(masks, **{f"m{i}": np.asarray(m, bool) for i, m in enumerate(self.spec.unmeasured_force.values())})
         spec_file = self.work_dir / "job.json"
         spec_file.write_text(
             json.dumps(
@@ -159,8 +160,8 @@ class SolverJob:
                     "subject_dir": str(self.spec.subject_dir),
                     "out_dir": str(self.spec.out_dir),
                     "trials": list(self.spec.trials) if self.spec.trials is not None else None,
-                    "mask_trials": list(self.spec.unmeasured),
-                    "masks": str(masks),
+                    "unmeasured_force_trials": list(self.spec.unmeasured_force),
+                    "unmeasured_force": str(masks),
                     "kind": self.spec.kind,
                     "dynamics_only": self.spec.dynamics_only,
                 }
@@ -385,8 +386,8 @@ def _emit(obj: dict[str, Any]) -> None:
 def _child(spec_path: str) -> int:
     try:
         spec = json.loads(Path(spec_path).read_text())
-        with np.load(spec["masks"]) as data:
-            masks = {t: data[f"m{i}"] for i, t in enumerate(spec["mask_trials"])}
+        with np.load(spec["unmeasured_force"]) as data:
+            unmeasured_force = {t: data[f"m{i}"] for i, t in enumerate(spec["unmeasured_force_trials"])}
         from solver.pipeline import ProcessOptions, process_subject
 
         trials = tuple(spec["trials"]) if spec["trials"] is not None else None
@@ -396,7 +397,7 @@ def _child(spec_path: str) -> int:
             from solver.diagnose.report import write_report
 
             (trial,) = trials or ("",)
-            diag = diagnose_trial(spec["subject_dir"], trial, spec["out_dir"], flags=masks.get(trial),
+            diag = diagnose_trial(spec["subject_dir"], trial, spec["out_dir"], unmeasured_force=unmeasured_force.get(trial),
                                   progress=lambda m, f: _emit({"progress": m, "fraction": f}))  # fmt: skip
             write_report(diag, spec["out_dir"], trial)
             _emit({"done": True})
@@ -408,7 +409,7 @@ def _child(spec_path: str) -> int:
                 spec["subject_dir"],
                 spec["out_dir"],
                 trials,
-                masks or None,
+                unmeasured_force or None,
                 lambda m, f: _emit({"progress": m, "fraction": f}),
             )
             _emit({"done": True})
@@ -417,7 +418,7 @@ def _child(spec_path: str) -> int:
             spec["subject_dir"],
             spec["out_dir"],
             options=ProcessOptions(trials=trials),
-            unmeasured=masks or None,
+            unmeasured_force=unmeasured_force or None,
             progress=lambda m, f: _emit({"progress": m, "fraction": f}),
         )
     except Exception as exc:  # noqa: BLE001 - every failure is reported to the page

@@ -1,8 +1,9 @@
 """Solver runs started from the page (first processing of a subject, Reprocess of a trial)
 and the "Record to Rerun" export, with their progress, cancel and results in the panel.
 
-One run at a time. A Reprocess gives the solver every trial's reviewer flags (frames with
-unmeasured force) and its name; the solver reruns the dynamics stage only, on the
+One run at a time. A Reprocess gives the solver the reviewer's flags of unmeasured force
+(:func:`addb_viewer.review_masks.unmeasured_force`: the trials flagged or marked reviewed, at
+their processed frames) and the trial's name; the solver reruns the dynamics stage only, on the
 kinematics cached by the last full run (:func:`solver.pipeline.reprocess_dynamics`), and replaces only that trial's folder (plus the
 model and subject.json) in the output folder when it succeeds; the app then reloads the
 trial at the same frame and shows the before/after table. A failed or cancelled run leaves the previous
@@ -124,19 +125,21 @@ class Reprocessor:
         return entry
 
     def _masks(self) -> dict[str, np.ndarray]:
-        """Every trial's unmeasured-force mask whose length the store knows."""
+        """The reviewer's ``unmeasured_force`` masks as the solver takes them
+        (:func:`addb_viewer.review_masks.unmeasured_force`, the conversion ``addb process``
+        and ``addb diagnose`` use too); {} with the error shown in the page when the flags
+        do not fit the trials (the solver then keeps its own proposals)."""
+        from addb_viewer.review_masks import unmeasured_force
+        from solver.errors import AddbError
+
         store = self.app.store
         if store is None:
             return {}
-        out = {}
-        for name in store.trials():
-            rev = store.review(name)
-            if rev.n_frames:
-                try:
-                    out[name] = store.mask(name, rev.n_frames)
-                except AnnotationError as exc:
-                    self.app.show_error(f"Flags of {name} not used", exc)
-        return out
+        try:
+            return unmeasured_force(store, self.app.paths.subject_dir)
+        except (AnnotationError, AddbError) as exc:
+            self.app.show_error("The reviewer's flags were not used", exc)
+            return {}
 
     def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str = "process") -> None:
         with self._lock:

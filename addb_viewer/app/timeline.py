@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from addb_viewer.app.flags import FlagView
 from addb_viewer.app.scene import foot_of_body, plate_feet
-from annotations import mask_to_ranges
+from solver.masks import true_runs
 from solver.results import ProcessedTrial
 
 BoolArray = NDArray[np.bool_]
@@ -142,10 +142,6 @@ def _pct(x: float) -> str:
     return f"{100.0 * x:.3f}%"
 
 
-def _runs(mask: BoolArray) -> list[tuple[int, int]]:
-    return mask_to_ranges(np.asarray(mask, dtype=bool))
-
-
 def track_runs(data: TrackData, reasons: tuple[str, ...] = ()) -> list[tuple[str, int, int, tuple[int, int, int], str]]:
     """Every coloured run of the strip: ``(track, start, stop, colour, tooltip)`` with
     half-open frame ranges; the proposals' tooltips give their state and reason."""
@@ -153,11 +149,11 @@ def track_runs(data: TrackData, reasons: tuple[str, ...] = ()) -> list[tuple[str
     for name, color in TRACKS.items():
         if name == "proposal":
             for value, state, c in ((1, "pending", color), (2, "accepted", ACCEPTED), (3, "rejected", REJECTED)):
-                for s, e in _runs(data.proposal_state == value):
+                for s, e in true_runs(data.proposal_state == value):
                     reason = reasons[s] if s < len(reasons) and reasons[s] else "no reason given"
                     out.append((name, s, e, c, f"proposal ({state}), frames {s}–{e - 1}: {reason}"))
             continue
-        for s, e in _runs(data.masks[name]):
+        for s, e in true_runs(data.masks[name]):
             out.append((name, s, e, color, f"{name}, frames {s}–{e - 1}"))
     return out
 

@@ -30,7 +30,7 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
     """
     from addb_viewer.locations import annotations_path, default_output_dir
     from annotations import AnnotationStore
-    from annotations.masks import mask_to_ranges
+    from solver.masks import true_runs
 
     path = annotations_path(converted.path, default_output_dir(converted.path))
     with AnnotationStore.open(path, reviewer=reviewer) as store:
@@ -40,7 +40,7 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
             reasons = t.missing_grf
             for reason in sorted(set(reasons) - {"notMissingGRF"}):
                 mask = [r == reason for r in reasons]
-                for start, stop in mask_to_ranges(mask):
+                for start, stop in true_runs(mask):
                     store.add_note(t.name, f"AddBiomechanics: missing GRF ({reason})", start=start, stop=stop, source="imported")
     return path
 

@@ -2,8 +2,10 @@
 
 The subject is processed first when the trial has no output yet (with the reviewer's
 flags from the subject's review record, as the app does). The reviewer's flags of
-unmeasured force (the review record, or ``--annotations``) are the frames the diagnosis
-knows to be unmeasured; every other frame is evaluated. Writes ``OUT/<trial>/diagnosis.json``
+unmeasured force (the review record, or ``--annotations``: a record or an AddBiomechanics
+``review.json``; :func:`addb_viewer.review_masks.masks_from_file`, the conversion the app
+and ``addb process`` use) are the frames the diagnosis knows to be unmeasured; every other
+frame is evaluated. Writes ``OUT/<trial>/diagnosis.json``
 (read by the review app) and prints a report, or the JSON object with ``--json``.
 ``--apply`` saves the chosen extension in ``<subject>/addb_extensions.json`` so that the
 next ``addb process`` uses it.
@@ -17,25 +19,10 @@ import sys
 from pathlib import Path
 
 
-def reviewer_masks(annotations: Path, subject_dir: str | Path) -> dict:
-    """Unmeasured-force masks (marker rate) of every trial in a review record."""
-    from annotations import AnnotationStore
-    from solver.io.subject import load_subject, load_trial
-
-    subject = load_subject(subject_dir)
-    masks = {}
-    with AnnotationStore.open(annotations, reviewer="addb diagnose") as store:
-        names = set(store.trials())
-        for trial in subject.trials:
-            if trial.name in names:
-                n = load_trial(trial).markers.n_frames
-                masks[trial.name] = store.mask(trial.name, n, kind="unmeasured_force")
-    return masks
-
-
 def run(args: argparse.Namespace) -> int:
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
+    from addb_viewer.review_masks import masks_from_file
     from solver.corrections import save_extension
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
     from solver.diagnose.report import to_json, to_text, write_report
@@ -54,17 +41,17 @@ def run(args: argparse.Namespace) -> int:
         raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
     out = Path(args.out) if args.out else default_output_dir(subject)
     record = Path(args.annotations) if args.annotations else annotations_path(subject, out)
-    masks = reviewer_masks(record, subject) if record.is_file() else {}
+    masks = masks_from_file(record, subject, reviewer="addb diagnose") if record.is_file() else {}
     progress = ProgressBar(sys.stderr)
     if args.trial not in processed_trials(out):
         from solver.pipeline import process_subject
 
-        process_subject(subject, out, unmeasured=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
+        process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
     diag = diagnose_trial(
         subject,
         args.trial,
         out,
-        flags=masks.get(args.trial),
+        unmeasured_force=masks.get(args.trial),
         options=DiagnoseOptions(refit=not args.no_refit),
         progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
     )
@@ -94,7 +81,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Show where a processed trial's residual forces and moments concentrate, fit each "
             "candidate cause (unmeasured force, body mass, force/motion time offset, plate force "
-            "offset and gain, plate position, segment mass distribution, marker offset) on "
+            "offset, plate force gain, plate position, plate registration, segment mass "
+            "distribution, marker offset) on "
             "training frames and score it on held-out frames, name the cause that stands out (or "
             "none), refit with and without it and report the gain. The subject is processed first if needed."
         ),
@@ -107,6 +95,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
     )
-    p.add_argument("--annotations", help="review record with the reviewer's flags (default: the subject's)")
+    p.add_argument("--annotations", help="review record with the reviewer's flags, or an AddBiomechanics review.json (default: the subject's record)")
     p.add_argument("--no-refit", action="store_true", help="skip the refit (fixed-kinematics figures only)")
     p.set_defaults(handler=run)

@@ -11,34 +11,6 @@ import sys
 from pathlib import Path
 
 
-def _masks(path: str, subject_dir: str) -> dict:
-    """Unmeasured-force masks from an annotations file (ours) or an AddBiomechanics review."""
-    import json
-    from pathlib import Path
-
-    import numpy as np
-
-    from solver.io.subject import load_subject, load_trial
-
-    p = Path(path)
-    data = json.loads(p.read_text())
-    if isinstance(data, dict) and "missing_grf_data" in data:  # AddBiomechanics review.json
-        subject = load_subject(subject_dir)
-        if len(subject.trials) != 1:
-            raise SystemExit("addb process: an AddBiomechanics review.json covers one trial; use --trial with a subject of one trial")
-        return {subject.trials[0].name: np.array(data["missing_grf_data"], dtype=bool)}
-    from annotations import AnnotationStore
-
-    subject = load_subject(subject_dir)
-    masks = {}
-    with AnnotationStore.open(p, reviewer="addb process") as store:
-        for trial in subject.trials:
-            if trial.name in store.trials():
-                n = load_trial(trial).markers.n_frames
-                masks[trial.name] = store.mask(trial.name, n, kind="unmeasured_force")
-    return masks
-
-
 def run_dataset(args: argparse.Namespace) -> int:
     """A dataset folder: every subject on the Dask cluster, the summary, failures listed."""
     from addb_viewer.progress import ProgressBar, table
@@ -97,8 +69,12 @@ def run(args: argparse.Namespace) -> int:
     from solver.pipeline import ProcessOptions, process_subject
 
     opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
-    unmeasured = _masks(args.annotations, args.subject) if args.annotations else None
-    result = process_subject(args.subject, args.out, options=opts, unmeasured=unmeasured, progress=ProgressBar())
+    unmeasured_force = None
+    if args.annotations:
+        from addb_viewer.review_masks import masks_from_file
+
+        unmeasured_force = masks_from_file(args.annotations, args.subject, reviewer="addb process") or None
+    result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
     rows = []
     for t in result.kinematics.kinematics.trials:
         if opts.trials and t.name not in opts.trials:
@@ -138,7 +114,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("subject", help="AddBiomechanics subject folder, or a dataset folder of subject folders")
     p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
-    p.add_argument("--annotations", help="annotations file (frames with unmeasured force) or an AddBiomechanics review.json")
+    p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")
     d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")
     d.add_argument("--scheduler", help="submit to a running Dask scheduler, tcp://HOST:PORT, instead")

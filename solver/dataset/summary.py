@@ -105,7 +105,7 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
         "duration_s": n / rate if rate else None,
     }
     row.update({k: m.get(k) for k in _METRICS})
-    from solver.dynamics.preprocess import true_runs
+    from solver.masks import true_runs
 
     row["proposed_ranges"] = [list(r) for r in true_runs(np.asarray(trial.proposed, dtype=bool))]
     if not dynamics:

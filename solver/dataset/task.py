@@ -39,9 +39,10 @@ PROGRESS_INTERVAL_S = 0.5
 #: Prefix of a subject's private work folder (beside its final output folder).
 WORK_PREFIX = ".addb-work-"
 
-#: ``(subject_dir, out_dir) -> {trial: (T,) bool mask}`` or None: the reviewer's
-#: unmeasured-force flags of a subject whose output goes to ``out_dir`` (a module-level
-#: function, so that Dask sends it to the workers by name).
+#: ``(subject_dir, out_dir) -> {trial: (T,) bool}`` or None: the reviewer's
+#: unmeasured-force flags of a subject whose output goes to ``out_dir``, at each trial's
+#: processed frames (``unmeasured_force``, :mod:`solver.masks`; a module-level function,
+#: so that Dask sends it to the workers by name).
 MaskLoader = Callable[[str, str], "dict[str, Any] | None"]
 
 
@@ -156,10 +157,10 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            masks = job.masks(job.subject_dir, job.out_dir) if job.masks is not None else None
-            if masks:
-                log(f"reviewer flags used for {', '.join(sorted(masks))}")
-            result = process_subject(job.subject_dir, work / "out", unmeasured=masks, progress=log)
+            unmeasured_force = job.masks(job.subject_dir, job.out_dir) if job.masks is not None else None
+            if unmeasured_force:
+                log(f"reviewer flags used for {', '.join(sorted(unmeasured_force))}")
+            result = process_subject(job.subject_dir, work / "out", unmeasured_force=unmeasured_force, progress=log)
         for w in caught:
             log(f"warning: {w.message}")
         rows = subject_rows(work / "out")

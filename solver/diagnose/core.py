@@ -40,7 +40,7 @@ from solver.diagnose.data import (
     marker_kinematics,
     prepare,
 )
-from solver.corrections import correct_forces, extend_subject, extension_masks, join_masks
+from solver.corrections import correct_forces, extend_subject, extension_masks
 from solver.diagnose.profile import Profile, Sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
@@ -57,6 +57,7 @@ from solver.diagnose.selection import (
 )
 from solver.dynamics.preprocess import nearest_frames
 from solver.errors import DiagnosisError
+from solver.masks import join_masks, resample_mask, true_runs
 from solver.io.subject import Subject, Trial, load_subject, load_trial
 from solver.model.osim import OsimModel, read_osim
 from solver.results import ProcessedTrial, load_processed
@@ -323,10 +324,10 @@ def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray
             "lab_shift_m": np.round(lab, 6).tolist(),
         }
     if ev.cause == "unmeasured_force":
-        frames = []
+        found = np.zeros(data.time.size, dtype=bool)
         for a, b in p["frames"]:
-            idx = nearest_frames(marker_time, data.time[a:b])
-            frames.append([int(idx.min()), int(idx.max()) + 1])
+            found[a:b] = True
+        frames = [list(r) for r in true_runs(resample_mask(found, data.time, marker_time))]
         return {"cause": ev.cause, "trial": trial, "n_frames": int(marker_time.size), "frames": frames, "times_s": p["times_s"]}
     raise ValueError(f"unknown cause {ev.cause!r}")
 
@@ -344,45 +345,67 @@ class TrialInputs:
         The subject (mass, model, foot bodies), with saved extensions applied.
     raw
         The raw trial with saved extensions applied.
-    flags
-        ``(T_markers,)`` reviewer flags at the marker rate (saved unmeasured-force
-        extensions included), or None.
+    unmeasured_force
+        ``(T,)`` the reviewer's flags of unmeasured force at the trial's processed frames
+        (:mod:`solver.masks`), or None.
     marker_offsets
         Fitted marker offsets (``OUT/subject.json``).
     reviewed
         A reviewer's flags were given: they replace the solver's own unmeasured-force
         proposals, as in ``addb process``; otherwise the proposals stand and saved
         extensions join them.
+    known_unmeasured
+        ``(T_markers,)`` frames of the saved ``unmeasured_force`` extensions, at the marker
+        frames, or None.
     """
 
     subject: Subject
     raw: Trial
-    flags: BoolArray | None
+    unmeasured_force: BoolArray | None
     marker_offsets: dict[str, list[float]]
     reviewed: bool = False
+    known_unmeasured: BoolArray | None = None
 
 
-def load_inputs(subject_dir: str | Path, trial: str, out_dir: str | Path, flags: BoolArray | None = None) -> TrialInputs:
-    """Load the subject, the raw trial (saved extensions applied) and the flags."""
+def load_inputs(
+    subject_dir: str | Path, trial: str, out_dir: str | Path, unmeasured_force: BoolArray | None = None
+) -> TrialInputs:
+    """Load the subject, the raw trial (saved extensions applied), the reviewer's flags
+    (``(T,)`` at the processed frames) and the saved unmeasured-force extensions."""
     from solver.corrections import apply_extensions
 
     subject = load_subject(subject_dir)
     raw = apply_extensions(subject, (load_trial(subject.trial(trial)),))[0]
-    masks = None if flags is None else {trial: np.asarray(flags, dtype=bool)}
-    masks = join_masks(masks, extension_masks(subject))
+    flags = None if unmeasured_force is None else np.asarray(unmeasured_force, dtype=bool)
     return TrialInputs(
-        extend_subject(subject), raw, None if masks is None else masks.get(trial), load_offsets(out_dir), reviewed=flags is not None
-    )
+        extend_subject(subject), raw, flags, load_offsets(out_dir), reviewed=flags is not None,
+        known_unmeasured=extension_masks(subject).get(trial),
+    )  # fmt: skip
 
 
-def frame_flags(flags: BoolArray | None, marker_time: FloatArray, time: FloatArray) -> BoolArray:
-    """Reviewer flags at the marker rate -> the processed frames (nearest marker frame)."""
-    if flags is None:
-        return np.zeros(time.size, dtype=bool)
-    flags = np.asarray(flags, dtype=bool)
-    n = min(flags.size, marker_time.size)
-    idx = nearest_frames(marker_time[:n], time)
-    return flags[:n][np.clip(idx, 0, n - 1)]
+def frame_flags(inputs: TrialInputs, flags_time: FloatArray, time: FloatArray) -> BoolArray:
+    """``(T,)`` frames of ``time`` known to be unmeasured: the reviewer's flags (given on
+    the processed frames ``flags_time``) joined with the saved unmeasured-force extensions
+    (marker frames), both put on ``time`` by the overlap rule (:mod:`solver.masks`).
+
+    Raises
+    ------
+    DiagnosisError
+        The reviewer's flags or an extension were made on other frames (naming the trial
+        and both lengths).
+    """
+    trial, marker_time = inputs.raw.name, np.asarray(inputs.raw.markers.time)
+    out = {trial: np.zeros(time.size, dtype=bool)}
+    for mask, on, what in ((inputs.unmeasured_force, flags_time, "processed"), (inputs.known_unmeasured, marker_time, "marker")):
+        if mask is None:
+            continue
+        if np.size(mask) != on.size:
+            raise DiagnosisError(
+                f"an unmeasured-force mask has {np.size(mask)} frames but the trial has {on.size} {what} frames: "
+                "it was made on other frames", where=f"trial {trial}",
+            )  # fmt: skip
+        out = join_masks(out, {trial: resample_mask(mask, on, time)}) or out
+    return out[trial]
 
 
 def diagnose_processed(
@@ -426,7 +449,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             trial,
             inputs.raw.forces,
             stated_mass=subject.mass_kg,
-            flagged=frame_flags(inputs.flags, marker_time, trial.time),
+            flagged=frame_flags(inputs, processed.time, trial.time),
             generic_model=generic,
             marker_offsets=inputs.marker_offsets,
             feet=subject.foot_body_names,
@@ -510,7 +533,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 # corrected forces on the motion refitted with them, against the same refit
                 # without them (the parameters of each frame still fitted without its fold)
                 def on(r: Refit) -> tuple[C.Context, C.Alternative]:
-                    unmeasured = _at_times(ctx.unmeasured, data.time, r.trial.time)
+                    unmeasured = resample_mask(ctx.unmeasured, data.time, r.trial.time)
                     ctx_r, full_r = build_context(prep(r.trial, r.model), ctx.sigmas, (unmeasured, ctx.unmeasured_reasons))
                     return ctx_r, _alt_of(alternatives(ctx_r, full_r, (chosen.cause,)), chosen)
 
@@ -543,8 +566,8 @@ def _same_times(time: FloatArray, other: FloatArray) -> BoolArray:
 
 
 def _at_times(values: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarray:
-    """Per-frame values on ``time`` (folds, frame masks) taken at the nearest frame of each
-    of ``at``: ``at``'s own frames."""
+    """Per-frame values on ``time`` (folds) taken at the nearest frame of each of ``at``:
+    ``at``'s own frames (frame masks go through :func:`solver.masks.resample_mask`)."""
     return values if np.array_equal(time, at) else values[nearest_frames(time, at)]
 
 
@@ -698,7 +721,7 @@ def diagnose_trial(
     trial: str,
     out_dir: str | Path,
     *,
-    flags: BoolArray | None = None,
+    unmeasured_force: BoolArray | None = None,
     options: DiagnoseOptions | None = None,
     progress: Progress | None = None,
 ) -> Diagnosis:
@@ -712,8 +735,9 @@ def diagnose_trial(
         Trial name.
     out_dir
         The subject's processed output folder (``OUT/<trial>/trial.npz``).
-    flags
-        ``(T_markers,)`` reviewer flags of unmeasured force at the marker rate (None: none).
+    unmeasured_force
+        ``(T,)`` the reviewer's flags of unmeasured force at the trial's processed frames
+        (:mod:`solver.masks`; None: none); they replace the solver's proposals.
     options
         Folds, thresholds, refit.
     progress
@@ -726,6 +750,6 @@ def diagnose_trial(
     DiagnosisError
         The trial has no dynamics (no force plates).
     """
-    inputs = load_inputs(subject_dir, trial, out_dir, flags)
+    inputs = load_inputs(subject_dir, trial, out_dir, unmeasured_force)
     processed = load_processed(out_dir, trial)
     return diagnose_processed(processed, inputs, options, progress)

@@ -21,9 +21,10 @@ from numpy.typing import NDArray
 
 from solver.model.mass_groups import redistribute  # noqa: F401 (re-exported)
 from solver.dynamics.fit import FitSettings
-from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics
+from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics, trial_frames
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.kinematics.result import KinematicsResult, TrialKinematics
+from solver.masks import resample_mask
 from solver.model.osim import Body, OsimModel
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
@@ -122,13 +123,16 @@ def refit_trial(
         trials=(TrialKinematics(trial.trial, trial.time, trial.coordinate_names, trial.q, trial.marker_names, obs, sk.marker_positions(trial.q, sk.marker_index(list(trial.marker_names)))),),
     )
     markers = MarkerTrajectories(trial.marker_names, obs, trial.time, trial.rate_hz)
+    if unmeasured is not None:  # onto the refit's frames (other ones when a correction shifts the forces in time)
+        frames = trial_frames(markers, forces, opts.rate_hz, trial.trial)
+        unmeasured = resample_mask(unmeasured, trial.time, frames)
     dyn = run_dynamics(
         kin,
         [(trial.trial, markers, forces)],
         mass_kg=mass_kg,
         foot_bodies=feet,
         height_m=trial.height_m,
-        unmeasured=None if unmeasured is None else {trial.trial: np.asarray(unmeasured, dtype=bool)},
+        unmeasured_force=None if unmeasured is None else {trial.trial: np.asarray(unmeasured, dtype=bool)},
         known_unmeasured=None if known_unmeasured is None else {trial.trial: np.asarray(known_unmeasured, dtype=bool)},
         options=opts,
         proposal_q=None if proposal_q is None else {trial.trial: proposal_q},

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.errors import DynamicsError
+from solver.masks import true_runs  # noqa: F401 (re-exported: the one runs helper lives in solver.masks)
 
 FloatArray = NDArray[np.float64]
 
@@ -98,12 +99,6 @@ def nearest_frames(src_time: FloatArray, time: FloatArray) -> NDArray[np.intp]:
     idx = np.clip(np.searchsorted(src_time, time), 1, src_time.size - 1)
     left = idx - 1
     return np.where(np.abs(src_time[left] - time) <= np.abs(src_time[idx] - time), left, idx)
-
-
-def true_runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
-    """Half-open ``(start, stop)`` of every run of consecutive True values of ``mask``."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask).astype(int), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
 def common_time(start: float, stop: float, rate_hz: float) -> FloatArray:

@@ -35,13 +35,13 @@ from solver.dynamics.preprocess import (
     cop_from_wrench,
     lowpass,
     moment_about_origin,
-    nearest_frames,
     resample,
 )
 from solver.dynamics.spline import differentiate
 from solver.errors import DynamicsError
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.kinematics.result import KinematicsResult, TrialKinematics
+from solver.masks import join_masks, resample_mask
 from solver.model.osim import Body, OsimModel
 from solver.model.skeleton import ExternalWrench, Skeleton
 from solver.results import PlateData
@@ -159,7 +159,16 @@ def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOpt
     return tuple(out)
 
 
-def _trial_frames(markers: MarkerTrajectories, forces: ForceRecording, rate: float, trial: str) -> FloatArray:
+def trial_frames(markers: MarkerTrajectories, forces: ForceRecording, rate: float, trial: str) -> FloatArray:
+    """``(T,)`` times, s, of the trial's processed frames: ``rate`` Hz from the first to the
+    last instant both the markers and the forces cover (the frames of ``OUT/<trial>/trial.npz``
+    and of the ``unmeasured_force`` masks, :mod:`solver.masks`).
+
+    Raises
+    ------
+    DynamicsError
+        Markers and forces overlap by less than ten frames (naming the trial).
+    """
     start = max(float(markers.time[0]), float(forces.time[0]))
     stop = min(float(markers.time[-1]), float(forces.time[-1]))
     if stop - start < 10.0 / rate:
@@ -184,11 +193,6 @@ def _with_mass(model: OsimModel, total: float, factors: Mapping[str, float] | No
     return replace(model, bodies=tuple(bodies))
 
 
-def _resample_mask(mask: NDArray[np.bool_], src_time: FloatArray, time: FloatArray) -> NDArray[np.bool_]:
-    """A frame is flagged when the nearest source frame is flagged."""
-    return np.asarray(mask, dtype=bool)[nearest_frames(src_time, time)]
-
-
 @dataclass
 class _Prepared:
     name: str
@@ -209,7 +213,7 @@ def run_dynamics(
     mass_kg: float,
     foot_bodies: Sequence[str],
     height_m: float | None = None,
-    unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
+    unmeasured_force: Mapping[str, NDArray[np.bool_]] | None = None,
     options: DynamicsOptions | None = None,
     progress: Progress | None = None,
     known_unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
@@ -230,17 +234,20 @@ def run_dynamics(
         Bodies that can stand on plates (``footBodyNames``).
     height_m
         Subject height, m (for the angular residual in body weight x height).
-    unmeasured
-        Trial name -> ``(T,)`` bool mask at the trial's marker rate of frames with
-        unmeasured force (the reviewer's flags); replaces the automatic proposals.
+    unmeasured_force
+        Trial name -> ``(T,)`` bool at the trial's processed frames (:func:`trial_frames`)
+        of frames with unmeasured force (the reviewer's flags); replaces the automatic
+        proposals. See :mod:`solver.masks`.
     options
         Stage options.
     progress
         Called with (message, fraction).
     known_unmeasured
-        Trial name -> ``(T,)`` bool mask at the marker rate of frames known to be
-        unmeasured whatever the reviewer or the proposals say (saved by ``addb diagnose
-        --apply``); joined to the reviewer's flags or to the automatic proposals.
+        Trial name -> ``(T_k,)`` bool at the kinematics' frames (``kinematics.trial(name).time``:
+        the marker frames) of frames known to be unmeasured whatever the reviewer or the
+        proposals say (saved by ``addb diagnose --apply``); resampled onto the processed
+        frames (:func:`solver.masks.resample_mask`) and joined to the reviewer's flags or
+        to the automatic proposals (:func:`solver.masks.join_masks`).
     proposal_q
         Trial name -> ``(T, n)`` coordinates at the kinematics' times on which the feet are
         assigned to the plates and unmeasured frames proposed, instead of the kinematics'
@@ -261,7 +268,8 @@ def run_dynamics(
     ------
     DynamicsError
         NaN or absurd (> 20 BW) plate forces, forces that do not overlap the markers in
-        time, an unknown foot body, or a failed mass fit; naming the trial.
+        time, an unknown foot body, an ``unmeasured_force`` mask whose length is not the
+        trial's processed frame count, or a failed mass fit; naming the trial.
     """
     opts = options or DynamicsOptions()
     say = progress or (lambda m, f: None)
@@ -281,7 +289,7 @@ def run_dynamics(
     for name, markers, forces in with_forces:
         say(f"preprocessing {name}", 0.02)
         kin: TrialKinematics = kinematics.trial(name)
-        time = _trial_frames(markers, forces, opts.rate_hz, name)
+        time = trial_frames(markers, forces, opts.rate_hz, name)
         rate_m = 1.0 / float(np.median(np.diff(kin.time)))
         q = resample(kin.time, lowpass(kin.q, rate_m, opts.cutoff_hz, opts.filter_order), time)
         obs = resample(kin.time, kin.observed, time)
@@ -301,16 +309,22 @@ def run_dynamics(
             stray |= (p.force[:, 1] > opts.contact.loaded_bw * bw) & (contact.plate_foot[i] < 0)
         for k in np.flatnonzero(contact.ambiguous | stray):
             reasons[k] = reasons[k] or ("two feet on one plate" if contact.ambiguous[k] else "plate force with no foot on the plate")
-        if unmeasured is not None and name in unmeasured:
-            unobserved = _resample_mask(unmeasured[name], kin.time, time)
+        if unmeasured_force is not None and name in unmeasured_force:
+            unobserved = np.asarray(unmeasured_force[name], dtype=bool)
+            if unobserved.shape != time.shape:
+                raise DynamicsError(
+                    f"the unmeasured-force mask has {unobserved.size} frames but the trial has {time.size} processed "
+                    f"frames ({opts.rate_hz:g} Hz from {time[0]:.3f} s to {time[-1]:.3f} s): it was made on other frames",
+                    where=f"trial {name}",
+                )
             reasons = ["flagged by the reviewer" if u else "" for u in unobserved]
         else:
             unobserved = contact.proposed | contact.ambiguous | stray
         if known_unmeasured is not None and name in known_unmeasured:
-            known = _resample_mask(known_unmeasured[name], kin.time, time)
+            known = resample_mask(known_unmeasured[name], kin.time, time)
             for k in np.flatnonzero(known & ~unobserved):
                 reasons[k] = "unmeasured force found by addb diagnose (saved extension)"
-            unobserved = unobserved | known
+            unobserved = join_masks({name: unobserved}, {name: known})[name]
         prepared.append(_Prepared(name, time, q, obs, kin.marker_names, plates, contact, unobserved, reasons))
     t_pre = _time.perf_counter()
 

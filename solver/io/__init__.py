@@ -23,7 +23,7 @@ from solver.io.mot import (
     write_forces,
     write_table,
 )
-from solver.io.review import read_review, write_review
+from solver.io.review import read_review
 from solver.io.subject import Subject, Trial, TrialFiles, load_subject, load_trial
 from solver.io.summary import format_summary, summarize
 from solver.io.trc import read_trc, write_trc
@@ -57,7 +57,6 @@ __all__ = [
     "write_coordinates",
     "write_external_loads",
     "write_forces",
-    "write_review",
     "write_table",
     "write_trc",
 ]

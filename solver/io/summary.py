@@ -29,6 +29,7 @@ from solver.io.review import read_review
 from solver.io.subject import load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
+from solver.masks import true_runs
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
@@ -126,11 +127,7 @@ def marker_gaps(m: MarkerTrajectories) -> dict[str, Any]:
 
 
 def _longest_run(flags: np.ndarray) -> int:
-    if not flags.any():
-        return 0
-    padded = np.concatenate([[0], flags.astype(np.int8), [0]])
-    edges = np.flatnonzero(np.diff(padded))
-    return int((edges[1::2] - edges[::2]).max())
+    return max((b - a for a, b in true_runs(flags)), default=0)
 
 
 def _forces_summary(f: ForceRecording, mass_kg: float | None) -> dict[str, Any]:

@@ -122,7 +122,7 @@ def main() -> None:
         for a, b in windows:
             flags |= (markers.time >= a) & (markers.time <= b)
         flags |= np.interp(markers.time, od.time, od.unobserved.astype(float)) > 0.5  # natural ones too
-        ours = process_subject(mod, tmp / "ours", unmeasured={TRIAL: flags})
+        ours = process_subject(mod, tmp / "ours", unmeasured_force={TRIAL: flags})
         ud = ours.dynamics.trial(TRIAL)
 
         # ---- piecewise: each observed segment its own trial

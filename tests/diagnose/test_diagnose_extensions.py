@@ -8,19 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from solver.diagnose.data import plate_centre
 from solver.corrections import (
     append_extension,
     correct_forces,
     correct_markers,
     extend_subject,
     extension_masks,
-    join_masks,
     read_extensions,
 )
+from solver.diagnose.data import plate_centre
 from solver.errors import SubjectFolderError
 from solver.io.mot import read_forces
 from solver.io.subject import load_subject
+from solver.masks import join_masks
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import (
     copy_subject,

@@ -137,7 +137,7 @@ def test_reviewer_flags_override_proposals(tmp_path: Path) -> None:
     flags = np.zeros(n, dtype=bool)
     flags[:50] = True
     flags[200:] = True
-    res = process_subject(SUBJECTS / "rajagopal2016_walk", tmp_path / "out", unmeasured={"walk": flags})
+    res = process_subject(SUBJECTS / "rajagopal2016_walk", tmp_path / "out", unmeasured_force={"walk": flags})
     td = res.dynamics.trial("walk")
     np.testing.assert_array_equal(td.unobserved, flags[: td.unobserved.size])
     assert {r for r in td.reasons if r} == {"flagged by the reviewer"}

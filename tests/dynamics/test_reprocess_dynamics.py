@@ -17,7 +17,13 @@ import numpy as np
 import pytest
 
 import solver.pipeline as pipeline
-from solver.pipeline import CACHE_DIR, KINEMATICS_CACHE, ProcessOptions, process_subject, reprocess_dynamics
+from solver.pipeline import (
+    CACHE_DIR,
+    KINEMATICS_CACHE,
+    ProcessOptions,
+    process_subject,
+    reprocess_dynamics,
+)
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA, writable_copy
 
@@ -94,7 +100,7 @@ def test_flag_edit_reruns_the_dynamics_only_and_equals_a_full_run(
     subject, out = base
     flags = _flags(out)
     reference = tmp_path / "full"
-    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured=flags)
+    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured_force=flags)
 
     fast = _copy_out(out, tmp_path / "fast")
     before_static = (fast / "static" / "trial.npz").stat().st_mtime_ns
@@ -130,7 +136,7 @@ def test_warm_start_skips_kinematics_and_keeps_mass_and_flags_exact(
     subject, out = base
     flags = _flags(out)
     reference = tmp_path / "full"
-    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured=flags)
+    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured_force=flags)
     warm = _copy_out(out, tmp_path / "warm")
     _no_kinematics(monkeypatch)
     reprocess_dynamics(subject, warm, ("walk",), flags, warm_start=True)
@@ -220,10 +226,10 @@ def test_app_reprocess_job_reruns_the_dynamics_only(
     # the child with that spec (and the reviewer's flags)
     work = tmp_path / "work"
     work.mkdir()
-    np.savez(work / "unmeasured.npz", m0=flags["walk"])
+    np.savez(work / "unmeasured_force.npz", m0=flags["walk"])
     spec_file = work / "job.json"
     spec_file.write_text(json.dumps({"subject_dir": str(subject), "out_dir": str(out), "trials": ["walk"],
-                                     "mask_trials": ["walk"], "masks": str(work / "unmeasured.npz"),
+                                     "unmeasured_force_trials": ["walk"], "unmeasured_force": str(work / "unmeasured_force.npz"),
                                      "kind": "process", "dynamics_only": True}))  # fmt: skip
     _no_kinematics(monkeypatch)
     lines: list[str] = []

@@ -1,4 +1,5 @@
-"""ExternalLoads XML (read, write, OpenSim 4.6 loads ours, plate mapping) and review files."""
+"""ExternalLoads XML (read, write, OpenSim 4.6 loads ours, plate mapping) and review files
+(the one reader, solver.io.review, against the one writer, annotations.addb)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from annotations.addb import write_addb_review
 from solver.errors import FileFormatError, XmlFormatError
 from solver.io.external_loads import (
     ExternalForce,
@@ -16,7 +18,7 @@ from solver.io.external_loads import (
     write_external_loads,
 )
 from solver.io.mot import read_forces, read_table
-from solver.io.review import read_review, write_review
+from solver.io.review import read_review
 from tests.conftest import OPENSIM_REASON, import_tool
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
@@ -136,7 +138,7 @@ def test_review_round_trip_is_byte_identical(path: Path, tmp_path: Path) -> None
     assert mask.dtype == bool and mask.ndim == 1
     assert mask.shape[0] == path.read_text().count("true") + path.read_text().count("false")
     out = tmp_path / path.name
-    write_review(out, mask)
+    write_addb_review(out, mask)
     assert out.read_bytes() == path.read_bytes()
 
 
@@ -150,7 +152,7 @@ def test_walking_review_flags_the_first_frames(shared_data: Path) -> None:
 def test_random_review_round_trip(tmp_path: Path) -> None:
     mask = np.random.default_rng(3).random(500) < 0.3
     path = tmp_path / "review.json"
-    write_review(path, mask)
+    write_addb_review(path, mask)
     np.testing.assert_array_equal(read_review(path), mask)
 
 
@@ -169,3 +171,16 @@ def test_broken_review_files(tmp_path: Path, text: str, words: str) -> None:
     with pytest.raises(FileFormatError) as info:
         read_review(path)
     assert words in str(info.value) and info.value.path == str(path)
+
+
+def test_review_length_is_checked_against_the_trial(tmp_path: Path) -> None:
+    """``n_frames``: extra trailing entries (old AddBiomechanics UI) are dropped with a
+    warning, fewer entries than the trial's frames are an error naming the file."""
+    path = tmp_path / "review.json"
+    write_addb_review(path, np.array([True, False, False, True]))
+    with pytest.warns(UserWarning, match="1 extra trailing entries dropped"):
+        np.testing.assert_array_equal(read_review(path, n_frames=3), [True, False, False])
+    np.testing.assert_array_equal(read_review(path, n_frames=4), [True, False, False, True])
+    with pytest.raises(FileFormatError, match="4 entries for a trial or segment of 5 marker frames") as info:
+        read_review(path, n_frames=5)
+    assert info.value.path == str(path)

@@ -108,14 +108,19 @@ def test_playback_runs_during_a_solver_run_which_can_be_cancelled(demo_paths, ma
     assert not any(app.paths.jobs_dir.glob("*/out")) if app.paths.jobs_dir.exists() else True
 
 
-def test_reprocess_uses_every_flagged_trial(demo_paths, make_app) -> None:
+def test_reprocess_uses_the_flagged_trials_with_dynamics(demo_paths, make_app) -> None:
+    """The solver gets the flagged trials' masks at their processed frames
+    (addb_viewer.review_masks.unmeasured_force); a trial only opened keeps the solver's
+    proposals, and the static trial (no force plates) has no dynamics."""
     app = make_app(demo_paths)
     app.panel.trial.value = "static"
     app.edit("flag", lambda ed, _k, _f: ed.flag_range(3, 9, "left"))
     app.panel.trial.value = "walk"
+    assert app.jobs._masks() == {}
+    app.edit("flag", lambda ed, _k, _f: ed.flag_range(20, 41, "right"))
     masks = app.jobs._masks()
-    assert set(masks) == {"static", "walk"}
-    assert np.flatnonzero(masks["static"]).tolist() == list(range(3, 9)) and not masks["walk"].any()
+    assert set(masks) == {"walk"} and masks["walk"].shape == (238,)
+    assert np.flatnonzero(masks["walk"]).tolist() == list(range(20, 41))
 
 
 def test_record_to_rerun(demo_paths, make_app) -> None:

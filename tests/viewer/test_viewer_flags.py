@@ -50,7 +50,7 @@ def test_toggle_and_ranges_per_foot(editor: TrialEditor) -> None:
     editor.flag_range(40, 50, "left")
     editor.clear_range(45, 47)
     assert editor.store.ranges("walk", foot="left") == [(40, 45), (47, 50)]
-    assert editor.solver_mask().sum() == 1 + 8
+    assert editor.store.mask("walk").sum() == 1 + 8
     with pytest.raises(AnnotationError):
         editor.flag_range(90, 120, "left")
     with pytest.raises(AnnotationError):
