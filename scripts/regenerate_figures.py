@@ -1,0 +1,270 @@
+"""Regenerate every measured figure of the documentation with the current code (not CI).
+
+Run from the repository root::
+
+    .venv/bin/python scripts/regenerate_figures.py              # everything, in order (hours)
+    .venv/bin/python scripts/regenerate_figures.py --list       # names, kinds, docs, commands
+    .venv/bin/python scripts/regenerate_figures.py --only model io kinematics
+    .venv/bin/python scripts/regenerate_figures.py --kind timing
+    .venv/bin/python scripts/regenerate_figures.py --check      # every figure has its block
+
+Every figure is one shell command (run from the repository root with ``bash -c``) and one
+place in a document:
+
+* most commands print their figure; the output replaces the document's marked block
+  ``<!-- begin: NAME -->`` ... ``<!-- end: NAME -->`` (prose outside the blocks is left
+  alone, so prose must not repeat a block's numbers);
+* some commands write their document(s) themselves (``writes``); those files get the same
+  marked block appended, holding only the stamp.
+
+Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
+when the working tree differs from the commit in the measured code (``solver``,
+``addb_viewer``, ``annotations``, ``tests/benchmarks``), the stamp says so. A failed
+command leaves its block as it was and makes the exit status 1 (the others still run).
+The command's standard error goes to the terminal (progress); only its standard output
+goes into the document.
+
+``kind`` is ``timing`` (wall times: run on a quiet machine) or ``accuracy`` (errors,
+residuals, counts: deterministic given the code and data, up to round-off and network
+training seeds). Durations in ``--list`` are rough, from the last runs on the 2-core
+development machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import re
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PY = ".venv/bin/python"
+RESULTS = "tests/benchmarks/RESULTS.md"
+MEASURED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks", "scripts")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One regenerated figure.
+
+    Attributes
+    ----------
+    name
+        Block name (``<!-- begin: name -->``) and ``--only`` key.
+    doc
+        Document holding the block (repository-relative); empty when the command writes
+        its documents itself (``writes``).
+    command
+        Shell command, run from the repository root.
+    kind
+        ``"timing"`` or ``"accuracy"``.
+    minutes
+        Rough duration on the development machine.
+    fence
+        Put the output in a code fence (plain-text output) rather than as Markdown.
+    writes
+        Documents the command writes itself (each gets a stamp block appended).
+    """
+
+    name: str
+    doc: str
+    command: str
+    kind: str
+    minutes: float
+    fence: bool = True
+    writes: tuple[str, ...] = ()
+
+
+# git archive of the commit before the fit's speed-ups (tests/benchmarks/RESULTS.md, "Process speed")
+BEFORE = "e0336e8"
+BEFORE_TREE = f"/tmp/addb_{BEFORE}"
+EXPORT_BEFORE = f"rm -rf {BEFORE_TREE} && mkdir -p {BEFORE_TREE} && git archive {BEFORE} solver addb_viewer annotations | tar -x -C {BEFORE_TREE}"
+DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
+
+FIGURES: tuple[Figure, ...] = (
+    # ---- tests/benchmarks/RESULTS.md, in the document's order
+    Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.5),
+    Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.5),
+    Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 1.5, fence=False),
+    Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 2.5, fence=False),
+    Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 2.0, fence=False),
+    Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.5),
+    Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 1.0),
+    Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 1.5),
+    Figure("queue", RESULTS, f"{PY} tests/benchmarks/bench_queue.py", "timing", 0.5),
+    Figure("seed-benchmark", RESULTS, f"{PY} tests/benchmarks/bench_benchmark.py --work /tmp/addb_bench_benchmark --fresh",
+           "accuracy", 3.5, fence=False,
+           writes=("docs/benchmark/benchmark_kinematic_inputs.md", "docs/benchmark/benchmark_processed_inputs.md",
+                   "docs/benchmark/filtering_study.md")),
+    Figure("benchmark-variants", RESULTS, f"{PY} tests/benchmarks/bench_benchmark_variants.py --work /tmp/addb_bench_benchmark",
+           "accuracy", 12.0, fence=False),
+    Figure("b3d", RESULTS, f"{PY} tests/benchmarks/bench_b3d.py", "timing", 1.5),
+    Figure("process-before", RESULTS, f"{EXPORT_BEFORE} && {PY} tests/benchmarks/bench_process.py --repeat 3 --src {BEFORE_TREE}",
+           "timing", 6.0, fence=False),
+    Figure(
+        "process-exactness", RESULTS,
+        f"{EXPORT_BEFORE} && rm -rf /tmp/addb_exact_before /tmp/addb_exact_after && for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
+        f"(cd /tmp && PYTHONPATH={BEFORE_TREE} {REPO}/.venv/bin/addb process {REPO.parent}/shared/data/subjects/$s --out /tmp/addb_exact_before/$s >/dev/null) && "
+        f".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s >/dev/null; done && "
+        f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
+        "accuracy", 3.0),
+    Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
+    Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 3.0, fence=False),
+    # ---- documents of their own
+    Figure("ablation", "docs/dynamics/ABLATION.md", f"{PY} tests/benchmarks/bench_ablation.py", "accuracy", 1.5, fence=False),
+    Figure("expert-comparison", "docs/kinematics/EXPERT_COMPARISON.md", f"{PY} tests/benchmarks/bench_expert_comparison.py",
+           "accuracy", 1.5, fence=False),
+    Figure("b3d-comparison", "", f"{PY} scripts/b3d_compare.py --md docs/b3d/comparison.md", "accuracy", 0.5,
+           writes=("docs/b3d/comparison.md",)),
+    # ---- the diagnosis (docs/diagnose; the commands named at the head of each document)
+    Figure("diagnose-draws-0-9", "", f"{DIAG} --draws 10 --synthetic 5 --json docs/diagnose/results_draws_0_9.json", "accuracy", 40.0),
+    Figure("diagnose-draws-10-19", "", f"{DIAG} --first 10 --draws 10 --synthetic 0 --json docs/diagnose/results_draws_10_19.json",
+           "accuracy", 35.0),
+    Figure("diagnose-results", "docs/diagnose/RESULTS.md",
+           f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
+           fence=False),
+    Figure("diagnose-marker-offset-opencap-DJ1", "",
+           f"{DIAG} --trials DJ1 --causes marker_offset --draws 10 --synthetic 0 --json docs/diagnose/results_marker_offset_opencap_DJ1.json",
+           "accuracy", 6.0),
+    Figure("diagnose-marker-offset-opencap-walking1", "",
+           f"{DIAG} --trials walking1 --causes marker_offset --draws 10 --synthetic 0 "
+           "--json docs/diagnose/results_marker_offset_opencap_walking1.json", "accuracy", 6.0),
+    Figure("diagnose-findings", "", f"{PY} tests/benchmarks/findings_diagnose.py --rounds 4 --markdown docs/diagnose/findings_runs.md",
+           "accuracy", 10.0, writes=("docs/diagnose/findings_runs.md",)),
+    Figure("diagnose-findings-run", "",
+           f"{PY} tests/benchmarks/findings_diagnose.py --trials run --rounds 4 --markdown docs/diagnose/findings_runs_run.md",
+           "accuracy", 3.0, writes=("docs/diagnose/findings_runs_run.md",)),
+)
+
+BEGIN = "<!-- begin: {} -->"
+END = "<!-- end: {} -->"
+
+
+def _git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=REPO, check=True, capture_output=True, text=True).stdout.strip()
+
+
+def stamp(fig: Figure, seconds: float) -> str:
+    """The first line of a block: command, date, commit and duration."""
+    commit = _git("rev-parse", "--short", "HEAD")
+    dirty = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", *MEASURED_CODE], cwd=REPO, check=False).returncode != 0
+    minutes, secs = divmod(round(seconds), 60)
+    took = f"{minutes} min {secs} s" if minutes else f"{secs} s"
+    note = " plus uncommitted changes to the measured code" if dirty else ""
+    return f"Made by `{fig.command}` on {_dt.date.today().isoformat()}, commit {commit}{note} ({took})."
+
+
+def block_text(fig: Figure, head: str, output: str) -> str:
+    """The whole marked block: begin marker, stamp, output, end marker."""
+    body = output.rstrip("\n")
+    if fig.fence and body:
+        body = f"```\n{body}\n```"
+    parts = [BEGIN.format(fig.name), head]
+    if body:
+        parts += ["", body]
+    parts.append(END.format(fig.name))
+    return "\n".join(parts)
+
+
+def _pattern(name: str) -> re.Pattern[str]:
+    """A whole block: its markers each on a line of their own."""
+    return re.compile("^" + re.escape(BEGIN.format(name)) + r"$.*?^" + re.escape(END.format(name)) + "$", re.DOTALL | re.MULTILINE)
+
+
+def replace_block(path: Path, fig: Figure, text: str, *, append: bool = False) -> None:
+    """Put ``text`` (a whole block) in place of ``path``'s block ``fig.name``; with
+    ``append``, add it at the end when the document has none.
+
+    Raises
+    ------
+    ValueError
+        The document has no such block (and ``append`` is false), or has it twice.
+    """
+    doc = path.read_text()
+    found = _pattern(fig.name).findall(doc)
+    if len(found) > 1:
+        raise ValueError(f"{path}: block {fig.name!r} appears {len(found)} times")
+    if not found:
+        if not append:
+            raise ValueError(f"{path}: no block {BEGIN.format(fig.name)} ... {END.format(fig.name)}")
+        doc = doc.rstrip("\n") + "\n\n" + text + "\n"
+    else:
+        doc = _pattern(fig.name).sub(lambda _m: text, doc)
+    path.write_text(doc)
+
+
+def check() -> list[str]:
+    """Problems: a figure whose document lacks its block, a block no figure makes."""
+    problems = []
+    names = {f.name for f in FIGURES}
+    docs = {f.doc for f in FIGURES if f.doc}
+    for fig in FIGURES:
+        if fig.doc and len(_pattern(fig.name).findall((REPO / fig.doc).read_text())) != 1:
+            problems.append(f"{fig.doc}: block {fig.name!r} missing or repeated")
+    for doc in sorted(docs | {"tests/benchmarks/RESULTS.md"}):
+        for name in re.findall(r"^<!-- begin: (\S+) -->$", (REPO / doc).read_text(), re.MULTILINE):
+            if name not in names:
+                problems.append(f"{doc}: block {name!r} made by no figure")
+    return problems
+
+
+def run(fig: Figure) -> bool:
+    """Run one figure's command and write its block(s); False when the command failed."""
+    print(f"== {fig.name}: {fig.command}", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    proc = subprocess.run(["bash", "-c", fig.command], cwd=REPO, stdout=subprocess.PIPE, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    sys.stdout.write(proc.stdout)
+    if proc.returncode != 0:
+        print(f"!! {fig.name} failed (exit {proc.returncode}) after {seconds:.0f} s; its block is left as it was", file=sys.stderr)
+        return False
+    head = stamp(fig, seconds)
+    if fig.doc:
+        replace_block(REPO / fig.doc, fig, block_text(fig, head, proc.stdout))
+    for written in fig.writes:
+        if written.endswith(".md"):
+            replace_block(REPO / written, fig, block_text(fig, head, ""), append=True)
+    print(f"== {fig.name} done in {seconds:.0f} s", file=sys.stderr, flush=True)
+    return True
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--list", action="store_true", help="list the figures and exit")
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="run only these figures (in the registry's order)")
+    ap.add_argument("--kind", choices=("timing", "accuracy"), help="run only figures of this kind")
+    ap.add_argument("--skip-diagnose", action="store_true", help="leave out the diagnosis figures (hours)")
+    ap.add_argument("--check", action="store_true", help="check that every document has exactly the blocks of the registry")
+    args = ap.parse_args()
+    if args.check:
+        problems = check()
+        print("\n".join(problems) if problems else f"{len(FIGURES)} figures, every block in place")
+        return 1 if problems else 0
+    chosen = list(FIGURES)
+    if args.only:
+        unknown = sorted(set(args.only) - {f.name for f in FIGURES})
+        if unknown:
+            ap.error(f"unknown figure(s) {', '.join(unknown)}; see --list")
+        chosen = [f for f in chosen if f.name in args.only]
+    if args.kind:
+        chosen = [f for f in chosen if f.kind == args.kind]
+    if args.skip_diagnose:
+        chosen = [f for f in chosen if not f.name.startswith("diagnose")]
+    if args.list:
+        for f in chosen:
+            where = f.doc or ", ".join(f.writes) or "(data files named in the command)"
+            print(f"{f.name:40s} {f.kind:8s} ~{f.minutes:g} min  {where}\n    {f.command}")
+        print(f"{len(chosen)} figures, about {sum(f.minutes for f in chosen) / 60:.1f} h in all")
+        return 0
+    failed = [f.name for f in chosen if not run(f)]
+    if failed:
+        print(f"failed: {', '.join(failed)}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
