@@ -248,7 +248,9 @@ class _TrialProblem:
         sm = self.st.marker_sigma
         # markers: frame k depends on q_k only; unseen markers contribute zero rows
         pos, jac = self.sk.marker_jacobians(q, self.data.markers, free)  # (T, M, 3), (T, M, 3, nf)
-        jm = np.where(self.seen[:, :, None, None], jac, 0.0).reshape(t, -1, nf) / sm
+        jac[~self.seen] = 0.0  # in place: the Jacobian is a fresh array
+        jac /= sm
+        jm = jac.reshape(t, -1, nf)
         rm = (np.where(self.seen[..., None], pos - self.y, 0.0) / sm).reshape(t, -1, 1)
         jmt = jm.transpose(0, 2, 1)
         blocks[:, 0] += jmt @ jm
@@ -259,18 +261,16 @@ class _TrialProblem:
         hq = np.empty((t, 6, nv))
         hv = np.empty((t, 6, nv))
         ha = np.empty((t, 6, nv))
-        jcom = np.empty((t, 3, nv))
         for k in range(t):
-            _, hdot_dq, hdot_dv, hdot_da = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-            jcom[k] = pin.jacobianCenterOfMass(model, data, qp[k], False)
-            hq[k], hv[k], ha[k] = hdot_dq, hdot_dv, hdot_da
-        # the external moment about the centre of mass moves with it: d/dq of c x F_ext
+            _, hq[k], hv[k], ha[k] = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+        # the external moment about the centre of mass moves with it: d/dq of c x F_ext, with
+        # the centre-of-mass Jacobian J_c = A_g[:3] / m (d hdot / d a is the centroidal
+        # momentum matrix A_g, whose linear rows are m J_c; Orin et al. 2013)
+        jcom = ha[:, :3] / data.mass[0]
         hq[:, 3:] -= _skew_batch(self.data.force) @ jcom
-        cmat = self._coupling_free(q)  # (T, nv, nf)
+        vals, dof, sel = self._coupling_free(q)
         w = self.w_res[:, :, None]
-        dq = (hq @ cmat) * w
-        dv = (hv @ cmat) * w
-        da = (ha @ cmat) * w
+        dq, dv, da = (((h[:, :, dof] * vals[:, None, :]).reshape(-1, dof.size) @ sel).reshape(t, 6, nf) * w for h in (hq, hv, ha))
         # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k);
         # jb[k, :, o + b] = d r_k / d q_{k+o}, zero past the ends
         idx = np.arange(t)
@@ -303,15 +303,29 @@ class _TrialProblem:
                 blocks[a : a + t - 2, c - a][:, diag, diag] += coef[a] * coef[c]
         return bands.lower_band_storage(), grad.reshape(-1)
 
-    def _coupling_free(self, q: FloatArray) -> FloatArray:
-        """``(T, nv, nf)`` coupling Jacobian d q_pin / d q restricted to the free coordinates."""
+    def _coupling_free(self, q: FloatArray) -> tuple[FloatArray, IntArray, FloatArray]:
+        """The coupling Jacobian d q_pin / d q restricted to the free coordinates, sparse.
+
+        Each expanded DoF depends on one coordinate, so ``C[t] = diag(vals[t]) @ sel`` on the
+        DoFs ``dof`` that depend on a free coordinate, and ``X @ C[t]`` is
+        ``(X[:, dof] * vals[t]) @ sel``: one gather and one 2-D product for all frames.
+
+        Returns
+        -------
+        vals
+            ``(T, D)`` d q_pin[dof] / d q[its coordinate].
+        dof
+            ``(D,)`` indices of those DoFs.
+        sel
+            ``(D, nf)`` 0/1: column of each DoF's free coordinate.
+        """
         vals, cols = self.sk.cmap.jacobian_batch(q)  # (T, nv), (nv,)
         where = np.full(self.sk.n, -1)
         where[self.free] = np.arange(self.nf)
-        cmat = np.zeros((self.t, vals.shape[1], self.nf))
         dof = np.flatnonzero(where[cols] >= 0)
-        cmat[:, dof, where[cols[dof]]] = vals[:, dof]
-        return cmat
+        sel = np.zeros((dof.size, self.nf))
+        sel[np.arange(dof.size), where[cols[dof]]] = 1.0
+        return vals[:, dof], dof, sel
 
     # -------------------------------------------------------------- steps
     def step(self, q: FloatArray, mu: float, cost0: float | None = None) -> tuple[FloatArray, float, float]:
