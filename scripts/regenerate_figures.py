@@ -19,7 +19,7 @@ place in a document:
 
 Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
 when the working tree differs from the commit in the measured code (``solver``,
-``addb_viewer``, ``annotations``, ``tests/benchmarks``), the stamp says so. A failed
+``addb_viewer``, ``annotations``, the benchmarks and ``scripts``), the stamp says so. A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
@@ -44,7 +44,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PY = ".venv/bin/python"
 RESULTS = "tests/benchmarks/RESULTS.md"
-MEASURED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks", "scripts")
+MEASURED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks/*.py", "scripts")
 
 
 @dataclass(frozen=True)
