@@ -107,9 +107,10 @@ FIGURES: tuple[Figure, ...] = (
            "timing", 6.0, fence=False),
     Figure(
         "process-exactness", RESULTS,
-        f"{EXPORT_BEFORE} && rm -rf /tmp/addb_exact_before /tmp/addb_exact_after && for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
-        f"(cd /tmp && PYTHONPATH={BEFORE_TREE} {REPO}/.venv/bin/addb process {REPO.parent}/shared/data/subjects/$s --out /tmp/addb_exact_before/$s >/dev/null) && "
-        f".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s >/dev/null; done && "
+        f"{EXPORT_BEFORE} && rm -rf /tmp/addb_exact_before /tmp/addb_exact_after && R=$PWD && "
+        "for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
+        f"(cd /tmp && PYTHONPATH={BEFORE_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_exact_before/$s >/dev/null) && "
+        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 3.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
