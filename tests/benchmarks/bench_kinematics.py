@@ -3,8 +3,10 @@
     .venv/bin/python tests/benchmarks/bench_kinematics.py [--repeats 3]
 
 OpenSim (``pip install opensim``, benchmark only) runs the working IK setup of
-shared/oracles (the study's scaled model, 39 weighted markers) on the walk trial; we time
-its ``InverseKinematicsTool.run()`` alone. addb runs ``addb kinematics`` on the
+shared/oracles (the study's scaled model, 39 weighted markers) on the walk trial in a
+fresh process; we time that whole process (interpreter start, ``import opensim``, the
+tool's setup, ``InverseKinematicsTool.run()``, its output) and, inside it,
+``run()`` alone. addb runs ``addb kinematics`` on the
 rajagopal2016_walk subject folder in a fresh process (interpreter start, imports, reading,
 scaling from the generic model over walk + static, IK of both trials, writing the outputs)
 and we time the whole command. Both marker RMS values are evaluated the same way: our
@@ -66,7 +68,8 @@ def rms(model_file: Path, mot: Path, names: set[str]) -> float:
     return float(np.sqrt(np.nanmean(e**2))), len(use)
 
 
-def run_opensim(work: Path) -> tuple[float, Path]:
+def run_opensim(work: Path) -> tuple[float, float, Path]:
+    """OpenSim's IK of the walk in a fresh process: (whole process s, ``run()`` s, .mot)."""
     setup = ET.parse(ORACLES / "opensim_ik_setup_walk.xml")
     root = setup.getroot()
     tool = root.find("InverseKinematicsTool")
@@ -76,8 +79,10 @@ def run_opensim(work: Path) -> tuple[float, Path]:
     tool.find("output_motion_file").text = str(work / "opensim_ik.mot")
     setup.write(work / "setup.xml")
     (work / "run.py").write_text(OPENSIM_SCRIPT)
+    t0 = time.perf_counter()
     out = subprocess.run([sys.executable, str(work / "run.py"), str(work / "setup.xml")], capture_output=True, text=True, check=True, cwd=work)
-    return float(out.stdout.strip().splitlines()[-1]), work / "opensim_ik.mot"
+    whole = time.perf_counter() - t0
+    return whole, float(out.stdout.strip().splitlines()[-1]), work / "opensim_ik.mot"
 
 
 def run_addb(work: Path) -> tuple[float, Path]:
@@ -92,24 +97,27 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     names = weighted_markers()
-    os_times, ad_times = [], []
+    os_times, os_run_times, ad_times = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         for _ in range(args.repeats):  # interleaved, so both see the same machine load
-            t_os, os_mot = run_opensim(work)
+            t_os, t_run, os_mot = run_opensim(work)
             os_times.append(t_os)
+            os_run_times.append(t_run)
             t_ad, ad_out = run_addb(work)
             ad_times.append(t_ad)
         os_rms, n = rms(ORACLES / "opensim_scaled_walk.osim", os_mot, names)
         ad_rms, n2 = rms(ad_out / "rajagopal2016_walk_scaled.osim", ad_out / "walk" / "walk_ik.mot", names)
         shutil.rmtree(work / "addb", ignore_errors=True)
     best_os, best_ad = min(os_times), min(ad_times)
+    best_run = min(os_run_times)
     print(f"markers evaluated: {n} (OpenSim) / {n2} (addb), all observations of the walk (238 frames)")
     print("| | wall time (best of %d) | all runs (s) | marker RMS (cm) |" % args.repeats)
     print("| --- | ---: | --- | ---: |")
-    print(f"| OpenSim 4.6 InverseKinematicsTool.run(), walk only, study-scaled model | {best_os:.2f} s | {', '.join(f'{t:.2f}' for t in os_times)} | {os_rms * 100:.2f} |")
+    print(f"| OpenSim 4.6 IK, whole process (start, import, setup, run, output), walk only, study-scaled model | {best_os:.2f} s | {', '.join(f'{t:.2f}' for t in os_times)} | {os_rms * 100:.2f} |")
+    print(f"| of which InverseKinematicsTool.run() | {best_run:.2f} s | {', '.join(f'{t:.2f}' for t in os_run_times)} | |")
     print(f"| `addb kinematics` command: start-up + scaling + IK of walk and static + files | {best_ad:.2f} s | {', '.join(f'{t:.2f}' for t in ad_times)} | {ad_rms * 100:.2f} |")
-    print(f"\nspeed-up: {best_os / best_ad:.1f}x (target >= 3x, aim 10x)")
+    print(f"\nspeed-up, whole process against whole process: {best_os / best_ad:.1f}x (issue: at least 10x); against run() alone: {best_run / best_ad:.1f}x")
 
 
 if __name__ == "__main__":

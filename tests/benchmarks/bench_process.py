@@ -5,7 +5,9 @@
 Runs the command in a fresh process per subject (as a user would), ``--repeat`` times each
 (default 3; the table shows the median and the range of the wall times), and prints the
 frames processed (every trial's frames, as in the trials' results.json), frames per
-wall-clock second, the per-stage times of the median run from subject.json / results.json
+wall-clock second, the child's CPU time (user + sys, from ``getrusage``; median) and
+frames per CPU-second (the issue's "frames per core-second"; the machine's other load
+does not count in it), the per-stage times of the median run from subject.json / results.json
 and the quality metrics. ``--src DIR`` runs another source tree's ``solver`` package (e.g.
 an export of an earlier commit) with this venv, for before/after figures on one machine.
 Target (issue): 200 frames per core-second.
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -26,16 +29,20 @@ from pathlib import Path
 SUBJECTS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "subjects"
 
 
-def _run(name: str, out: Path, src: str | None) -> float:
+def _run(name: str, out: Path, src: str | None) -> tuple[float, float]:
+    """One ``addb process`` of subject ``name``: (wall s, CPU s user + sys of the child)."""
     env = dict(os.environ)
     cmd = [str(Path(sys.executable).parent / "addb"), "process", str(SUBJECTS / name), "--out", str(out)]
     cwd = None
     if src:  # the other tree's `solver` first on the path; run outside the repo so '' does not shadow it
         env["PYTHONPATH"] = os.pathsep.join([src, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         cwd = tempfile.gettempdir()
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, env=env, cwd=cwd)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
 def main() -> None:
@@ -45,16 +52,19 @@ def main() -> None:
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
     args = ap.parse_args()
     print(
-        "| subject | frames | wall (s): median [min-max] | frames/s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
+        "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
         "| trial: measured frames, marker RMS (cm), linear residual (N, BW), angular residual (N·m, BW·h) |"
     )
-    print("| --- | ---: | ---: | ---: | ---: | --- | --- |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |")
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.subjects:
-            walls = []
+            walls, cpus = [], []
             for i in range(args.repeat):
-                walls.append((_run(name, Path(tmp) / f"{name}_{i}", args.src), i))
+                w, c = _run(name, Path(tmp) / f"{name}_{i}", args.src)
+                walls.append((w, i))
+                cpus.append(c)
             wall, i_med = sorted(walls)[len(walls) // 2]
+            cpu = statistics.median(cpus)
             out = Path(tmp) / f"{name}_{i_med}"
             subj = json.loads((out / "subject.json").read_text())
             dyn = subj.get("dynamics_seconds") or {}
@@ -73,6 +83,7 @@ def main() -> None:
             ws = [w for w, _ in walls]
             print(
                 f"| {name} | {frames} | {statistics.median(ws):.1f} [{min(ws):.1f}-{max(ws):.1f}] | {frames / wall:.0f} "
+                f"| {cpu:.1f} | {frames / cpu:.0f} "
                 f"| {stages['kinematics']:.1f} | {dyn_s} | {'; '.join(trials)} |",
                 flush=True,
             )
