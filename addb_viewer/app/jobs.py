@@ -170,10 +170,18 @@ class SolverJob:
         self._t0 = time.monotonic()
         spare = _take_spare()
         if spare is not None:  # a warm child: it opens its own log (child.log) beside the spec
+            try:
+                assert spare.stdin is not None
+                spare.stdin.write(str(spec_file) + "\n")
+                spare.stdin.close()
+            except OSError:  # it died just now (broken pipe): a fresh child instead
+                spare.kill()
+                spare.wait()
+                if spare.stdout is not None:
+                    spare.stdout.close()
+                spare = None
+        if spare is not None:
             self._proc = spare
-            assert spare.stdin is not None
-            spare.stdin.write(str(spec_file) + "\n")
-            spare.stdin.close()
             log = None
         else:
             log = open(self.work_dir / "child.log", "w")  # noqa: SIM115 (closed by the reader)

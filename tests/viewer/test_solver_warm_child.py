@@ -100,6 +100,25 @@ def test_a_dead_spare_is_replaced_by_a_fresh_child(processed, tmp_path: Path) ->
     assert result is not None and result.status == "done", result and result.message
 
 
+def test_a_spare_that_dies_as_the_job_starts_is_replaced(processed, tmp_path: Path, monkeypatch) -> None:
+    """The spare passed its checks but its pipe is broken when the spec is written."""
+    subject, out, flags = processed
+    jobs.prestart_solver(tmp_path)
+    assert jobs.wait_for_spare(120)
+    dead = jobs._spare
+    assert dead is not None
+    dead.proc.kill()
+    dead.proc.wait()
+    jobs._spare = None
+    monkeypatch.setattr(jobs, "_take_spare", lambda: dead.proc)
+    job = jobs.SolverJob(jobs.JobSpec(subject, out, ("walk",), flags, dynamics_only=True), tmp_path / "job",
+                         on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
+    job.start()
+    assert job._proc is not None and job._proc.pid != dead.proc.pid
+    result = job.wait(300)
+    assert result is not None and result.status == "done", result and result.message
+
+
 def test_a_warm_job_can_be_cancelled(processed, tmp_path: Path) -> None:
     subject, out, flags = processed
     before = (out / "walk" / "results.json").read_bytes()
