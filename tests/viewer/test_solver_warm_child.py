@@ -9,7 +9,6 @@ On the real walk (rajagopal2016_walk), a Reprocess of the walk (dynamics only) w
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -38,26 +37,23 @@ def processed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, dic
     return subject, out, {"walk": mask}
 
 
-def _run(subject: Path, out: Path, flags: dict, work: Path, *, warm: bool) -> tuple[jobs.JobResult, int]:
+def _run(subject: Path, out: Path, flags: dict, work: Path, monkeypatch, *, warm: bool) -> tuple[jobs.JobResult, int]:  # noqa: ANN001
     """One dynamics-only Reprocess job; (its result, the pid of the process that ran it)."""
-    os.environ["ADDB_WARM_SOLVER"] = "1" if warm else "0"
-    try:
-        spare_pid = None
-        if warm:
-            jobs.prestart_solver(work.parent)
-            assert jobs.wait_for_spare(120)
-            spare_pid = jobs._spare.proc.pid  # type: ignore[union-attr]
-        job = jobs.SolverJob(jobs.JobSpec(subject, out, ("walk",), flags, dynamics_only=True), work,
-                             on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
-        job.start()
-        assert job._proc is not None
-        pid = job._proc.pid
-        assert (pid == spare_pid) if warm else (spare_pid is None)
-        result = job.wait(300)
-        assert result is not None
-        return result, pid
-    finally:
-        os.environ.pop("ADDB_WARM_SOLVER", None)
+    monkeypatch.setenv("ADDB_WARM_SOLVER", "1" if warm else "0")
+    spare_pid = None
+    if warm:
+        jobs.prestart_solver(work.parent)
+        assert jobs.wait_for_spare(120)
+        spare_pid = jobs._spare.proc.pid  # type: ignore[union-attr]
+    job = jobs.SolverJob(jobs.JobSpec(subject, out, ("walk",), flags, dynamics_only=True), work,
+                         on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
+    job.start()
+    assert job._proc is not None
+    pid = job._proc.pid
+    assert (pid == spare_pid) if warm else (spare_pid is None)
+    result = job.wait(300)
+    assert result is not None
+    return result, pid
 
 
 def _arrays(out: Path) -> dict[str, np.ndarray]:
@@ -65,13 +61,13 @@ def _arrays(out: Path) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files if k != "header"}
 
 
-def test_warm_child_runs_the_job_and_gives_a_fresh_childs_numbers(processed, tmp_path: Path) -> None:
+def test_warm_child_runs_the_job_and_gives_a_fresh_childs_numbers(processed, tmp_path: Path, monkeypatch) -> None:
     subject, out, flags = processed
-    cold, _ = _run(subject, out, flags, tmp_path / "jobs" / "cold", warm=False)
+    cold, _ = _run(subject, out, flags, tmp_path / "jobs" / "cold", monkeypatch, warm=False)
     assert cold.status == "done", cold.message
     ref = _arrays(out)
     ref_results = json.loads((out / "walk" / "results.json").read_text())
-    warm, _ = _run(subject, out, flags, tmp_path / "jobs" / "warm", warm=True)
+    warm, _ = _run(subject, out, flags, tmp_path / "jobs" / "warm", monkeypatch, warm=True)
     assert warm.status == "done", warm.message
     assert (tmp_path / "jobs" / "warm" / "child.log").is_file()  # the spare wrote its log beside the spec
     got = _arrays(out)
@@ -84,7 +80,8 @@ def test_warm_child_runs_the_job_and_gives_a_fresh_childs_numbers(processed, tmp
     assert set(range(100, 121)) <= set(res["unobserved_frames"])
 
 
-def test_a_dead_spare_is_replaced_by_a_fresh_child(processed, tmp_path: Path) -> None:
+def test_a_dead_spare_is_replaced_by_a_fresh_child(processed, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("ADDB_WARM_SOLVER", "1")  # on even where a conftest turns spares off
     subject, out, flags = processed
     jobs.prestart_solver(tmp_path)
     assert jobs.wait_for_spare(120)
@@ -102,6 +99,7 @@ def test_a_dead_spare_is_replaced_by_a_fresh_child(processed, tmp_path: Path) ->
 
 def test_a_spare_that_dies_as_the_job_starts_is_replaced(processed, tmp_path: Path, monkeypatch) -> None:
     """The spare passed its checks but its pipe is broken when the spec is written."""
+    monkeypatch.setenv("ADDB_WARM_SOLVER", "1")
     subject, out, flags = processed
     jobs.prestart_solver(tmp_path)
     assert jobs.wait_for_spare(120)
@@ -119,7 +117,8 @@ def test_a_spare_that_dies_as_the_job_starts_is_replaced(processed, tmp_path: Pa
     assert result is not None and result.status == "done", result and result.message
 
 
-def test_a_warm_job_can_be_cancelled(processed, tmp_path: Path) -> None:
+def test_a_warm_job_can_be_cancelled(processed, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("ADDB_WARM_SOLVER", "1")
     subject, out, flags = processed
     before = (out / "walk" / "results.json").read_bytes()
     messages: list[str] = []
