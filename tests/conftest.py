@@ -19,6 +19,11 @@ from types import ModuleType
 
 import pytest
 
+#: Review apps made by the tests start no spare ("warm") solver child: each would cost about
+#: 1 s of CPU and 100 MB while idle, on a 2-core machine running two test workers. The
+#: warm-child tests (tests/viewer/test_solver_warm_child.py) switch spares on themselves.
+os.environ.setdefault("ADDB_WARM_SOLVER", "0")
+
 #: The read-only real lab data beside the repository: ``<repo>/../shared/data``.
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
