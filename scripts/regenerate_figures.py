@@ -87,22 +87,22 @@ DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
 
 FIGURES: tuple[Figure, ...] = (
     # ---- tests/benchmarks/RESULTS.md, in the document's order
-    Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.5),
-    Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.5),
-    Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 1.5, fence=False),
-    Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 2.5, fence=False),
-    Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 2.0, fence=False),
-    Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.5),
-    Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 1.0),
-    Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 1.5),
-    Figure("queue", RESULTS, f"{PY} tests/benchmarks/bench_queue.py", "timing", 0.5),
+    Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.2),
+    Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
+    Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
+    Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 1.0, fence=False),
+    Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 1.0, fence=False),
+    Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
+    Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 0.5),
+    Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 0.5),
+    Figure("queue", RESULTS, f"{PY} tests/benchmarks/bench_queue.py", "timing", 0.3),
     Figure("seed-benchmark", RESULTS, f"{PY} tests/benchmarks/bench_benchmark.py --work /tmp/addb_bench_benchmark --fresh",
-           "accuracy", 3.5, fence=False,
+           "accuracy", 2.0, fence=False,
            writes=("docs/benchmark/benchmark_kinematic_inputs.md", "docs/benchmark/benchmark_processed_inputs.md",
                    "docs/benchmark/filtering_study.md")),
     Figure("benchmark-variants", RESULTS, f"{PY} tests/benchmarks/bench_benchmark_variants.py --work /tmp/addb_bench_benchmark",
-           "accuracy", 12.0, fence=False),
-    Figure("b3d", RESULTS, f"{PY} tests/benchmarks/bench_b3d.py", "timing", 1.5),
+           "accuracy", 4.0, fence=False),
+    Figure("b3d", RESULTS, f"{PY} tests/benchmarks/bench_b3d.py", "timing", 0.5),
     Figure("process-before", RESULTS, f"{EXPORT_BEFORE} && {PY} tests/benchmarks/bench_process.py --repeat 3 --src {BEFORE_TREE}",
            "timing", 6.0, fence=False),
     Figure(
@@ -112,14 +112,14 @@ FIGURES: tuple[Figure, ...] = (
         f"(cd /tmp && PYTHONPATH={BEFORE_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_exact_before/$s >/dev/null) && "
         ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
-        "accuracy", 3.0),
+        "accuracy", 4.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 3.0, fence=False),
     # ---- documents of their own
-    Figure("ablation", "docs/dynamics/ABLATION.md", f"{PY} tests/benchmarks/bench_ablation.py", "accuracy", 1.5, fence=False),
+    Figure("ablation", "docs/dynamics/ABLATION.md", f"{PY} tests/benchmarks/bench_ablation.py", "accuracy", 0.5, fence=False),
     Figure("expert-comparison", "docs/kinematics/EXPERT_COMPARISON.md", f"{PY} tests/benchmarks/bench_expert_comparison.py",
-           "accuracy", 1.5, fence=False),
-    Figure("b3d-comparison", "", f"{PY} scripts/b3d_compare.py --md docs/b3d/comparison.md", "accuracy", 0.5,
+           "accuracy", 0.5, fence=False),
+    Figure("b3d-comparison", "", f"{PY} scripts/b3d_compare.py --md docs/b3d/comparison.md", "accuracy", 0.2,
            writes=("docs/b3d/comparison.md",)),
     # ---- the diagnosis (docs/diagnose; the commands named at the head of each document)
     Figure("diagnose-draws-0-9", "", f"{DIAG} --draws 10 --synthetic 5 --json docs/diagnose/results_draws_0_9.json", "accuracy", 40.0),

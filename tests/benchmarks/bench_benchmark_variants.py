@@ -23,7 +23,8 @@ leave-one-subject-out folds, the scored frames of ``addb benchmark``. Prints Mar
   input, 50 epochs); the four-subject folds of the first benchmark (walk, run, OpenCap,
   Camargo) against the six-subject folds, scored on the same frames.
 
-Takes about 20-25 minutes on the 2-core development machine (the networks' training).
+Takes about 4 minutes on the 2-core development machine when it is quiet (mostly the
+networks' training), several times longer when it is shared.
 Needs PyTorch.
 """
 
