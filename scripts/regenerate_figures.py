@@ -128,10 +128,10 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-results", "docs/diagnose/RESULTS.md",
            f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
            fence=False),
-    Figure("diagnose-marker-offset-opencap-DJ1", "",
+    Figure("diagnose-marker-offset-opencap-DJ1", "docs/diagnose/RESULTS.md",
            f"{DIAG} --trials DJ1 --causes marker_offset --draws 10 --synthetic 0 --json docs/diagnose/results_marker_offset_opencap_DJ1.json",
-           "accuracy", 6.0),
-    Figure("diagnose-marker-offset-opencap-walking1", "",
+           "accuracy", 2.0),
+    Figure("diagnose-marker-offset-opencap-walking1", "docs/diagnose/RESULTS.md",
            f"{DIAG} --trials walking1 --causes marker_offset --draws 10 --synthetic 0 "
            "--json docs/diagnose/results_marker_offset_opencap_walking1.json", "accuracy", 6.0),
     Figure("diagnose-findings", "", f"{PY} tests/benchmarks/findings_diagnose.py --rounds 4 --markdown docs/diagnose/findings_runs.md",
