@@ -1,0 +1,59 @@
+"""scripts/regenerate_figures.py: every figure of the registry has exactly one block in its
+document (and no block lacks a figure); a run replaces only its block, with the stamp and
+the command's output, and a failed command leaves the document as it was."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def rf():
+    spec = importlib.util.spec_from_file_location("regenerate_figures", REPO / "scripts" / "regenerate_figures.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["regenerate_figures"] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_figure_has_exactly_one_block(rf) -> None:
+    assert rf.check() == []
+    names = [f.name for f in rf.FIGURES]
+    assert len(names) == len(set(names))
+
+
+def test_a_run_replaces_its_block_and_keeps_the_prose(rf, tmp_path, monkeypatch) -> None:
+    doc = tmp_path / "doc.md"
+    prose_before, prose_after = "# Title\n\nProse 1.5 cm before.\n\n", "\n\nProse after.\n"
+    other = "<!-- begin: other -->\nkept as it is\n<!-- end: other -->"
+    doc.write_text(prose_before + "<!-- begin: fig -->\nold figure\n<!-- end: fig -->" + prose_after + other + "\n")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "stamp", lambda fig, seconds: f"Made by `{fig.command}` on DATE, commit HASH.")
+    fig = rf.Figure("fig", "doc.md", "printf 'a | 1\\nb | 2\\n'", "accuracy", 0.0)
+    assert rf.run(fig)
+    expected = (
+        prose_before
+        + "<!-- begin: fig -->\nMade by `printf 'a | 1\\nb | 2\\n'` on DATE, commit HASH.\n\n```\na | 1\nb | 2\n```\n<!-- end: fig -->"
+        + prose_after + other + "\n"
+    )
+    assert doc.read_text() == expected
+    assert rf.run(fig)  # a second run gives the same document
+    assert doc.read_text() == expected
+    assert not rf.run(rf.Figure("fig", "doc.md", "echo partial; exit 3", "accuracy", 0.0))
+    assert doc.read_text() == expected
+
+
+def test_a_missing_block_is_an_error_naming_the_document(rf, tmp_path) -> None:
+    doc = tmp_path / "doc.md"
+    doc.write_text("no block here\n")
+    fig = rf.Figure("fig", "doc.md", "true", "accuracy", 0.0)
+    with pytest.raises(ValueError, match="doc.md: no block"):
+        rf.replace_block(doc, fig, rf.block_text(fig, "stamp", ""))
+    rf.replace_block(doc, fig, rf.block_text(fig, "stamp", ""), append=True)
+    assert doc.read_text() == "no block here\n\n<!-- begin: fig -->\nstamp\n<!-- end: fig -->\n"
