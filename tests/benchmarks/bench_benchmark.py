@@ -129,9 +129,12 @@ def main() -> None:
                 print()
         shutil.copy(report / "benchmark.md", args.docs / f"benchmark_{name}_inputs.md")
         shutil.copy(report / "benchmark.json", args.docs / f"benchmark_{name}_inputs.json")
-        if (report / "filtering_study.png").exists():
-            shutil.copy(report / "filtering_study.png", args.docs / "filtering_study.png")
+        if (report / "filtering_study.md").exists():
             shutil.copy(report / "filtering_study.md", args.docs / "filtering_study.md")
+            if (report / "filtering_study.png").exists():
+                shutil.copy(report / "filtering_study.png", args.docs / "filtering_study.png")
+            else:
+                print(f"**The plot {args.docs / 'filtering_study.png'} was not redrawn: matplotlib is not installed.**\n")
 
 
 if __name__ == "__main__":
