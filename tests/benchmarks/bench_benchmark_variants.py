@@ -1,10 +1,11 @@
 """Variants around the seed-paper benchmark: where the analytical baseline's error comes
 from, the kinematic contact rule, the hybrid's and the MLP's variants (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_benchmark_variants.py [--work DIR] [--parts NAME ...]
+    .venv/bin/python tests/benchmarks/bench_benchmark_variants.py [--work DIR] [--fresh] [--parts NAME ...]
 
 Uses the subjects processed by tests/benchmarks/bench_benchmark.py into ``DIR/out`` (the
-same default folder; processed first when missing) and the benchmark's kinematic inputs
+same default folder; processed first when missing, or again with ``--fresh``: without it,
+outputs of older code are reused) and the benchmark's kinematic inputs
 (``--inputs kinematic``: q̃, inverse kinematics of the raw markers low-passed at 30 Hz),
 leave-one-subject-out folds, the scored frames of ``addb benchmark``. Prints Markdown
 (standard output; progress on standard error), one section per part:
@@ -76,14 +77,14 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
 
 
-def ensure_processed(work: Path) -> list[Path]:
+def ensure_processed(work: Path, fresh: bool) -> list[Path]:
     outs = [work / "out" / s for s in SUBJECTS]
-    if not all(any(o.glob("*/trial.npz")) for o in outs):
+    if fresh or not all(any(o.glob("*/trial.npz")) for o in outs):
         say(f"processing the subjects into {work}/out (tests/benchmarks/bench_benchmark.py's first step)")
         sys.path.insert(0, str(REPO / "tests" / "benchmarks"))
         from bench_benchmark import _process  # type: ignore[import-not-found]
 
-        _process(Path(sys.executable).parent / "addb", work, False)
+        _process(Path(sys.executable).parent / "addb", work, fresh)
     return outs
 
 
@@ -361,9 +362,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--work", type=Path, default=Path("/tmp/addb_bench_benchmark"))
     ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
+    ap.add_argument("--fresh", action="store_true", help="process the subjects again (else DIR/out is reused when complete)")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    outs = ensure_processed(args.work)
+    outs = ensure_processed(args.work, args.fresh)
     ds = load_dataset(outs, inputs="kinematic")
     say(f"dataset: {len(ds.subjects)} subjects, {len(ds.trials)} trials, {ds.n_frames} frames ({time.perf_counter() - t0:.0f} s)")
     print(f"Dataset: {len(ds.subjects)} subjects, {len(ds.trials)} trials, {ds.n_frames} scored frames (kinematic inputs).\n")
