@@ -20,7 +20,8 @@ two gains multiply)::
          "times_s": [[0.0, 0.46], [1.96, 2.37]]}
     ]}
 
-(each entry also records ``source`` and ``created``). Corrections:
+(each entry also records ``source`` and ``created``). Corrections (one entry per cause in
+the table :data:`CORRECTIONS`; a cause it does not know is refused when the file is read):
 
 * ``force_time_offset``: the force samples move to ``time - delay_s`` (forces were late);
 * ``plate_force_offset``: the plate's force minus ``offset_N`` acting at ``centre_m``, the
@@ -53,8 +54,8 @@ from __future__ import annotations
 
 import json
 import time as _time
-from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,8 @@ def read_extensions(subject_dir: str | Path) -> list[dict[str, Any]]:
     Raises
     ------
     SubjectFolderError
-        The file is not valid JSON or not of this schema.
+        The file is not valid JSON or not of this schema, or an extension's cause has no
+        correction (:data:`CORRECTIONS`).
     """
     path = extensions_path(subject_dir)
     if not path.is_file():
@@ -101,6 +103,11 @@ def read_extensions(subject_dir: str | Path) -> list[dict[str, Any]]:
     exts = data.get("extensions", [])
     if not isinstance(exts, list) or not all(isinstance(e, dict) and "cause" in e for e in exts):
         raise SubjectFolderError("'extensions' must be a list of objects with a 'cause'", path=path)
+    for i, e in enumerate(exts):
+        if e["cause"] not in CORRECTIONS:
+            raise SubjectFolderError(
+                f"extension {i + 1} has cause {e['cause']!r}, which this version cannot apply (known: {', '.join(CORRECTIONS)})", path=path
+            )
     return exts
 
 
@@ -139,23 +146,45 @@ def _map_plates(forces: ForceRecording, plate: str, fn: Any) -> ForceRecording:
 
 
 def correct_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
-    """The recording with one force extension's correction applied (others: unchanged)."""
-    cause = ext["cause"]
-    if cause == "force_time_offset":
-        return ForceRecording(np.asarray(forces.time) - float(ext["delay_s"]), forces.rate_hz, forces.plates, forces.source)
-    if cause == "plate_force_offset":
-        off = np.asarray(ext["offset_N"], dtype=float)
-        if "centre_m" not in ext:  # entries saved before 2026-11-22 (fourth session): at the CoP
-            return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force - off, p.cop, p.free_moment, p.corners))
-        centre = np.asarray(ext["centre_m"], dtype=float)
-        return _map_plates(forces, ext["plate"], lambda p: offset_plate(p, -off, centre))
-    if cause == "plate_force_gain":
-        g = float(ext["gain"])
-        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force / g, p.cop, p.free_moment / g, p.corners))
-    if cause == "plate_position_offset":
-        s = np.asarray(ext["shift_m"], dtype=float)
-        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force, p.cop - s, p.free_moment, p.corners))
-    return forces
+    """The recording with one extension's force correction applied (an extension that does
+    not correct forces leaves it unchanged; :data:`CORRECTIONS`).
+
+    Raises
+    ------
+    SubjectFolderError
+        The extension names a plate the recording lacks.
+    ValueError
+        The extension's cause has no correction (:func:`correction`).
+    """
+    fn = correction(ext["cause"]).forces
+    return forces if fn is None else fn(forces, ext)
+
+
+def _delay_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """``force_time_offset``: the force samples move to ``time - delay_s``."""
+    return ForceRecording(np.asarray(forces.time) - float(ext["delay_s"]), forces.rate_hz, forces.plates, forces.source)
+
+
+def _offset_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """``plate_force_offset``: the plate's force minus ``offset_N`` acting at ``centre_m``
+    (:func:`offset_plate`); entries without ``centre_m`` subtract it at the centre of pressure."""
+    off = np.asarray(ext["offset_N"], dtype=float)
+    if "centre_m" not in ext:  # entries saved before 2026-11-22 (fourth session): at the CoP
+        return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force - off, p.cop, p.free_moment, p.corners))
+    centre = np.asarray(ext["centre_m"], dtype=float)
+    return _map_plates(forces, ext["plate"], lambda p: offset_plate(p, -off, centre))
+
+
+def _gain_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """``plate_force_gain``: the plate's force and free moment divided by ``gain``."""
+    g = float(ext["gain"])
+    return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force / g, p.cop, p.free_moment / g, p.corners))
+
+
+def _shift_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """``plate_position_offset``: the plate's centre of pressure minus ``shift_m``."""
+    s = np.asarray(ext["shift_m"], dtype=float)
+    return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force, p.cop - s, p.free_moment, p.corners))
 
 
 #: Below this vertical force (N) a plate's corrected centre of pressure is not recomputed
@@ -190,8 +219,22 @@ def offset_plate(plate: ForcePlate, offset: FloatArray, centre: FloatArray) -> F
 
 
 def correct_markers(markers: MarkerTrajectories, ext: Mapping[str, Any]) -> MarkerTrajectories:
-    """The markers with a ``marker_offset`` correction applied (others: unchanged)."""
-    if ext["cause"] != "marker_offset" or ext["marker"] not in markers.names:
+    """The markers with one extension's marker correction applied (an extension that does
+    not correct markers leaves them unchanged; :data:`CORRECTIONS`).
+
+    Raises
+    ------
+    ValueError
+        The extension's cause has no correction (:func:`correction`).
+    """
+    fn = correction(ext["cause"]).markers
+    return markers if fn is None else fn(markers, ext)
+
+
+def _shift_marker(markers: MarkerTrajectories, ext: Mapping[str, Any]) -> MarkerTrajectories:
+    """``marker_offset``: the marker's recorded positions minus ``lab_shift_m`` (interpolated
+    from ``time_s`` onto the marker frames); a marker the recording lacks: unchanged."""
+    if ext["marker"] not in markers.names:
         return markers
     j = markers.names.index(ext["marker"])
     t_ext = np.asarray(ext["time_s"], dtype=float)
@@ -255,14 +298,22 @@ def extend_subject(subject: Subject) -> Subject:
         ``mass_kg`` plus every ``body_mass`` change, ``model_path`` the last
         ``segment_mass_distribution`` model.
     """
-    mass = subject.mass_kg
-    model_path = subject.model_path
     for ext in read_extensions(subject.path):
-        if ext["cause"] == "body_mass":
-            mass += float(ext["mass_change_kg"])
-        elif ext["cause"] == "segment_mass_distribution" and ext.get("model"):
-            model_path = subject.path / str(ext["model"])
-    return replace(subject, mass_kg=mass, model_path=model_path)
+        fn = correction(ext["cause"]).subject
+        if fn is not None:
+            subject = fn(subject, ext)
+    return subject
+
+
+def _change_mass(subject: Subject, ext: Mapping[str, Any]) -> Subject:
+    """``body_mass``: the subject's mass plus ``mass_change_kg``."""
+    return replace(subject, mass_kg=subject.mass_kg + float(ext["mass_change_kg"]))
+
+
+def _redistributed_model(subject: Subject, ext: Mapping[str, Any]) -> Subject:
+    """``segment_mass_distribution``: the subject's model replaced by the entry's ``model``
+    (beside the extensions file)."""
+    return replace(subject, model_path=subject.path / str(ext["model"])) if ext.get("model") else subject
 
 
 def extension_masks(subject: Subject) -> dict[str, BoolArray]:
@@ -313,16 +364,83 @@ def save_extension(subject_dir: str | Path, entry: Mapping[str, Any]) -> Path:
             "the subject folder is read-only; copy the subject to a folder you can write to and apply there", path=folder
         )
     entry = dict(entry)
-    if entry["cause"] == "segment_mass_distribution":
-        from solver.io.subject import load_subject
-        from solver.model.mass_groups import group_masses, redistribute
-        from solver.model.osim import read_osim
-        from solver.model.osim_writer import write_osim
-
-        subject = extend_subject(load_subject(folder))
-        model = read_osim(subject.model_path)
-        group_mass = group_masses(model)
-        change = {g: float(f) * group_mass.get(g, 0.0) for g, f in entry.get("fraction", {}).items()}
-        write_osim(redistribute(model, change), folder / MODEL_NAME)
-        entry["model"] = MODEL_NAME
+    prepare = correction(entry["cause"]).prepare
+    if prepare is not None:
+        entry = prepare(folder, entry)
     return append_extension(folder, entry)
+
+
+def _write_redistributed_model(folder: Path, entry: dict[str, Any]) -> dict[str, Any]:
+    """``segment_mass_distribution`` on saving: write ``addb_extensions.osim``, the subject's
+    current model (the generic one, or the last saved redistribution) with each body group's
+    mass changed by the entry's ``fraction`` of that group's mass; the entry names it."""
+    from solver.io.subject import load_subject
+    from solver.model.mass_groups import group_masses, redistribute
+    from solver.model.osim import read_osim
+    from solver.model.osim_writer import write_osim
+
+    subject = extend_subject(load_subject(folder))
+    model = read_osim(subject.model_path)
+    group_mass = group_masses(model)
+    change = {g: float(f) * group_mass.get(g, 0.0) for g, f in entry.get("fraction", {}).items()}
+    write_osim(redistribute(model, change), folder / MODEL_NAME)
+    return {**entry, "model": MODEL_NAME}
+
+
+# --------------------------------------------------------------------------- the table
+
+
+@dataclass(frozen=True)
+class Correction:
+    """How a saved extension of one cause corrects the raw recordings or the subject (each
+    part None when the cause does not touch it).
+
+    Attributes
+    ----------
+    forces
+        ``(recording, entry) -> recording`` (:func:`correct_forces`).
+    markers
+        ``(markers, entry) -> markers`` (:func:`correct_markers`).
+    subject
+        ``(subject, entry) -> subject``: its mass or model (:func:`extend_subject`).
+    prepare
+        ``(subject folder, entry) -> entry`` on saving (:func:`save_extension`): writes the
+        files the entry refers to.
+
+    ``unmeasured_force`` extensions have none of these: their frames join the masks
+    (:func:`extension_masks`).
+    """
+
+    forces: Callable[[ForceRecording, Mapping[str, Any]], ForceRecording] | None = None
+    markers: Callable[[MarkerTrajectories, Mapping[str, Any]], MarkerTrajectories] | None = None
+    subject: Callable[[Subject, Mapping[str, Any]], Subject] | None = None
+    prepare: Callable[[Path, dict[str, Any]], dict[str, Any]] | None = None
+
+
+#: Cause name -> its correction. Every diagnosis cause has an entry here (the diagnosis'
+#: registry refuses one that has not, :func:`solver.diagnose.causes.base.check`); the
+#: diagnosis' cause module says how the entry is written, this table how it is applied.
+CORRECTIONS: dict[str, Correction] = {
+    "unmeasured_force": Correction(),
+    "body_mass": Correction(subject=_change_mass),
+    "force_time_offset": Correction(forces=_delay_forces),
+    "plate_force_offset": Correction(forces=_offset_forces),
+    "plate_force_gain": Correction(forces=_gain_forces),
+    "plate_position_offset": Correction(forces=_shift_forces),
+    "segment_mass_distribution": Correction(subject=_redistributed_model, prepare=_write_redistributed_model),
+    "marker_offset": Correction(markers=_shift_marker),
+}
+
+
+def correction(cause: str) -> Correction:
+    """The correction of extensions of ``cause``.
+
+    Raises
+    ------
+    ValueError
+        No correction is known for ``cause`` (the message lists the known causes).
+    """
+    try:
+        return CORRECTIONS[cause]
+    except (KeyError, TypeError):
+        raise ValueError(f"no correction is known for extensions of cause {cause!r}; known: {', '.join(CORRECTIONS)}") from None

@@ -1,35 +1,25 @@
-"""Candidate causes: each a model extension whose parameters are fitted by least squares.
+"""What every candidate cause shares: the context of one trial and the alternatives' interface.
 
-Every candidate *alternative* (a cause, plus the plate or marker it concerns) exposes the
-same small interface, used by :mod:`.selection` for cross-validation:
+A cause (:mod:`solver.diagnose.causes`, one module each) is a model extension whose
+parameters are fitted by least squares; :meth:`solver.diagnose.causes.base.Cause.alternatives`
+builds its *alternatives* (the cause plus the plate or marker it concerns) from the shared
+:class:`Context`. Every alternative exposes the same small interface, used by
+:mod:`.selection` for cross-validation:
 
 * ``solve(mask)`` -> parameter vector fitted on the frames in ``mask``;
 * ``frame_costs(theta)`` -> ``(T,)`` cost of each frame under the extension;
 * ``ref_costs`` -> ``(T,)`` cost of each frame under the reference (same channels);
 * ``n_params`` and ``physical(theta)`` -> the parameters in their units.
 
+Three kinds: :class:`LinearAlternative` (rows affine in the parameters;
+:class:`MotionAlternative` on the whole-motion profile's rows), :class:`GridAlternative`
+(one parameter searched on a grid) and :class:`FixedAlternative` (no global parameters).
 Costs are in the currency of :mod:`.profile` (squared residuals over the dynamics fit's
-standard deviations, translation profiled out), except ``segment_mass_distribution``'s,
-whose rows have the whole motion profiled out (:mod:`.motion_profile`). The causes:
+standard deviations, translation profiled out), except a :class:`MotionAlternative`'s,
+whose rows have the whole motion profiled out (:mod:`.motion_profile`).
 
-=========================  ====================================================  ===============
-cause                      extension (what changes in the reference)             parameters
-=========================  ====================================================  ===============
-unmeasured_force           frames U leave the residual terms (the paper's free   frames of U
-                           centre-of-mass accelerations there)
-body_mass                  inertial wrench scaled to the stated mass + dm        dm, kg
-force_time_offset          plates read at t + delay (1-D search, 1 ms grid)      delay, s
-plate_force_offset         plate p's force minus a constant vector acting at     plate, (3,) N
-                           its centre (zero drift: the plate's moment stays)
-plate_force_gain           plate p's wrench divided by its gain                  plate, gain
-plate_position_offset      plate p's centre of pressure minus a horizontal       plate, (3,) m
-                           shift (y stays: the plate surface is levelled)        (y = 0)
-segment_mass_distribution  mass moved to the legs from the rest of the body      legs kg
-                           (pelvis, trunk with head and arms), total kept; on
-                           the whole-motion profile (every coordinate refitted)
-marker_offset              a landmark (``fixed``) marker moved on its body       marker, (3,) m
-                           (its own error channel, in its body frame)            body frame
-=========================  ====================================================  ===============
+The frames U (:func:`unmeasured_frames`) are part of the context: every cause is evaluated
+with them out of the residual terms.
 """
 
 from __future__ import annotations
@@ -42,27 +32,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.diagnose.data import LOADED_BW, DiagnosisData
+from solver.diagnose.data import DiagnosisData
 from solver.diagnose.motion_profile import MotionProfile
-from solver.diagnose.profile import ROWS, Profile, Sigmas, skew
+from solver.diagnose.profile import ROWS, Profile, Sigmas
 from solver.dynamics.preprocess import true_runs
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-CAUSES = (
-    "unmeasured_force",
-    "body_mass",
-    "force_time_offset",
-    "plate_force_offset",
-    "plate_force_gain",
-    "plate_position_offset",
-    "segment_mass_distribution",
-    "marker_offset",
-)
-
-#: Delays searched by ``force_time_offset``, s (forces late is positive).
-DELAY_GRID = np.round(np.arange(-0.120, 0.1205, 0.001), 4)
 
 
 @dataclass
@@ -289,7 +265,7 @@ Alternative = LinearAlternative | GridAlternative | FixedAlternative
 # --------------------------------------------------------------------------- helpers
 
 
-def _residual_rows(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
+def residual_rows(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
     """Columns of a change -> ``(T, R, k)`` unprofiled rows (marker rows zero).
 
     ``wrench`` ``(T, 6, k)`` is the change of the root residual; ``idle`` ``(P, T, 3, k)``
@@ -305,102 +281,17 @@ def _residual_rows(ctx: Context, wrench: FloatArray, idle: FloatArray | None = N
     return rows
 
 
-def _profiled(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
-    return ctx.profile.project(_residual_rows(ctx, wrench, idle))
+def profiled(ctx: Context, wrench: FloatArray, idle: FloatArray | None = None) -> FloatArray:
+    """:func:`residual_rows` with the translation profiled out: ``(T, R, k)`` columns of an
+    alternative (the change of the rows per unit parameter)."""
+    return ctx.profile.project(residual_rows(ctx, wrench, idle))
 
 
-def _plate_idle(ctx: Context, plate: int, cols: FloatArray) -> FloatArray:
+def plate_idle(ctx: Context, plate: int, cols: FloatArray) -> FloatArray:
     """``(P, T, 3, k)`` idle-row change: ``cols`` ``(T, 3, k)`` for ``plate``, zero for the others."""
     t, _, k = cols.shape
     out = np.zeros((len(ctx.data.plates.names), t, 3, k))
     out[plate] = cols
-    return out
-
-
-# --------------------------------------------------------------------------- causes
-
-
-def body_mass(ctx: Context) -> list[Alternative]:
-    """``body_mass``: the mass is the stated mass + dm (inertial wrench linear in dm)."""
-    d = ctx.data
-    col = (d.inertial / d.fitted_mass)[:, :, None]
-    g = _profiled(ctx, col)
-    stated = d.stated_mass
-
-    def physical(theta: FloatArray) -> dict[str, Any]:
-        dm = float(theta[0])
-        return {"value": dm, "mass_change_kg": dm, "stated_mass_kg": stated, "mass_kg": stated + dm}
-
-    return [LinearAlternative("body_mass", None, ctx.ref_rows, g, physical, ("mass_change_kg",))]
-
-
-def plate_force_offset(ctx: Context) -> list[Alternative]:
-    """``plate_force_offset``: plate p reads F + offset, the zero drift of its force
-    channels; the offset acts at the plate's centre (``RawPlates.centre``), where the plate
-    refers its moment, not at the moving centre of pressure
-    (:func:`solver.corrections.offset_plate`)."""
-    d = ctx.data
-    idle = d.plates.on(d.time)[2]
-    out: list[Alternative] = []
-    eye = np.broadcast_to(np.eye(3), (d.n_frames, 3, 3))
-    for i, name in enumerate(d.plates.names):
-        # residual change for an offset o: force +o, moment +(c - p) x o (not where idle);
-        # idle readings change by -o
-        wrench = np.concatenate([eye, skew(d.plates.centre[i] - d.pelvis)], axis=1)  # (T, 6, 3)
-        wrench = np.where(idle[i][:, None, None], 0.0, wrench)
-        g = _profiled(ctx, wrench, _plate_idle(ctx, i, np.where(idle[i][:, None, None], -eye, 0.0)))
-
-        centre = d.plates.centre[i].tolist()
-
-        def physical(theta: FloatArray, name: str = name, centre: list[float] = centre) -> dict[str, Any]:
-            return {"value": theta.tolist(), "plate": name, "offset_N": [float(v) for v in theta], "centre_m": centre}
-
-        out.append(LinearAlternative("plate_force_offset", name, ctx.ref_rows, g, physical, ("offset_x_N", "offset_y_N", "offset_z_N")))
-    return out
-
-
-def plate_force_gain(ctx: Context) -> list[Alternative]:
-    """``plate_force_gain``: plate p's wrench is its true wrench times the gain.
-
-    Linear in k = 1 - 1/gain: the corrected wrench is (1 - k) W_p, so the residual changes
-    by k W_p.
-    """
-    d = ctx.data
-    per, _, idle_force = d.external()
-    out: list[Alternative] = []
-    for i, name in enumerate(d.plates.names):
-        g = _profiled(ctx, per[i][:, :, None], _plate_idle(ctx, i, -idle_force[i][:, :, None]))
-
-        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
-            gain = 1.0 / (1.0 - float(theta[0])) if theta[0] < 0.99 else float("inf")
-            return {"value": gain, "plate": name, "gain": gain}
-
-        out.append(LinearAlternative("plate_force_gain", name, ctx.ref_rows, g, physical, ("gain",)))
-    return out
-
-
-def plate_position_offset(ctx: Context) -> list[Alternative]:
-    """``plate_position_offset``: plate p's CoP is shifted by s (horizontal); the residual
-    moment changes by s x F_p."""
-    d = ctx.data
-    per = d.external()[0]
-    out: list[Alternative] = []
-    for i, name in enumerate(d.plates.names):
-        f = per[i][:, :3]
-        cols = -skew(f)[:, :, [0, 2]]  # s x F = -F x s, for s = (sx, 0, sz)
-        wrench = np.concatenate([np.zeros((d.n_frames, 3, 2)), cols], axis=1)
-        g = _profiled(ctx, wrench)
-
-        def physical(theta: FloatArray, name: str = name) -> dict[str, Any]:
-            s = [float(theta[0]), 0.0, float(theta[1])]
-            return {"value": s, "plate": name, "shift_m": s}
-
-        # a shifted CoP changes nothing where the plate bears no load: the shift's gain is
-        # measured against the residual of the frames it can explain
-        loaded = f[:, 1] > LOADED_BW * d.bw
-        out.append(
-            LinearAlternative("plate_position_offset", name, ctx.ref_rows, g, physical, ("shift_x_m", "shift_z_m"), acts_on=loaded)
-        )
     return out
 
 
@@ -428,133 +319,6 @@ class MotionAlternative(LinearAlternative):
             "angular_residual_rms_Nm": float(np.sqrt(np.mean(np.sum(mo**2, axis=1)))) if res.any() else float("nan"),
             "frames": int(frames.sum()),
         }
-
-
-def segment_mass_distribution(ctx: Context) -> list[Alternative]:
-    """``segment_mass_distribution``: the legs carry ``legs_kg`` more of the body mass, taken
-    from the rest of the body (pelvis and trunk, each in proportion to its mass); total kept.
-
-    Judged on the rows of :attr:`Context.motion_profile`, with every coordinate at every
-    frame re-optimized: the dynamics fit balances a wrong distribution by bending the whole
-    motion, which the translation profile cannot undo (on the fitted motion it found
-    0.2-0.5 kg of a hidden 5-6 kg). The root residual is taken at the fitted mass (a wrong
-    total is ``body_mass``'s). One direction only: with the three groups free, the walk's
-    pelvis took +21.6 kg (the pelvis' own inertial wrench is nearly that of a translation of
-    the whole body), while the legs against the rest of the body came back within 0.7-1.6 kg
-    on eight draws (docs/diagnose/RESULTS.md, seventh and eighth sessions). Each group's
-    change is reported (``mass_change_kg``); ``value`` is the legs' change.
-    """
-    d = ctx.data
-    groups = [g for g in d.groups if d.group_mass[g] > 0]
-    if "legs" not in groups or len(groups) < 2:
-        return []
-    mp = ctx.motion_profile
-    masses = np.array([d.group_mass[g] for g in groups])
-    cols = np.stack([d.groups[g] / d.group_mass[g] for g in groups], axis=2)  # (T, 6, G): wrench per kg
-    g = mp.per_frame(mp.project(mp.wrench_rows(cols)))
-    rho0 = mp.per_frame(mp.project(mp.z0))
-    legs = np.array([grp == "legs" for grp in groups], dtype=float)
-    rest = np.where(legs > 0, 0.0, masses)
-    basis = (legs - rest / rest.sum())[:, None]  # theta (kg per group) = basis @ legs_kg
-
-    def physical(theta: FloatArray) -> dict[str, Any]:
-        moved = {grp: float(v) for grp, v in zip(groups, theta)}
-        return {"value": moved["legs"], "mass_change_kg": moved, "group_mass_kg": dict(zip(groups, masses.tolist()))}
-
-    return [MotionAlternative("segment_mass_distribution", None, rho0, g, physical, ("legs_kg",), basis, profile=mp)]
-
-
-def force_time_offset(ctx: Context) -> list[Alternative]:
-    """``force_time_offset``: forces are ``delay`` s late (the plates read at t + delay)."""
-    d = ctx.data
-    grid = DELAY_GRID
-    def raw(tau: float) -> FloatArray:
-        _, total, idle_force = d.external(tau)
-        return ctx.profile.raw_rows(d.inertial * (d.stated_mass / d.fitted_mass) - total, idle_force)
-
-    rows = np.stack([raw(float(tau)) for tau in grid], axis=2)
-    costs = np.sum(ctx.profile.project(rows) ** 2, axis=1)
-
-    def physical(tau: float) -> dict[str, Any]:
-        return {"value": tau, "delay_s": tau}
-
-    return [GridAlternative("force_time_offset", grid, costs, ctx.ref_costs, physical, lambda tau: ctx.profile.project(raw(tau)))]
-
-
-def marker_offset(ctx: Context) -> list[Alternative]:
-    """``marker_offset``: a landmark marker sits s (body frame) from where the model puts it.
-
-    Channel: the marker's error minus the frame's mean error, in its body frame, over the
-    marker sigma. A shift s moves the model marker by R s, of which the pose solved again
-    leaves P_jj R s in the marker's error (:func:`solver.diagnose.data.retained_displacement`),
-    so the shift is fitted to the error through Rᵀ P_jj R rather than through the identity.
-    The reported shift adds the offset the kinematics stage already fitted (so it is the
-    whole misplacement relative to the generic model's landmark); ``visible_shift_m`` is the
-    part the marker's error shows (mean Rᵀ P_jj R times the residual shift), which is what
-    is judged worth naming (:func:`solver.diagnose.selection.effect_size`).
-    """
-    d = ctx.data
-    mk = d.markers
-    mean_err, _ = mk.mean_error()
-    out: list[Alternative] = []
-    s = ctx.sigmas.marker
-    seen_all, landmark = mk.seen, mk.landmark
-    for j, name in enumerate(mk.names):
-        if not landmark[j]:
-            continue
-        seen = seen_all[:, j]
-        if seen.sum() < 10:
-            continue
-        dev = np.where(seen[:, None], mk.error[:, j] - mean_err, 0.0)
-        u = np.einsum("tji,tj->ti", mk.rotation[:, j], dev) / s  # body frame
-        rot = mk.rotation[:, j]
-        kept = np.einsum("tki,tkl,tlm->tim", rot, mk.retained[:, j], rot)  # body frame: R^T P_jj R
-        g = np.where(seen[:, None, None], kept, 0.0) / s
-        fitted = mk.fitted_offset[j]
-        shown = kept[seen].mean(axis=0)
-
-        # the model marker moves by R s: error + R s -> in body frame u + s / sigma
-        def physical(
-            theta: FloatArray, name: str = name, fitted: FloatArray = fitted, body: str = mk.bodies[j], shown: FloatArray = shown
-        ) -> dict[str, Any]:
-            total = fitted + theta
-            return {
-                "value": [float(v) for v in total],
-                "marker": name,
-                "body": body,
-                "shift_m": [float(v) for v in total],
-                "residual_shift_m": [float(v) for v in theta],
-                "fitted_offset_m": [float(v) for v in fitted],
-                "visible_shift_m": [float(v) for v in shown @ theta],
-            }
-
-        out.append(LinearAlternative("marker_offset", name, u, g, physical, ("shift_x_m", "shift_y_m", "shift_z_m")))
-    return out
-
-
-def unmeasured_force(ctx: Context, full: Profile) -> list[Alternative]:
-    """``unmeasured_force``: the frames U leave the residual terms.
-
-    ``full`` is the profile with U evaluated (the reference of this cause); the extension's
-    profile is ``ctx.profile`` (U not evaluated).
-    """
-    d = ctx.data
-    u = ctx.unmeasured
-    if not u.any():
-        return []
-    residual = d.residual()
-    ref = np.sum(full.project(full.raw_rows(residual, d.external()[2])) ** 2, axis=1)
-    ext = ctx.ref_costs
-    runs = true_runs(u)
-    params = {
-        "value": [],
-        "frames": [[int(a), int(b)] for a, b in runs],
-        "times_s": [[float(d.time[a]), float(d.time[b - 1])] for a, b in runs],
-        "n_frames": int(u.sum()),
-        "mean_force_N": [np.round(residual[a:b, :3].mean(axis=0), 1).tolist() for a, b in runs],
-        "reasons": sorted({r for r in ctx.unmeasured_reasons if r}),
-    }
-    return [FixedAlternative("unmeasured_force", ext, ref, 6 * int(u.sum()), params, ctx.ref_rows)]
 
 
 #: ``unmeasured_force`` frames: the residual force (a missing support force) exceeds

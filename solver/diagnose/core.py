@@ -33,6 +33,8 @@ from numpy.typing import NDArray
 
 from solver.diagnose import candidates as C
 from solver.diagnose.analysis import analyse
+from solver.diagnose.causes.base import EntryInputs, RefitSetup
+from solver.diagnose.causes.registry import CAUSES, NAMES, cause
 from solver.diagnose.data import (
     DiagnosisData,
     generic_mass_distribution,
@@ -40,7 +42,7 @@ from solver.diagnose.data import (
     marker_kinematics,
     prepare,
 )
-from solver.corrections import correct_forces, extend_subject, extension_masks
+from solver.corrections import extend_subject, extension_masks
 from solver.diagnose.profile import Profile, Sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
@@ -85,14 +87,15 @@ class DiagnoseOptions:
     refit
         Refit the trial with the chosen extension (off: fixed-kinematics figures only).
     causes
-        Causes to test.
+        Names of the causes to test (default: every registered one,
+        :data:`solver.diagnose.causes.registry.NAMES`).
     """
 
     folds: int = 5
     block_seconds: float = 0.2
     rule: ChoiceRule = field(default_factory=ChoiceRule)
     refit: bool = True
-    causes: tuple[str, ...] = C.CAUSES
+    causes: tuple[str, ...] = NAMES
 
 
 @dataclass
@@ -178,20 +181,16 @@ def build_context(
 
 
 def alternatives(ctx: C.Context, full: Profile, causes: tuple[str, ...]) -> list[C.Alternative]:
-    """Every alternative of the requested causes."""
-    makers = {
-        "unmeasured_force": lambda: C.unmeasured_force(ctx, full),
-        "body_mass": lambda: C.body_mass(ctx),
-        "force_time_offset": lambda: C.force_time_offset(ctx),
-        "plate_force_offset": lambda: C.plate_force_offset(ctx),
-        "plate_force_gain": lambda: C.plate_force_gain(ctx),
-        "plate_position_offset": lambda: C.plate_position_offset(ctx),
-        "segment_mass_distribution": lambda: C.segment_mass_distribution(ctx),
-        "marker_offset": lambda: C.marker_offset(ctx),
-    }
+    """Every alternative of the requested causes (names; in that order).
+
+    Raises
+    ------
+    solver.diagnose.causes.registry.UnknownCause
+        A name no registered cause has.
+    """
     out: list[C.Alternative] = []
-    for cause in causes:
-        out.extend(makers[cause]())
+    for name in causes:
+        out.extend(cause(name).alternatives(ctx, full))
     return out
 
 
@@ -215,121 +214,44 @@ def _alt_of(alts: list[C.Alternative], ev: Evaluation) -> C.Alternative:
 # --------------------------------------------------------------------------- held-out figures
 
 
-def _figures(ctx: C.Context, rows: FloatArray, frames: BoolArray, evaluated: BoolArray, marker: tuple[int, FloatArray] | None) -> dict[str, float]:
-    """Marker RMS (m), linear (N) and angular (N·m) residual RMS from profiled rows."""
-    d, s = ctx.data, ctx.sigmas
-    mk = d.markers
-    mean_err, count = mk.mean_error()
-    shifted = rows[:, :3] * (s.marker / np.sqrt(np.maximum(count, 1)))[:, None]
-    err = mk.error - mean_err[:, None] + shifted[:, None]
-    if marker is not None:
-        j, lab = marker
-        err[:, j] = err[:, j] + lab
-    e = np.linalg.norm(err[frames], axis=2)
-    res = frames & evaluated
-    f = rows[res, 3:6] * s.force
-    m = rows[res, 6:9] * s.moment
-    return {
-        "marker_rms_m": float(np.sqrt(np.nanmean(e**2))) if np.isfinite(e).any() else float("nan"),
-        "linear_residual_rms_N": float(np.sqrt(np.mean(np.sum(f**2, axis=1)))) if res.any() else float("nan"),
-        "angular_residual_rms_Nm": float(np.sqrt(np.mean(np.sum(m**2, axis=1)))) if res.any() else float("nan"),
-        "frames": int(frames.sum()),
-    }
-
-
 def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scored: BoolArray | None = None) -> dict[str, Any]:
     """Before/after figures on held-out frames: every frame scored after a fit without its fold.
 
     Before: the reference (processed motion, stated mass, translation re-optimized). After:
-    the extension with the parameters of the fold the frame was held out of. ``scored``
-    ``(T,)``: the frames whose residuals count (default: every evaluated frame).
+    the extension with the parameters of the fold the frame was held out of
+    (:meth:`solver.diagnose.causes.base.Cause.held_out_figures` of the alternative's cause).
+    ``scored`` ``(T,)``: the frames whose residuals count (default: every evaluated frame).
     """
-    d = ctx.data
-    t = d.n_frames
-    frames = np.ones(t, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
-    motion = isinstance(alt, C.MotionAlternative)  # rows of the whole-motion profile
-    after_rows = np.array(alt.rho0 if motion else ctx.ref_rows)
-    lab = np.zeros((t, 3))
-    j = None
-    for f in range(int(folds.max()) + 1):
-        test = folds == f
-        theta = alt.solve(~test)
-        if alt.cause == "marker_offset":
-            j = d.markers.names.index(alt.choice)
-            lab[test] = np.einsum("tij,j->ti", d.markers.rotation[test, j], theta)
-        else:
-            after_rows[test] = alt.rows(theta)[test]
-    if motion:
-        return {
-            "before": alt.figures(alt.rho0, frames),
-            "after": alt.figures(after_rows, frames),
-            "note": "fixed processed motion, every coordinate re-optimized (linearized); after: parameters fitted without the frame's fold",
-        }
-    before_eval = ~d.flagged if alt.cause == "unmeasured_force" else ctx.evaluated
-    before_rows = ctx.ref_rows
-    note = "fixed kinematics, translation re-optimized; after: parameters fitted without the frame's fold"
-    if alt.cause == "unmeasured_force":
-        prof = Profile(d, ~d.flagged, ctx.sigmas)
-        before_rows = prof.project(prof.raw_rows(d.residual(), d.external()[2]))
-        # the walk's steps off the plates read 7.3 cm of marker RMS here: the translation
-        # that balances a missing support force moves the whole body off its markers
-        note = (
-            "fixed kinematics, translation re-optimized; before: the unmeasured frames count in the "
-            "residual terms, and the translation that best balances the missing support force moves "
-            "the body off its markers (hence its marker RMS); after: those frames left out"
-        )
-    marker = None if j is None else (j, lab)
-    return {
-        "before": _figures(ctx, before_rows, frames, before_eval, None),
-        "after": _figures(ctx, after_rows, frames, ctx.evaluated, marker),
-        "note": note,
-    }
+    frames = np.ones(ctx.data.n_frames, dtype=bool) if scored is None else np.asarray(scored, dtype=bool)
+    return cause(alt.cause).held_out_figures(ctx, alt, folds, frames)
 
 
 # --------------------------------------------------------------------------- extensions
 
 
-def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray) -> dict[str, Any]:
-    """The :mod:`.extensions` entry of an evaluation (what ``--apply`` saves)."""
-    p = ev.parameters
-    trial = data.trial.trial
-    if ev.cause == "body_mass":
-        return {"cause": "body_mass", "trial": None, "mass_change_kg": p["mass_change_kg"]}
-    if ev.cause == "force_time_offset":
-        return {"cause": "force_time_offset", "trial": trial, "delay_s": p["delay_s"]}
-    if ev.cause == "plate_force_offset":
-        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "offset_N": p["offset_N"], "centre_m": p["centre_m"]}
-    if ev.cause == "plate_force_gain":
-        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "gain": p["gain"]}
-    if ev.cause == "plate_position_offset":
-        return {"cause": ev.cause, "trial": trial, "plate": p["plate"], "shift_m": p["shift_m"]}
-    if ev.cause == "segment_mass_distribution":
-        fractions = {g: p["mass_change_kg"][g] / p["group_mass_kg"][g] for g in p["mass_change_kg"]}
-        return {"cause": ev.cause, "trial": None, "mass_change_kg": p["mass_change_kg"], "fraction": fractions}
-    if ev.cause == "marker_offset":
-        # the model marker already carries the offset the kinematics stage fitted (from every
-        # trial, the static one included): the recordings move by the rest. Until 2026-11-23
-        # the whole shift was applied, which counted that offset twice: a marker's finding
-        # applied again and again stayed named (the walk's L.Shoulder, four rounds)
-        j = data.markers.names.index(p["marker"])
-        lab = np.einsum("tij,j->ti", data.markers.rotation[:, j], np.asarray(p["residual_shift_m"]))
-        return {
-            "cause": ev.cause,
-            "trial": trial,
-            "marker": p["marker"],
-            "body": p["body"],
-            "shift_m": p["residual_shift_m"],
-            "misplacement_m": p["shift_m"],
-            "time_s": data.time.tolist(),
-            "lab_shift_m": np.round(lab, 6).tolist(),
-        }
-    if ev.cause == "unmeasured_force":
+def entry_inputs(data: DiagnosisData, marker_time: FloatArray) -> EntryInputs:
+    """What a cause needs to write its extension entry: the prepared trial, the raw marker
+    times and the rule that takes runs of the diagnosis' frames to the marker rate."""
+
+    def marker_frames(runs: Any) -> list[list[int]]:
         found = np.zeros(data.time.size, dtype=bool)
-        for a, b in p["frames"]:
+        for a, b in runs:
             found[a:b] = True
-        frames = [list(r) for r in true_runs(resample_mask(found, data.time, marker_time))]
-        return {"cause": ev.cause, "trial": trial, "n_frames": int(marker_time.size), "frames": frames, "times_s": p["times_s"]}
-    raise ValueError(f"unknown cause {ev.cause!r}")
+        return [list(r) for r in true_runs(resample_mask(found, data.time, marker_time))]
+
+    return EntryInputs(data, marker_time, marker_frames)
+
+
+def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray) -> dict[str, Any]:
+    """The :mod:`solver.corrections` entry of an evaluation (what ``--apply`` saves): its
+    cause's :meth:`~solver.diagnose.causes.base.Cause.extension`.
+
+    Raises
+    ------
+    solver.diagnose.causes.registry.UnknownCause
+        No registered cause has the evaluation's name.
+    """
+    return cause(ev.cause).extension(ev.parameters, entry_inputs(data, marker_time))
 
 
 # --------------------------------------------------------------------------- main entry
@@ -468,13 +390,13 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     # parameters from the marker-only motion (not pulled toward the forces by the fit)
     # (same frames U as the fitted motion: the marker-only motion is noisier, and its own
     # residual would call far more frames unmeasured)
-    ik_options = replace(options, causes=tuple(c for c in options.causes if c not in FITTED_MOTION_ONLY))
+    ik_options = replace(options, causes=tuple(c for c in options.causes if cause(c).on_marker_motion != "skipped"))
     ctx_ik, alts_ik, evaluations_ik, _ = evaluate(data_ik, ik_options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
     for ev in evaluations_ik:
         ev.motion = "marker-only"
     for ev in evaluations:
         twin = next((e for e in evaluations_ik if e.cause == ev.cause and e.choice == ev.choice), None)
-        if twin is not None and ev.cause in MARKER_MOTION_ESTIMATES:
+        if twin is not None and cause(ev.cause).on_marker_motion == "estimated":
             ev.parameters_fitted_motion, ev.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
             twin.parameters_fitted_motion, twin.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
@@ -528,7 +450,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             refit, plain = _refits(result, inputs, marker_time, data_ik.trial.q)
             result.after, result.before_refit = refit.metrics, plain.metrics
             result.seconds["refit"] = _time.perf_counter() - t_refit
-            if chosen.cause in FORCE_CORRECTIONS and held_ctx is ctx:
+            if cause(chosen.cause).corrects_forces and held_ctx is ctx:
                 # the processed motion was bent to balance the uncorrected forces: score the
                 # corrected forces on the motion refitted with them, against the same refit
                 # without them (the parameters of each frame still fitted without its fold)
@@ -571,17 +493,18 @@ def _at_times(values: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarra
     return values if np.array_equal(time, at) else values[nearest_frames(time, at)]
 
 
-#: Causes that act on the measured forces (the plates' readings or the body's weight).
-FORCE_CAUSES = ("body_mass", "force_time_offset", "plate_force_offset", "plate_force_gain", "plate_position_offset")
+#: Causes that act on the measured forces (the plates' readings or the body's weight):
+#: compared again on the marker-only motion (:func:`choice_on_marker_motion`).
+FORCE_CAUSES = tuple(c.name for c in CAUSES if c.acts_on_forces)
 
 
 #: Causes that correct the plates' readings alone (model and markers as processed): their
 #: held-out figures are taken on the refits without and with them (:func:`_diagnose`).
-FORCE_CORRECTIONS = tuple(c for c in FORCE_CAUSES if c != "body_mass")
+FORCE_CORRECTIONS = tuple(c.name for c in CAUSES if c.corrects_forces)
 
 
 #: Force-side causes that may be chosen on the marker-only motion (:func:`choice_on_marker_motion`).
-MARKER_MOTION_CHOICES = ("force_time_offset", "plate_position_offset")
+MARKER_MOTION_CHOICES = tuple(c.name for c in CAUSES if c.chosen_on_marker_motion)
 
 
 def choice_on_marker_motion(
@@ -613,11 +536,11 @@ def choice_on_marker_motion(
     -------
     (evaluation on the marker-only motion, the rule's sentence), or None
     """
-    if chosen is not None and chosen.cause not in FORCE_CAUSES and channels(chosen.cause) != "markers":
+    if chosen is not None and not cause(chosen.cause).acts_on_forces and channels(chosen.cause) != "markers":
         return None
-    force_side = [e for e in evaluations_ik if e.cause in FORCE_CAUSES]
+    force_side = [e for e in evaluations_ik if cause(e.cause).acts_on_forces]
     pick, why = choose(best_per_cause(force_side), rule, blocks, force_side, kept)
-    if pick is None or pick.cause not in MARKER_MOTION_CHOICES:
+    if pick is None or not cause(pick.cause).chosen_on_marker_motion:
         return None
     return pick, why
 
@@ -625,13 +548,14 @@ def choice_on_marker_motion(
 #: Causes not evaluated on the marker-only motion at all: a mass distribution is judged with
 #: the whole motion re-optimized (:mod:`.motion_profile`), so the motion it starts from only
 #: sets the linearization point, and the fitted one is consistent with the forces.
-FITTED_MOTION_ONLY = ("segment_mass_distribution",)
+FITTED_MOTION_ONLY = tuple(c.name for c in CAUSES if c.on_marker_motion == "skipped")
 
 
 #: Causes whose parameters are estimated on the marker-only motion (see :func:`_diagnose`):
-#: every cause acting on the forces. ``segment_mass_distribution`` and ``unmeasured_force``
-#: keep the fitted motion (the marker-only motion's moment noise dominates the former).
-MARKER_MOTION_ESTIMATES = (*FORCE_CAUSES, "marker_offset")
+#: every cause acting on the forces, and the marker offsets. ``segment_mass_distribution`` and
+#: ``unmeasured_force`` keep the fitted motion (the marker-only motion's moment noise
+#: dominates the former).
+MARKER_MOTION_ESTIMATES = tuple(c.name for c in CAUSES if c.on_marker_motion == "estimated")
 
 
 def _refits(result: Diagnosis, inputs: TrialInputs, marker_time: FloatArray, ik_q: FloatArray) -> tuple[Refit, Refit]:
@@ -666,17 +590,13 @@ def refit_result(
     in bend the refitted motion). The refit without the extension keeps the frames the
     processing left out (same inputs, same frames).
     """
-    from solver.diagnose.refit import redistribute, refit_trial
+    from solver.diagnose.refit import refit_trial
 
     data = result.data
     assert data is not None and result.chosen is not None
     ev = result.chosen
-    p = ev.parameters
     trial = data.trial
-    model = read_osim(trial.model_path)
-    forces = inputs.raw.forces
-    mass = data.stated_mass
-    observed = None
+    setup = RefitSetup(read_osim(trial.model_path), inputs.raw.forces, data.stated_mass)
     # as `addb process` would: a reviewer's flags replace the solver's proposals; saved
     # extensions and an unmeasured_force extension join them
     flagged = np.asarray(data.flagged, dtype=bool)
@@ -687,31 +607,20 @@ def refit_result(
         # refit's own proposals, made on the processed motion instead of the inverse
         # kinematics, differ at the edges of its runs)
         unmeasured, known = np.asarray(trial.unobserved, dtype=bool), None
-    elif ev.cause == "body_mass":
-        mass += p["mass_change_kg"]
-    elif ev.cause == "segment_mass_distribution":
-        model = redistribute(model, p["mass_change_kg"])
-    elif ev.cause == "marker_offset":
-        # the correction ``--apply`` saves (the recordings minus the lab shift; until
-        # 2026-11-23 the refit added it, which doubled the marker's error: the walk's marker
-        # RMS rose from 1.30 to 1.51 cm in the refit with a shoulder marker's offset)
-        j = data.markers.names.index(p["marker"])
-        observed = np.array(trial.observed)
-        observed[:, j] -= np.asarray(extension_entry(ev, data, marker_time)["lab_shift_m"])
-    elif ev.cause == "unmeasured_force":
-        for a, b in p["frames"]:
-            known[a:b] = True
     else:
-        forces = correct_forces(forces, extension_entry(ev, data, marker_time))
+        # the extension's own change (:meth:`solver.diagnose.causes.base.Cause.refit`)
+        setup = cause(ev.cause).refit(setup, ev.parameters, entry_inputs(data, marker_time))
+        for a, b in setup.unmeasured_runs:
+            known[a:b] = True
     return refit_trial(
         trial,
-        model,
-        forces,
-        mass_kg=mass,
+        setup.model,
+        setup.forces,
+        mass_kg=setup.mass_kg,
         feet=data.feet,
         unmeasured=unmeasured,
         known_unmeasured=known,
-        observed=observed,
+        observed=setup.observed,
         proposal_q=ik_q if extension else None,
     )
 

@@ -45,23 +45,16 @@ from typing import Any
 
 import numpy as np
 
+from solver.diagnose.causes.registry import CAUSES, cause, registered
 from solver.diagnose.core import Diagnosis
 from solver.diagnose.selection import Evaluation
 
 SCHEMA = "addb.diagnosis"
 VERSION = 1
 
-#: The main parameter of each cause (the key its uncertainty is reported under).
-MAIN_PARAMETER = {
-    "body_mass": "mass_change_kg",
-    "force_time_offset": "delay_s",
-    "plate_force_offset": "offset_N",
-    "plate_force_gain": "gain",
-    "plate_position_offset": "shift_m",
-    "segment_mass_distribution": "mass_change_kg",
-    "marker_offset": "shift_m",
-    "unmeasured_force": "frames",
-}
+#: The main parameter of each cause (the key its uncertainty is reported under;
+#: :attr:`solver.diagnose.causes.base.Cause.main_parameter`).
+MAIN_PARAMETER = {c.name: c.main_parameter for c in CAUSES}
 
 
 def clean(obj: Any) -> Any:
@@ -89,11 +82,7 @@ def _params(p: dict[str, Any] | None) -> dict[str, Any] | None:
 def _uncertainty(ev: Evaluation) -> dict[str, Any] | None:
     if ev.uncertainty is None:
         return None
-    key = MAIN_PARAMETER[ev.cause]
-    unc = ev.uncertainty
-    if ev.cause == "segment_mass_distribution":  # one parameter: the legs' change (the rest follows)
-        unc = {"legs": unc}
-    return {key: unc}
+    return cause(ev.cause).uncertainty_json(ev.uncertainty, ev.parameters)
 
 
 def candidate_json(ev: Evaluation, alternatives: list[Evaluation]) -> dict[str, Any]:
@@ -165,36 +154,15 @@ def to_json(diag: Diagnosis) -> dict[str, Any]:
 # --------------------------------------------------------------------------- text
 
 
-def _fmt_params(cause: str, p: dict[str, Any] | None, unc: dict[str, Any] | None = None) -> str:
+def _fmt_params(cause_name: str, p: dict[str, Any] | None, unc: dict[str, Any] | None = None) -> str:
+    """The estimate ``p`` (JSON parameters) with its uncertainty ``unc`` (JSON) as one line
+    (:meth:`solver.diagnose.causes.base.Cause.describe`); a cause this version does not
+    know (a report written by another one) prints its parameters as they are."""
     if not p:
         return ""
-    u = (unc or {}).get(MAIN_PARAMETER.get(cause, ""), None)
-
-    def pm(x: Any, scale: float, unit: str, digits: int) -> str:
-        return "" if x is None else f" ± {np.round(np.asarray(x) * scale, digits).tolist()} {unit}"
-
-    if cause == "body_mass":
-        return f"mass change {p['mass_change_kg']:+.2f} kg{pm(u, 1, 'kg', 2)} (stated {p['stated_mass_kg']:.2f} kg -> {p['mass_kg']:.2f} kg)"
-    if cause == "force_time_offset":
-        return f"forces late by {1000 * p['delay_s']:+.1f} ms{pm(u, 1000, 'ms', 1)}"
-    if cause == "plate_force_offset":
-        return f"plate {p['plate']}: offset {np.round(p['offset_N'], 1).tolist()} N{pm(u, 1, 'N', 1)}"
-    if cause == "plate_force_gain":
-        return f"plate {p['plate']}: gain {p['gain']:.4f}{pm(u, 1, '', 4)}"
-    if cause == "plate_position_offset":
-        return f"plate {p['plate']}: centre of pressure shifted by {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm{pm(u, 100, 'cm', 2)}"
-    if cause == "segment_mass_distribution":
-        legs = f" (legs{pm(u.get('legs'), 1, 'kg', 2)})" if isinstance(u, dict) and u.get("legs") is not None else ""
-        return "mass moved: " + ", ".join(f"{g} {v:+.2f} kg" for g, v in p["mass_change_kg"].items()) + legs
-    if cause == "marker_offset":
-        return (
-            f"marker {p['marker']} on {p['body']}: {np.round(np.asarray(p['shift_m']) * 100, 2).tolist()} cm from the model's landmark "
-            f"(body frame; {np.round(np.asarray(p['residual_shift_m']) * 100, 2).tolist()} cm beyond what the kinematics fit placed){pm(u, 100, 'cm', 2)}"
-        )
-    if cause == "unmeasured_force":
-        spans = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in p["times_s"])
-        return f"{p['n_frames']} frames ({spans}) look unmeasured"
-    return str(p)
+    if not registered(cause_name):
+        return str(p)
+    return cause(cause_name).describe(p, unc)
 
 
 def candidate_line(c: dict[str, Any]) -> str:

@@ -34,6 +34,7 @@ from solver.diagnose.candidates import (
     GridAlternative,
     LinearAlternative,
 )
+from solver.diagnose.causes.registry import CAUSES, cause
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -166,7 +167,9 @@ class ChoiceRule:
     min_relative_gain
         Its held-out gain removes at least this fraction of the reference cost of its channels.
     relative_gain_of
-        Cause -> its own ``min_relative_gain``. ``segment_mass_distribution``'s channels
+        Cause -> its own ``min_relative_gain`` (default: each cause's
+        :attr:`~solver.diagnose.causes.base.Cause.min_relative_gain` that is set).
+        ``segment_mass_distribution``'s channels
         carry every marker's error and the whole motion's prior (:mod:`.motion_profile`),
         which no mass changes: a hidden 4-9 % redistribution removes 0.3-6 % of them, a
         consistent synthetic trial's estimate of under 1 kg 0.1-0.5 % (2026-11-23). It is
@@ -190,9 +193,11 @@ class ChoiceRule:
         the moment under each plate on that plate's own stances, so the two plates' shifts
         explain different frames and would both be kept.
     min_effect
-        Cause -> smallest effect worth naming (in the units of :func:`effect_size`).
+        Cause -> smallest effect worth naming (in the units of :func:`effect_size`; default:
+        each cause's :attr:`~solver.diagnose.causes.base.Cause.min_effect`).
     max_effect
-        Cause -> largest plausible effect: a larger estimate (a segment gaining three times
+        Cause -> largest plausible effect (default: each cause's finite
+        :attr:`~solver.diagnose.causes.base.Cause.max_effect`): a larger estimate (a segment gaining three times
         its mass, a 50 % gain error) means the cause is fitting something else, and it is
         no contender.
     min_t
@@ -203,7 +208,8 @@ class ChoiceRule:
         zeroed, give the stated 66 kg).
     distinct_choice
         Causes whose named plate must also stand out, by the same test, from the same cause
-        on the other plates. A centre of mass misplaced in the model moves the moment under
+        on the other plates (default: those with
+        :attr:`~solver.diagnose.causes.base.Cause.distinct_choice`). A centre of mass misplaced in the model moves the moment under
         both feet alike, which a shift of either plate mimics (two walk draws hiding a 4.5-5.4
         kg redistribution: the right plate's shift scored 409 and 350, the left one's 349 and
         295), and the fitted motion absorbs the redistribution itself; a misplaced plate
@@ -213,35 +219,16 @@ class ChoiceRule:
     """
 
     min_relative_gain: float = 0.10
-    relative_gain_of: dict[str, float] = field(default_factory=lambda: {"segment_mass_distribution": 0.0})
+    relative_gain_of: dict[str, float] = field(
+        default_factory=lambda: {c.name: c.min_relative_gain for c in CAUSES if c.min_relative_gain is not None}
+    )
     min_folds_improved: float = 0.8
     runner_up_ratio: float = 0.6
     paired_t: float = 2.0
     paired_fraction: float = 0.6
-    min_effect: dict[str, float] = field(
-        default_factory=lambda: {
-            "body_mass": 1.5,  # kg
-            "force_time_offset": 0.005,  # s
-            "plate_force_offset": 10.0,  # N
-            "plate_force_gain": 0.015,  # relative
-            "plate_position_offset": 0.005,  # m
-            "segment_mass_distribution": 1.5,  # kg moved to the legs (consistent synthetic trials: up to 0.8 kg, 1.1 kg on the run's of 2026-11-23)
-            "marker_offset": 0.005,  # m (residual part the marker's error shows)
-            "unmeasured_force": 3.0,  # frames
-        }
-    )
-    max_effect: dict[str, float] = field(
-        default_factory=lambda: {
-            "body_mass": 30.0,  # kg
-            "force_time_offset": 0.1,  # s (the search grid ends at 0.12 s)
-            "plate_force_offset": 300.0,  # N
-            "plate_force_gain": 0.3,  # relative
-            "plate_position_offset": 0.1,  # m
-            "segment_mass_distribution": 15.0,  # kg moved
-            "marker_offset": 0.1,  # m
-        }
-    )
-    distinct_choice: tuple[str, ...] = ("plate_position_offset",)
+    min_effect: dict[str, float] = field(default_factory=lambda: {c.name: c.min_effect for c in CAUSES})
+    max_effect: dict[str, float] = field(default_factory=lambda: {c.name: c.max_effect for c in CAUSES if np.isfinite(c.max_effect)})
+    distinct_choice: tuple[str, ...] = field(default_factory=lambda: tuple(c.name for c in CAUSES if c.distinct_choice))
     min_t: float = 2.0
     kept_share: float = 0.8
 
@@ -250,77 +237,54 @@ class ChoiceRule:
         return self.relative_gain_of.get(cause, self.min_relative_gain)
 
 
-#: Causes judged on the observed markers' own error channels; every other cause acts on the
-#: root residual channels. Causes on different channels explain different residuals and may
-#: both be true at once, so they do not stand in each other's way (:func:`choose`).
-MARKER_CHANNEL_CAUSES = ("marker_offset",)
+def channels(cause_name: str) -> str:
+    """``"markers"``, ``"motion"``, ``"frames"`` or ``"residuals"``: what the cause explains
+    (:attr:`solver.diagnose.causes.base.Cause.channel`).
 
-#: Causes judged on the whole-motion profile's channels (:mod:`.motion_profile`): the root
-#: residual with every coordinate re-optimized. Such a cause is named only when no cause on
-#: the other channels stands out (:func:`choose`): re-optimizing the whole motion leaves it
-#: the weakest evidence (a fraction of a per cent of its channels' cost), and any force
-#: error also leaves a trace there.
-MOTION_CHANNEL_CAUSES = ("segment_mass_distribution",)
+    Causes on different channels explain different residuals and may both be true at once,
+    so they do not stand in each other's way (:func:`choose`): a marker offset acts on its
+    marker's own error; a cause on the whole-motion profile's channels (:mod:`.motion_profile`,
+    the root residual with every coordinate re-optimized) is named only when no cause on the
+    other channels stands out, since re-optimizing the whole motion leaves it the weakest
+    evidence (a fraction of a per cent of its channels' cost) and any force error also leaves
+    a trace there; ``unmeasured_force`` takes its frames U out of the residual terms, and
+    every other cause is evaluated with U already out
+    (:func:`solver.diagnose.core.build_context`): its gain is measured on top of U's, so the
+    two are not alternatives and may both be true (opensim-core's C3D walk: after its steps
+    off the plates were applied, six more frames of a foot on the floor stood in the way of
+    a plate's zero drift that is real).
 
-
-def channels(cause: str) -> str:
-    """``"markers"``, ``"motion"``, ``"frames"`` or ``"residuals"``: what ``cause`` explains.
-
-    ``unmeasured_force`` takes its frames U out of the residual terms, and every other
-    cause is evaluated with U already out (:func:`solver.diagnose.core.build_context`): its
-    gain is measured on top of U's, so the two are not alternatives and may both be true
-    (opensim-core's C3D walk: after its steps off the plates were applied, six more frames
-    of a foot on the floor stood in the way of a plate's zero drift that is real)."""
-    if cause in MARKER_CHANNEL_CAUSES:
-        return "markers"
-    if cause in MOTION_CHANNEL_CAUSES:
-        return "motion"
-    return "frames" if cause == "unmeasured_force" else "residuals"
+    Raises
+    ------
+    solver.diagnose.causes.registry.UnknownCause
+        No registered cause has that name.
+    """
+    return cause(cause_name).channel
 
 
 def effect_size(ev: Evaluation, parameters: dict[str, Any] | None = None) -> float:
-    """The magnitude compared with :attr:`ChoiceRule.min_effect` (units per cause) of
-    ``parameters`` (default: the evaluation's reported ones)."""
-    p = ev.parameters if parameters is None else parameters
-    if ev.cause == "body_mass":
-        return abs(p["mass_change_kg"])
-    if ev.cause == "force_time_offset":
-        return abs(p["delay_s"])
-    if ev.cause == "plate_force_offset":
-        return float(np.linalg.norm(p["offset_N"]))
-    if ev.cause == "plate_force_gain":
-        return abs(p["gain"] - 1.0)
-    if ev.cause == "plate_position_offset":
-        return float(np.linalg.norm(p["shift_m"]))
-    if ev.cause == "segment_mass_distribution":
-        return float(np.sum(np.abs(list(p["mass_change_kg"].values()))) / 2)
-    if ev.cause == "marker_offset":
-        # the part of the shift the marker's own error shows (the pose takes up the rest)
-        return float(np.linalg.norm(p["visible_shift_m"]))
-    if ev.cause == "unmeasured_force":
-        return float(p["n_frames"])
-    return 0.0
+    """The magnitude compared with :attr:`ChoiceRule.min_effect` (units per cause,
+    :meth:`solver.diagnose.causes.base.Cause.effect_size`) of ``parameters`` (default: the
+    evaluation's reported ones).
+
+    Raises
+    ------
+    solver.diagnose.causes.registry.UnknownCause
+        No registered cause has the evaluation's name (a cause left out of the registry is
+        an error, not an effect of size zero).
+    """
+    return cause(ev.cause).effect_size(ev.parameters if parameters is None else parameters)
 
 
 def t_value(ev: Evaluation, parameters: dict[str, Any] | None = None, uncertainty: Any = None) -> float:
     """Distance of the reported estimate (or ``parameters`` with ``uncertainty``) from "no
-    effect" (a gain of 1, otherwise zero) in jackknife standard errors (vector estimates:
-    norm over norm); ``inf`` when the estimate has no uncertainty (``unmeasured_force``'s
-    frames)."""
+    effect" (:meth:`solver.diagnose.causes.base.Cause.deviation`: zero, or a gain of 1) in
+    jackknife standard errors (vector estimates: norm over norm); ``inf`` when the estimate
+    has no uncertainty (``unmeasured_force``'s frames)."""
     p, unc = (ev.parameters, ev.uncertainty) if parameters is None else (parameters, uncertainty)
     if unc is None or "value" not in p:
         return float("inf")
-    value = np.atleast_1d(np.asarray(p["value"], dtype=float))
-    if ev.cause == "marker_offset":
-        # judged by the shift beyond the offset the kinematics stage already gave the model
-        # marker (what the marker's own error shows and ``--apply`` corrects); the reported
-        # value adds that offset, a constant, so its jackknife error is the same. Judged by
-        # the whole shift, a marker the trial shows 1.3 cm from the model's marker (the
-        # walk's L.Shoulder once corrected, 2026-11-23) was 0.8 errors from "no effect" and
-        # blocked every other marker
-        value = np.atleast_1d(np.asarray(p["residual_shift_m"], dtype=float))
-    if ev.cause == "plate_force_gain":
-        value = value - 1.0
+    value = cause(ev.cause).deviation(p)
     se = float(np.linalg.norm(np.atleast_1d(np.asarray(unc, dtype=float))))
     size = float(np.linalg.norm(value))
     return size / se if se > 0 else float("inf")
@@ -356,7 +320,7 @@ def best_per_cause(evaluations: list[Evaluation], rule: ChoiceRule | None = None
     """The best-scoring alternative of each cause, best first.
 
     With ``rule``, the best of a cause whose alternatives each act on a channel of their own
-    (:data:`MARKER_CHANNEL_CAUSES`: a marker's offset explains that marker's error only) is
+    (channel ``markers``: a marker's offset explains that marker's error only) is
     the best that stands out on its own channel (:func:`stands_out_alone`), else the best
     that :func:`contends`: a marker whose estimate is no effect, or that improves too few
     folds, does not stand in the way of another marker's offset."""
@@ -365,11 +329,13 @@ def best_per_cause(evaluations: list[Evaluation], rule: ChoiceRule | None = None
         if ev.cause not in best or ev.score > best[ev.cause].score:
             best[ev.cause] = ev
     if rule is not None:
-        for cause in MARKER_CHANNEL_CAUSES:
-            own = [e for e in evaluations if e.cause == cause]
+        for c in CAUSES:
+            if c.channel != "markers":
+                continue
+            own = [e for e in evaluations if e.cause == c.name]
             eligible = [e for e in own if stands_out_alone(e, rule)] or [e for e in own if contends(e, rule)]
             if eligible:
-                best[cause] = max(eligible, key=lambda e: e.score)
+                best[c.name] = max(eligible, key=lambda e: e.score)
     return sorted(best.values(), key=lambda e: e.score, reverse=True)
 
 
@@ -390,7 +356,7 @@ def also_standing_out(evaluations: list[Evaluation], chosen: Evaluation | None, 
     """Marker offsets other than ``chosen`` that stand out on their own channel
     (:func:`stands_out_alone`). Markers do not compete with each other (each explains its
     own error), so every one of them is a finding; best score first."""
-    out = [e for e in evaluations if e.cause in MARKER_CHANNEL_CAUSES and e is not chosen and stands_out_alone(e, rule)]
+    out = [e for e in evaluations if channels(e.cause) == "markers" and e is not chosen and stands_out_alone(e, rule)]
     return sorted(out, key=lambda e: e.score, reverse=True)
 
 
@@ -643,7 +609,7 @@ def choose(
     group's other contenders (:func:`_verdict`), and the best-scoring one that passes the
     rule's checks is chosen, one on the whole-motion channels only when no other passes and
     no force error on the residual channels is held back only by a rival
-    (:data:`MOTION_CHANNEL_CAUSES`; when none passes, the reason is that of the overall best).
+    (channel ``motion``; when none passes, the reason is that of the overall best).
 
     Parameters
     ----------

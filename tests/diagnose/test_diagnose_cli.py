@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from addb_viewer.cli import main as cli
-from solver.diagnose.candidates import CAUSES
+from solver.diagnose.causes.registry import NAMES as CAUSES
 from solver.corrections import read_extensions
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA
