@@ -11,6 +11,8 @@ two gains multiply)::
          "centre_m": [0.35, 0.0, 0.2]},
         {"cause": "plate_force_gain", "trial": "walk", "plate": "r", "gain": 1.05},
         {"cause": "plate_position_offset", "trial": "walk", "plate": "r", "shift_m": [0.03, 0.0, 0.0]},
+        {"cause": "plate_registration", "trial": "run", "shift_m": [0.013, 0.0, 0.0], "rotation_rad": 0.01,
+         "centre_m": [0.89, 0.0, -0.34]},
         {"cause": "marker_offset", "trial": "walk", "marker": "R.Knee", "body": "femur_r",
          "shift_m": [0.0, 0.02, 0.0], "time_s": [...], "lab_shift_m": [[...], ...]},
         {"cause": "body_mass", "trial": null, "mass_change_kg": 4.9},
@@ -30,6 +32,11 @@ the table :data:`CORRECTIONS`; a cause it does not know is refused when the file
   2026-11-22) subtract it at the centre of pressure;
 * ``plate_force_gain``: the plate's force and free moment divided by ``gain``;
 * ``plate_position_offset``: the plate's centre of pressure minus ``shift_m``;
+* ``plate_registration``: every plate's readings moved back rigidly (the plates as a whole
+  misregistered against the motion-capture frame): centre of pressure
+  ``centre_m + Rᵀ (cop - centre_m - shift_m)``, force and free moment turned by ``Rᵀ``, with
+  ``R`` the rotation by ``rotation_rad`` (0 when absent) about the vertical
+  (:func:`register_plates` makes such a misregistration);
 * ``marker_offset``: the marker's recorded positions minus ``lab_shift_m`` (its body-fixed
   ``shift_m`` rotated by its body's orientation in the diagnosed trial, one row per time in
   ``time_s``, interpolated onto the marker frames). ``shift_m`` is the shift beyond the
@@ -185,6 +192,43 @@ def _shift_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecord
     """``plate_position_offset``: the plate's centre of pressure minus ``shift_m``."""
     s = np.asarray(ext["shift_m"], dtype=float)
     return _map_plates(forces, ext["plate"], lambda p: ForcePlate(p.name, p.force, p.cop - s, p.free_moment, p.corners))
+
+
+def turn_about_vertical(angle: float) -> FloatArray:
+    """``(3, 3)`` rotation by ``angle`` rad about the vertical (y) axis of the ground frame."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def register_plates(forces: ForceRecording, shift: FloatArray, rotation: float, centre: FloatArray) -> ForceRecording:
+    """Every plate's readings moved rigidly: turned by ``rotation`` rad about the vertical
+    axis through ``centre`` (3,) m, then shifted by ``shift`` (3,) m, ground frame.
+
+    What a plate misregistered that way against the motion-capture frame reports, from what
+    it measures: centre of pressure ``centre + R (cop - centre) + shift``, force, free moment
+    and corners turned alike (``R`` :func:`turn_about_vertical`; the corners move as the
+    centre of pressure). ``plate_registration`` extensions apply the inverse
+    (:func:`_register_forces`); the diagnosis' tests hide one with this.
+    """
+    r = turn_about_vertical(float(rotation))
+    o, s = np.asarray(centre, dtype=float), np.asarray(shift, dtype=float)
+
+    def move(p: ForcePlate) -> ForcePlate:
+        corners = None if p.corners is None else (np.asarray(p.corners, dtype=float) - o) @ r.T + o + s
+        return ForcePlate(p.name, np.asarray(p.force) @ r.T, (np.asarray(p.cop) - o) @ r.T + o + s, np.asarray(p.free_moment) @ r.T, corners)
+
+    return ForceRecording(forces.time, forces.rate_hz, tuple(move(p) for p in forces.plates), forces.source)
+
+
+def _register_forces(forces: ForceRecording, ext: Mapping[str, Any]) -> ForceRecording:
+    """``plate_registration``: every plate's readings moved back, the inverse of
+    :func:`register_plates` with the entry's ``shift_m``, ``rotation_rad`` (0 when absent)
+    and ``centre_m`` o: ``cop = o + Rᵀ (cop_read - o - shift_m)``, force and free moment
+    turned by ``Rᵀ`` (that is, turned by ``-rotation_rad`` about ``o + shift_m``, then
+    shifted by ``-shift_m``)."""
+    o = np.asarray(ext["centre_m"], dtype=float)
+    s = np.asarray(ext["shift_m"], dtype=float)
+    return register_plates(forces, -s, -float(ext.get("rotation_rad", 0.0)), o + s)
 
 
 #: Below this vertical force (N) a plate's corrected centre of pressure is not recomputed
@@ -429,6 +473,7 @@ CORRECTIONS: dict[str, Correction] = {
     "plate_position_offset": Correction(forces=_shift_forces),
     "segment_mass_distribution": Correction(subject=_redistributed_model, prepare=_write_redistributed_model),
     "marker_offset": Correction(markers=_shift_marker),
+    "plate_registration": Correction(forces=_register_forces),
 }
 
 

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.corrections import extend_subject, extension_masks
 from solver.diagnose import candidates as C
 from solver.diagnose.analysis import analyse
 from solver.diagnose.causes.base import EntryInputs, RefitSetup
@@ -42,7 +43,6 @@ from solver.diagnose.data import (
     marker_kinematics,
     prepare,
 )
-from solver.corrections import extend_subject, extension_masks
 from solver.diagnose.profile import Profile, Sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
@@ -59,8 +59,8 @@ from solver.diagnose.selection import (
 )
 from solver.dynamics.preprocess import nearest_frames
 from solver.errors import DiagnosisError
-from solver.masks import join_masks, resample_mask, true_runs
 from solver.io.subject import Subject, Trial, load_subject, load_trial
+from solver.masks import join_masks, resample_mask, true_runs
 from solver.model.osim import OsimModel, read_osim
 from solver.results import ProcessedTrial, load_processed
 
@@ -514,7 +514,7 @@ def choice_on_marker_motion(
     blocks: np.ndarray,
     kept: KeptShare | None = None,
 ) -> tuple[Evaluation, str] | None:
-    """A force delay or plate shift chosen on the marker-only motion, or None.
+    """A force delay, plate shift or plate registration chosen on the marker-only motion, or None.
 
     A delay between plates and cameras leaves its evidence in the force transients of
     every foot strike. The dynamics fit cannot follow a force that comes too late, so it
@@ -525,18 +525,21 @@ def choice_on_marker_motion(
     that the shifted moment is balanced (on the treadmill run the fitted motion keeps
     0-10 % of a hidden 1-4 cm shift). The marker-only motion keeps every frame and owes
     nothing to the forces. When the fitted motion names no cause, one acting on the
-    forces or a marker offset (which acts on other channels: the walk's own shoulder
-    markers stand out on every draw hidden in it), the causes acting on the forces are
-    compared on the marker-only motion (same :func:`.selection.choose` rule, same frames
-    U); if a delay or a plate shift (:data:`MARKER_MOTION_CHOICES`) stands out there, it is
-    the choice: a force error matters for every dynamic output, a marker offset for one
-    marker's fit.
+    forces, a marker offset (which acts on other channels: the walk's own shoulder
+    markers stand out on every draw hidden in it) or a cause on the whole-motion channels
+    (named only when nothing else stands out, and a force error leaves a trace there too:
+    since 2026-11-24, a run draw hiding a 2.7 cm sideways shift and a 1 degree turn of both
+    belts named a 2.8 kg mass redistribution, the fitted motion keeping under 0.5 cm of the
+    shift), the causes acting on the forces are compared on the marker-only motion (same
+    :func:`.selection.choose` rule, same frames U); if a delay, a plate shift or the plates'
+    registration (:data:`MARKER_MOTION_CHOICES`) stands out there, it is the choice: a force
+    error matters for every dynamic output, a marker offset for one marker's fit.
 
     Returns
     -------
     (evaluation on the marker-only motion, the rule's sentence), or None
     """
-    if chosen is not None and not cause(chosen.cause).acts_on_forces and channels(chosen.cause) != "markers":
+    if chosen is not None and not cause(chosen.cause).acts_on_forces and channels(chosen.cause) not in ("markers", "motion"):
         return None
     force_side = [e for e in evaluations_ik if cause(e.cause).acts_on_forces]
     pick, why = choose(best_per_cause(force_side), rule, blocks, force_side, kept)

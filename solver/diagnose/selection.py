@@ -309,11 +309,12 @@ def significance(ev: Evaluation) -> float:
 
 
 def contends(ev: Evaluation, rule: ChoiceRule) -> bool:
-    """Whether every estimate of ``ev`` is worth naming and plausible and one of them lies
-    at least ``rule.min_t`` standard errors from no effect (:func:`significance`;
-    :meth:`ChoiceRule` fields)."""
+    """Whether every estimate of ``ev`` is worth naming and plausible (its size within
+    :meth:`ChoiceRule` bounds, and :meth:`solver.diagnose.causes.base.Cause.plausible`) and
+    one of them lies at least ``rule.min_t`` standard errors from no effect (:func:`significance`)."""
     lo, hi = rule.min_effect.get(ev.cause, 0.0), rule.max_effect.get(ev.cause, np.inf)
-    return all(lo <= effect_size(ev, p) <= hi for p in ev.estimates) and significance(ev) >= rule.min_t
+    c = cause(ev.cause)
+    return all(lo <= c.effect_size(p) <= hi and c.plausible(p) for p in ev.estimates) and significance(ev) >= rule.min_t
 
 
 def best_per_cause(evaluations: list[Evaluation], rule: ChoiceRule | None = None) -> list[Evaluation]:
@@ -481,7 +482,25 @@ def _stands_out(
 ) -> tuple[bool, float, float, float | None]:
     """Whether ``best`` stands out from ``rival`` (score ratio, paired blocks or, with
     ``kept``, the share of its gain it keeps on top of the rival's), with the paired t and
-    fraction of blocks (:func:`paired_blocks`) and that share (None if not computed)."""
+    fraction of blocks (:func:`paired_blocks`) and that share (None if not computed).
+
+    Causes that overlap (:attr:`solver.diagnose.causes.base.Cause.overlaps`: a shift of
+    one plate and a shift shared by every plate) explain the same residual on one plate's
+    stances and differ on the others, so neither keeps all of its gain on top of the other
+    even when both are there. ``best`` stands out from an overlapping ``rival`` when it keeps
+    at least ``1 - rule.kept_share`` of its gain on top of it (a part the rival cannot
+    explain, and it scores higher), or when the rival keeps nothing on top of ``best`` (no
+    held-out gain: its own parameters fit noise there) while ``best`` keeps at least
+    ``rule.min_relative_gain`` of its gain. Measured on 2026-11-24: a walk draw hiding a
+    shared 2.4 cm shift and a 1.1 degree turn of every plate, every plate's registration
+    kept 38 % of its gain on top of the left plate's shift and the shift 16 % on top of it
+    (marker-only motion: 36 % and -5 %); the same 2.5 cm shift of both walk plates without a
+    turn, on the marker-only motion: the registration kept 17 % on top of the right plate's
+    shift (the left plate's single stance is all that tells them apart), the shift -3 %; a
+    run draw hiding a 3.7 cm shift of belt L: the shift kept 62 % on top of the
+    registration, which kept 44 % on top of the shift (the run's own forward reading of both
+    belts, docs/diagnose/RESULTS.md).
+    """
     if rival is None:
         return True, 0.0, 0.0, None
     t_pair, frac_pair = paired_blocks(best, rival, blocks) if blocks is not None else (0.0, 0.0)
@@ -489,8 +508,19 @@ def _stands_out(
     share = None
     if not clear and kept is not None:
         share = kept(best, rival)
-        clear = share is not None and share >= rule.kept_share
+        if not overlapping(best.cause, rival.cause):
+            clear = share is not None and share >= rule.kept_share
+        elif share is not None:
+            back = kept(rival, best)
+            clear = share >= 1.0 - rule.kept_share or (back is not None and back <= 0.0 and share >= rule.min_relative_gain)
     return clear, t_pair, frac_pair, share
+
+
+def overlapping(a: str, b: str) -> bool:
+    """Whether the causes called ``a`` and ``b`` overlap
+    (:attr:`solver.diagnose.causes.base.Cause.overlaps`, either way)."""
+    ca, cb = cause(a), cause(b)
+    return cb in ca.overlaps or ca in cb.overlaps
 
 
 class Failed(NamedTuple):

@@ -44,6 +44,7 @@ UNITS = {
     "marker_offset": ("cm", 100.0),
     "segment_mass_distribution": ("kg", 1.0),
     "unmeasured_force": ("% of the erased step missed", 100.0),
+    "plate_registration": ("cm", 100.0),
 }
 
 

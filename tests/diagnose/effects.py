@@ -18,7 +18,11 @@ Conventions (what each cause's parameter means, as :mod:`solver.diagnose` report
   that the leg bodies gain, total kept;
 * ``unmeasured_force``: one stance of one plate erased (all its columns zero); the share of
   it missed counts only its frames the base does not already leave out (its own steps off
-  the plates, saved as extensions).
+  the plates, saved as extensions);
+* ``plate_registration``: every plate's readings moved rigidly
+  (:func:`solver.corrections.register_plates`): turned about the vertical through the
+  plates' common centre (the mean of :func:`solver.diagnose.data.plate_centre`, as the
+  diagnosis takes it), then shifted in the floor plane.
 """
 
 from __future__ import annotations
@@ -31,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from solver.corrections import offset_plate, register_plates
 from solver.diagnose.data import plate_centre, wxyz_to_matrix
-from solver.corrections import offset_plate
 from solver.io.mot import read_forces, write_forces
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
@@ -47,6 +51,7 @@ CAUSES = (
     "marker_offset",
     "segment_mass_distribution",
     "unmeasured_force",
+    "plate_registration",
 )
 
 #: Tolerances of the hidden-effect tests (parameter error relative to the unmodified
@@ -60,6 +65,7 @@ TOLERANCE = {
     "marker_offset": 0.005,  # m
     "segment_mass_distribution": 2.0,  # kg moved to the legs
     "unmeasured_force": 0.2,  # 1 - overlap of the found frames with the erased ones
+    "plate_registration": 0.005,  # m: |(sx, sz, ρφ)| error, ρ the reported radius (:func:`error`)
 }
 
 
@@ -174,6 +180,39 @@ def hide_plate_shift(subject: Path, trial: str, rng: np.random.Generator) -> Hid
     return Hidden("plate_position_offset", plate, {"shift_m": shift.tolist()})
 
 
+def plates_centre(subject: Path, trial: str) -> np.ndarray:
+    """``(3,)`` the plates' common centre of a trial, m: the mean of each plate's
+    :func:`solver.diagnose.data.plate_centre` (the pivot of ``plate_registration``)."""
+    rec = read_forces(_forces_path(subject, trial))
+    bw = 9.80665 * stated_mass(subject)
+    return np.mean([plate_centre(p, bw) for p in rec.plates], axis=0)
+
+
+def hide_registration(
+    subject: Path, trial: str, shift: np.ndarray, rotation: float = 0.0, plates: tuple[str, ...] | None = None
+) -> np.ndarray:
+    """Move the readings of ``plates`` (default: every plate) rigidly: turned by ``rotation``
+    rad about the vertical through the plates' common centre, then shifted by ``shift`` (3,)
+    m (:func:`solver.corrections.register_plates`); returns that centre."""
+    centre = plates_centre(subject, trial)
+
+    def fn(r: ForceRecording) -> ForceRecording:
+        moved = {p.name: p for p in register_plates(r, shift, rotation, centre).plates}
+        return ForceRecording(r.time, r.rate_hz, tuple(moved[p.name] if plates is None or p.name in plates else p for p in r.plates), r.source)
+
+    _edit_forces(subject, trial, fn)
+    return centre
+
+
+def hide_plate_registration(subject: Path, trial: str, rng: np.random.Generator) -> Hidden:
+    """Every plate misregistered alike: a 1-3 cm shift in the floor plane and a 0.5-2 degree
+    turn about the vertical (either sign) through the plates' common centre."""
+    shift = _random_direction(rng, horizontal=True) * rng.uniform(0.01, 0.03)
+    rotation = float(np.radians(rng.uniform(0.5, 2.0)) * rng.choice([-1.0, 1.0]))
+    centre = hide_registration(subject, trial, shift, rotation)
+    return Hidden("plate_registration", None, {"shift_m": shift.tolist(), "rotation_rad": rotation, "centre_m": centre.tolist()})
+
+
 def fixed_markers(subject: Path) -> list[tuple[str, str]]:
     """(marker, body) of the subject's generic model's ``fixed`` (landmark) markers."""
     from solver.model.osim import read_osim
@@ -205,8 +244,8 @@ def hide_marker_offset(subject: Path, trial: str, rng: np.random.Generator, proc
 
 def hide_segment_mass(subject: Path, trial: str, rng: np.random.Generator) -> Hidden:
     """Move mass between the trunk group and the legs in the generic model (total kept)."""
-    from solver.diagnose.data import group_masses
     from solver.corrections import extend_subject
+    from solver.diagnose.data import group_masses
     from solver.diagnose.refit import redistribute
     from solver.io.subject import load_subject
     from solver.model.osim import read_osim
@@ -278,6 +317,7 @@ def hide(cause: str, subject: Path, trial: str, seed: int, processed: ProcessedT
         "plate_position_offset": hide_plate_shift,
         "segment_mass_distribution": hide_segment_mass,
         "unmeasured_force": hide_unmeasured,
+        "plate_registration": hide_plate_registration,
     }[cause]
     return fn(subject, trial, rng)
 
@@ -321,6 +361,8 @@ def error(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) 
         legs = got["mass_change_kg"].get("legs", 0.0) - (base_p["mass_change_kg"].get("legs", 0.0) if base_p else 0.0)
         expected = -t["legs_fraction"] * modified["settings"]["fitted_mass_kg"]
         return abs(legs - expected)
+    if hidden.cause == "plate_registration":
+        return registration_error(got, base_p, t)
     if hidden.cause == "unmeasured_force":
         # share of the erased step missed, counting only its frames not already left out
         # (time spans; the known spans do not overlap each other, nor do the found ones)
@@ -332,6 +374,30 @@ def error(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) 
         covered = sum(y - x for u, v in new for x, y in _overlap(got["times_s"], u, v))
         return 1.0 - covered / max(length, 1e-9)
     raise ValueError(hidden.cause)
+
+
+def _turn(rotation: float, v: np.ndarray) -> np.ndarray:
+    """``v`` (3,) turned by ``rotation`` rad about the vertical, minus ``v``: (R - I) v."""
+    c, s = np.cos(rotation), np.sin(rotation)
+    return np.array([c * v[0] + s * v[2], v[1], -s * v[0] + c * v[2]]) - v
+
+
+def registration_error(got: dict[str, Any], base: dict[str, Any] | None, truth: dict[str, Any]) -> float:
+    """Error of a ``plate_registration`` estimate, m: |(Δsx, Δsz, ρ Δφ)| with ρ its reported
+    radius, the translations compared at the estimate's pivot.
+
+    A registration about one pivot is one about another with the translation
+    ``s + (R - I)(o_new - o)``: the hidden one and the base's own estimate (to first order,
+    the estimate on the modified trial is their sum) are both taken to the pivot of the
+    estimate ``got``."""
+    o = np.asarray(got["centre_m"])
+    expected_s = np.asarray(truth["shift_m"]) + _turn(truth["rotation_rad"], o - np.asarray(truth["centre_m"]))
+    expected_phi = truth["rotation_rad"]
+    if base is not None:
+        expected_s = expected_s + np.asarray(base["shift_m"]) + _turn(base["rotation_rad"], o - np.asarray(base["centre_m"]))
+        expected_phi += base["rotation_rad"]
+    ds = np.asarray(got["shift_m"]) - expected_s
+    return float(np.linalg.norm([ds[0], ds[2], got["radius_m"] * (got["rotation_rad"] - expected_phi)]))
 
 
 def check(hidden: Hidden, modified: dict[str, Any], unmodified: dict[str, Any]) -> dict[str, Any]:

@@ -139,7 +139,7 @@ def test_a_cause_without_a_correction_or_with_a_wrong_part_is_refused() -> None:
 def test_an_unknown_cause_name_is_an_error() -> None:
     """Before the registry, ``effect_size`` gave 0.0 for a cause it did not know: a cause
     left out of one of its places was silently never named."""
-    with pytest.raises(KeyError, match="unknown diagnosis cause 'nope'.*marker_offset"):
+    with pytest.raises(KeyError, match="unknown diagnosis cause 'nope'.*plate_registration"):
         registry.cause("nope")
     ev = Evaluation("nope", None, {"value": 1.0, "x": 1.0}, 0.1, 1, 1.0, 1.0, np.ones(5), 1.0)
     with pytest.raises(KeyError, match="nope"):

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from addb_viewer.cli import main as cli
-from solver.diagnose.causes.registry import NAMES as CAUSES
 from solver.corrections import read_extensions
+from solver.diagnose.causes.registry import NAMES as CAUSES
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import copy_subject, hide_body_mass

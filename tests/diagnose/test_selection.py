@@ -166,6 +166,11 @@ def test_a_marker_offset_does_not_hide_a_force_delay_on_the_marker_only_motion()
     assert picked is not None and picked[0] is delay
     frames = _evaluation("unmeasured_force", {"n_frames": 20}, 0.5)
     assert choice_on_marker_motion(frames, [delay], ChoiceRule(), blocks) is None
+    # nor does a mass redistribution, named on the whole-motion channels only when nothing
+    # else stands out on the fitted motion (a force error leaves a trace there too)
+    segment = _evaluation("segment_mass_distribution", {"value": 3.0, "mass_change_kg": {"legs": 3.0, "trunk": -3.0}}, 0.1)
+    picked = choice_on_marker_motion(segment, [delay], ChoiceRule(), blocks)
+    assert picked is not None and picked[0] is delay
 
 
 def test_an_estimate_within_two_standard_errors_of_none_is_no_contender() -> None:
@@ -347,3 +352,41 @@ def test_a_force_error_held_back_by_a_rival_is_not_named_a_mass_distribution() -
     assert chosen is None and "held back by a rival" in reason
     # alone, the redistribution is named
     assert choose([segment], ChoiceRule(), make_blocks(T, DT))[0] is segment
+
+
+REGISTRATION = {"value": [0.02, 0.0, 0.0], "shift_m": [0.02, 0.0, 0.0], "rotation_rad": 0.0, "centre_m": [0.9, 0.0, -0.25], "radius_m": 0.6}
+
+
+@pytest.mark.parametrize(
+    ("kept_best", "kept_rival", "named"), [(0.38, 0.16, True), (0.62, 0.44, True), (0.17, -0.03, True), (0.17, 0.05, False), (0.1, 0.9, False)]
+)
+def test_overlapping_causes_are_told_apart_by_the_gain_each_keeps(kept_best: float, kept_rival: float, named: bool) -> None:
+    # every plate's shift and one plate's shift explain the same residual on that plate's
+    # stances: the better one is named when it keeps at least 20 % of its gain on top of the
+    # other (a part the other cannot explain), or 10 % while the other keeps nothing on top
+    # of it; the same residual explained twice keeps less (shares measured on walk draws
+    # hiding a shared shift, and on a run draw hiding one belt's shift on top of the run's
+    # own forward reading of both belts)
+    from solver.diagnose.selection import overlapping
+
+    # alike block by block (neither stands out by the paired blocks), the registration a
+    # little better
+    registration = _evaluation("plate_registration", REGISTRATION, 0.3)
+    shift = _evaluation("plate_position_offset", SHIFT, 0.3)
+    registration.score = 1.05 * shift.score
+    assert overlapping("plate_registration", "plate_position_offset") and overlapping("plate_position_offset", "plate_registration")
+    assert not overlapping("plate_position_offset", "force_time_offset")
+    shares = {(id(registration), id(shift)): kept_best, (id(shift), id(registration)): kept_rival}
+
+    def kept(best: Evaluation, rival: Evaluation) -> float | None:
+        return shares.get((id(best), id(rival)))
+
+    ranked = [registration, shift]
+    chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept)
+    assert (chosen is registration) == named, reason
+    # causes that do not overlap need 80 % (both may be true): a delay keeping 38 % is held back
+    delay = _evaluation("force_time_offset", DELAY, 0.3)
+    delay.score = 1.05 * shift.score
+    shares[(id(delay), id(shift))] = kept_best
+    chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(T, DT), [delay, shift], kept)
+    assert chosen is not delay

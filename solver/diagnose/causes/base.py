@@ -16,10 +16,13 @@ The parts of a cause (class attributes, then methods):
 * where it is judged: ``acts_on_forces`` (a force-side cause, compared again on the
   marker-only motion), ``on_marker_motion`` (:data:`MARKER_MOTION`),
   ``chosen_on_marker_motion`` (may be named from that motion), ``distinct_choice`` (its
-  plate must stand out from the same cause on the other plates);
+  plate must stand out from the same cause on the other plates), ``overlaps`` (the causes
+  it is told from by which keeps its gain on top of the other,
+  :func:`solver.diagnose.selection._stands_out`);
 * :meth:`Cause.alternatives`: the fitted alternatives (one per plate or marker, or one);
 * :meth:`Cause.effect_size` and :meth:`Cause.deviation`: the size compared with the bounds
   and the vector whose distance from "no effect" is measured in standard errors;
+  :meth:`Cause.plausible` for bounds other than the size's;
 * :meth:`Cause.extension`: the entry ``addb diagnose --apply`` saves
   (:mod:`solver.corrections` applies it to the raw recordings through its table
   :data:`solver.corrections.CORRECTIONS`, which every cause must have an entry in);
@@ -141,6 +144,7 @@ class Cause(ABC):
     on_marker_motion: ClassVar[str] = "estimated"
     chosen_on_marker_motion: ClassVar[bool] = False
     distinct_choice: ClassVar[bool] = False
+    overlaps: ClassVar[tuple[Cause, ...]] = ()
 
     def __repr__(self) -> str:
         return f"<cause {getattr(self, 'name', type(self).__name__)}>"
@@ -164,6 +168,12 @@ class Cause(ABC):
     @abstractmethod
     def effect_size(self, parameters: dict[str, Any]) -> float:
         """The magnitude compared with :attr:`min_effect` and :attr:`max_effect`."""
+
+    def plausible(self, parameters: dict[str, Any]) -> bool:
+        """Whether an estimate is physically plausible beyond its size
+        (:attr:`max_effect`); an implausible one means the cause fits something else, and it
+        is no contender (default: always)."""
+        return True
 
     def deviation(self, parameters: dict[str, Any]) -> FloatArray:
         """The estimate's departure from "no effect", the vector whose norm over the norm of

@@ -7,7 +7,7 @@ nothing where the plate bears no load, so the shift's relative gain is measured 
 the residual of the frames where it is loaded (> 2 % BW). One alternative per plate, and the
 named plate must stand out from the other plates' shifts (``distinct_choice``: a centre of
 mass misplaced in the model moves the moment under every foot alike, as a shift of either
-plate would). The dynamics fit
+plate would; a shift shared by every plate is ``plate_registration``). The dynamics fit
 turns the body to balance a shifted centre of pressure under large forces, so the shift
 may be named from the marker-only motion.
 """

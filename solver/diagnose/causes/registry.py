@@ -16,6 +16,7 @@ from solver.diagnose.causes import (
     plate_force_gain,
     plate_force_offset,
     plate_position_offset,
+    plate_registration,
     segment_mass_distribution,
     unmeasured_force,
 )
@@ -31,6 +32,7 @@ CAUSES: tuple[Cause, ...] = (
     plate_position_offset.CAUSE,
     segment_mass_distribution.CAUSE,
     marker_offset.CAUSE,
+    plate_registration.CAUSE,
 )
 
 check(CAUSES)
