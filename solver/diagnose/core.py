@@ -43,7 +43,7 @@ from solver.diagnose.data import (
     marker_kinematics,
     prepare,
 )
-from solver.diagnose.profile import Profile, Sigmas
+from solver.diagnose.profile import Profile, Sigmas, own_noise_sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
     Evaluation,
@@ -195,13 +195,17 @@ def alternatives(ctx: C.Context, full: Profile, causes: tuple[str, ...]) -> list
 
 
 def evaluate(
-    data: DiagnosisData, options: DiagnoseOptions, unmeasured: tuple[BoolArray, list[str]] | None = None
+    data: DiagnosisData,
+    options: DiagnoseOptions,
+    unmeasured: tuple[BoolArray, list[str]] | None = None,
+    sigmas: Sigmas | None = None,
 ) -> tuple[C.Context, list[C.Alternative], list[Evaluation], np.ndarray]:
     """Cross-validate every alternative; returns the context, alternatives, evaluations, folds.
 
-    ``unmeasured``: the frames U and their reasons (default: found on ``data``).
+    ``unmeasured``: the frames U and their reasons (default: found on ``data``); ``sigmas``:
+    the channels' standard deviations (default: :meth:`Sigmas.of` ``data``, the fit's).
     """
-    ctx, full = build_context(data, unmeasured=unmeasured)
+    ctx, full = build_context(data, sigmas, unmeasured=unmeasured)
     alts = alternatives(ctx, full, options.causes)
     folds = make_folds(data.n_frames, data.dt, options.folds, options.block_seconds)
     return ctx, alts, [cross_validate(a, folds) for a in alts], folds
@@ -404,7 +408,19 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     ranked = best_per_cause(evaluations, options.rule)
     chosen, reason = choose(ranked, options.rule, blocks, evaluations, JointGains(alts, evaluations, folds).kept_share)
     held_ctx, held_alts = ctx, alts
-    on_markers = choice_on_marker_motion(chosen, evaluations_ik, options.rule, blocks, JointGains(alts_ik, evaluations_ik, folds).kept_share)
+    own_sigmas: list[Sigmas] = []
+
+    def own_noise() -> tuple[list[Evaluation], KeptShare]:
+        # the force-side causes on the marker-only motion whitened with its own noise
+        own_sigmas.append(own_noise_sigmas(data_ik, ctx_ik.evaluated, ctx_ik.sigmas))
+        own_options = replace(ik_options, causes=tuple(c for c in ik_options.causes if cause(c).acts_on_forces))
+        _, alts_own, evs_own, _ = evaluate(data_ik, own_options, (ctx.unmeasured, ctx.unmeasured_reasons), own_sigmas[0])
+        for ev in evs_own:
+            ev.motion = "marker-only"
+        return evs_own, JointGains(alts_own, evs_own, folds).kept_share
+
+    kept_ik = JointGains(alts_ik, evaluations_ik, folds).kept_share
+    on_markers = choice_on_marker_motion(chosen, evaluations_ik, options.rule, blocks, kept_ik, own_noise)
     if on_markers is not None:
         chosen, why = on_markers
         reason = (
@@ -426,6 +442,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         reason=reason,
         settings={
             "sigmas": vars(ctx.sigmas),
+            "sigmas_own_noise": vars(own_sigmas[0]) if own_sigmas else None,
             "folds": int(folds.max()) + 1,
             "block_seconds": options.block_seconds,
             "rule": {k: getattr(options.rule, k) for k in options.rule.__dataclass_fields__},
@@ -513,8 +530,10 @@ def choice_on_marker_motion(
     rule: ChoiceRule,
     blocks: np.ndarray,
     kept: KeptShare | None = None,
+    own_noise: Callable[[], tuple[list[Evaluation], KeptShare]] | None = None,
 ) -> tuple[Evaluation, str] | None:
-    """A force delay, plate shift or plate registration chosen on the marker-only motion, or None.
+    """A force delay, plate shift, plate registration or plate gain chosen on the
+    marker-only motion, or None.
 
     A delay between plates and cameras leaves its evidence in the force transients of
     every foot strike. The dynamics fit cannot follow a force that comes too late, so it
@@ -535,6 +554,21 @@ def choice_on_marker_motion(
     registration (:data:`MARKER_MOTION_CHOICES`) stands out there, it is the choice: a force
     error matters for every dynamic output, a marker offset for one marker's fit.
 
+    When nothing that may be chosen there stands out, the force-side causes are compared once
+    more on the marker-only motion whitened with its own noise (``own_noise``: their
+    evaluations with :func:`.profile.own_noise_sigmas` and their joint gains; since
+    2026-11-24), and a cause that may be chosen that way (``chosen_on_own_noise``: a plate's
+    gain) and stands out there is the choice. Whitened with the fitted motion's sigmas, the
+    marker-only motion's moment rows are mostly the inertial noise of a motion no force
+    shaped, and a body-mass change, which scales that inertial moment, outscored a treadmill
+    belt's gain that the marker-only motion recovers exactly (6 of 20 gain draws, all on the
+    run, were missed). The causes decided on the moment rows (a delay, a plate's shift, the
+    plates' registration) keep the first comparison: with the moment rows down-weighted, 2 of
+    10 run plate shifts, all 10 run registrations and 1 of 10 walk delays were lost
+    (docs/diagnose/RESULTS.md). The returned evaluation is the cause's own on the marker-only
+    motion with the fitted sigmas (the estimate and uncertainty reported for it anyway); the
+    sentence says how it was chosen.
+
     Returns
     -------
     (evaluation on the marker-only motion, the rule's sentence), or None
@@ -543,9 +577,17 @@ def choice_on_marker_motion(
         return None
     force_side = [e for e in evaluations_ik if cause(e.cause).acts_on_forces]
     pick, why = choose(best_per_cause(force_side), rule, blocks, force_side, kept)
-    if pick is None or not cause(pick.cause).chosen_on_marker_motion:
+    if pick is not None and cause(pick.cause).chosen_on_marker_motion:
+        return pick, why
+    if own_noise is None:
         return None
-    return pick, why
+    evaluations_own, kept_own = own_noise()
+    force_side = [e for e in evaluations_own if cause(e.cause).acts_on_forces]
+    pick, why = choose(best_per_cause(force_side), rule, blocks, force_side, kept_own)
+    if pick is None or not cause(pick.cause).chosen_on_own_noise:
+        return None
+    twin = next(e for e in evaluations_ik if e.cause == pick.cause and e.choice == pick.choice)
+    return twin, f"whitened with its own noise: {why}"
 
 
 #: Causes not evaluated on the marker-only motion at all: a mass distribution is judged with

@@ -65,6 +65,29 @@ class Sigmas:
         return cls(float(fit.get("marker_sigma", 0.01)), float(fit.get("force_sigma", 2.0)), float(fit.get("moment_sigma", 2.0)))
 
 
+def own_noise_sigmas(data: DiagnosisData, evaluated: BoolArray, sigmas: Sigmas) -> Sigmas:
+    """The sigmas that whiten a motion's residual rows with that motion's own noise.
+
+    The force and moment sigmas are multiplied by the RMS of the motion's profiled force and
+    moment rows (:class:`Profile`, whitened with ``sigmas``) over the ``evaluated`` frames
+    ``(T,)``, when that RMS is above 1; the marker sigma is kept. Used for the marker-only
+    motion, whose residual no force shaped (on the treadmill run its profiled moment rows
+    have an RMS of about 16, the fitted motion's about 1-2, with the fitted motion's 2 N·m).
+
+    Returns
+    -------
+    Sigmas
+        m, N and N·m, as ``sigmas``.
+    """
+    prof = Profile(data, evaluated, sigmas)
+    rows = prof.project(prof.raw_rows(data.residual(), data.external()[2]))[np.asarray(evaluated, dtype=bool)]
+    if not len(rows):
+        return sigmas
+    force = float(np.sqrt(np.mean(rows[:, 3:6] ** 2)))
+    moment = float(np.sqrt(np.mean(rows[:, 6:9] ** 2)))
+    return Sigmas(sigmas.marker, sigmas.force * max(1.0, force), sigmas.moment * max(1.0, moment))
+
+
 def _second_difference(t: int, dt: float) -> sp.csr_matrix:
     """``(T, T)`` central second difference / h² (ends copy their neighbour's row)."""
     main = np.full(t, -2.0)

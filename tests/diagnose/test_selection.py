@@ -390,3 +390,61 @@ def test_overlapping_causes_are_told_apart_by_the_gain_each_keeps(kept_best: flo
     shares[(id(delay), id(shift))] = kept_best
     chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(T, DT), [delay, shift], kept)
     assert chosen is not delay
+
+
+GAIN = {"plate": "L", "gain": 0.94}
+MASS = {"mass_change_kg": -3.0}
+
+
+def test_a_plate_gain_is_named_on_the_marker_only_motion_whitened_with_its_own_noise() -> None:
+    # on the treadmill run the fitted motion absorbs a belt's gain; on the marker-only motion
+    # whitened with the fitted sigmas a body-mass change outscores it (not a cause named from
+    # that motion): the force-side causes are compared again on that motion whitened with
+    # its own noise, and a gain standing out there is named, with the estimate of the first
+    # comparison (the fitted sigmas)
+    from solver.diagnose.core import choice_on_marker_motion
+
+    blocks = make_blocks(T, DT)
+    mass_ik, gain_ik = _evaluation("body_mass", MASS, 0.3), _evaluation("plate_force_gain", GAIN, 0.05)
+    calls: list[str] = []
+
+    def own(gain: float, mass: float) -> object:
+        def evaluations() -> tuple[list[Evaluation], None]:
+            calls.append("own")
+            return [_evaluation("plate_force_gain", GAIN, gain), _evaluation("body_mass", MASS, mass)], None
+
+        return evaluations
+
+    picked = choice_on_marker_motion(None, [mass_ik, gain_ik], ChoiceRule(), blocks, None, own(0.3, 0.01))
+    assert picked is not None and picked[0] is gain_ik and "own noise" in picked[1]
+    # the fitted motion naming the mass change is overruled the same way
+    mass_fitted = _evaluation("body_mass", MASS, 0.3)
+    picked = choice_on_marker_motion(mass_fitted, [mass_ik, gain_ik], ChoiceRule(), blocks, None, own(0.3, 0.01))
+    assert picked is not None and picked[0] is gain_ik
+    # a mass change standing out with the motion's own noise is not named from it
+    assert choice_on_marker_motion(None, [mass_ik, gain_ik], ChoiceRule(), blocks, None, own(0.01, 0.3)) is None
+    # a delay standing out with the fitted sigmas is the choice; no second comparison
+    calls.clear()
+    delay = _evaluation("force_time_offset", DELAY, 0.3)
+    picked = choice_on_marker_motion(None, [delay, gain_ik], ChoiceRule(), blocks, None, own(0.3, 0.01))
+    assert picked is not None and picked[0] is delay and not calls
+
+
+@pytest.mark.parametrize(("kept_best", "kept_rival", "named"), [(0.39, -0.02, True), (0.39, 0.05, False), (0.08, -0.02, False), (0.85, 0.5, True)])
+def test_a_rival_that_keeps_nothing_on_top_does_not_hold_back(kept_best: float, kept_rival: float, named: bool) -> None:
+    # causes that do not overlap: the contender is named when it keeps 80 % of its gain on
+    # top of the rival, or at least 10 % while the rival keeps nothing on top of it (what the
+    # rival explains, the contender explains too: on the marker-only motion of a walk draw
+    # hiding a -40 ms delay, the delay kept 39 % on top of the plates' registration, which
+    # kept -2 % on top of the delay)
+    delay = _evaluation("force_time_offset", DELAY, 0.3)
+    registration = _evaluation("plate_registration", REGISTRATION, 0.3)
+    delay.score = 1.05 * registration.score
+    shares = {(id(delay), id(registration)): kept_best, (id(registration), id(delay)): kept_rival}
+
+    def kept(best: Evaluation, rival: Evaluation) -> float | None:
+        return shares.get((id(best), id(rival)))
+
+    ranked = [delay, registration]
+    chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept)
+    assert (chosen is delay) == named, reason

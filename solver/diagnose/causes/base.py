@@ -15,7 +15,9 @@ The parts of a cause (class attributes, then methods):
   :meth:`Cause.effect_size`), ``min_relative_gain`` (None: the rule's default);
 * where it is judged: ``acts_on_forces`` (a force-side cause, compared again on the
   marker-only motion), ``on_marker_motion`` (:data:`MARKER_MOTION`),
-  ``chosen_on_marker_motion`` (may be named from that motion), ``distinct_choice`` (its
+  ``chosen_on_marker_motion`` (may be named from that motion), ``chosen_on_own_noise``
+  (may be named from that motion whitened with its own noise,
+  :func:`solver.diagnose.core.choice_on_marker_motion`), ``distinct_choice`` (its
   plate must stand out from the same cause on the other plates), ``overlaps`` (the causes
   it is told from by which keeps its gain on top of the other,
   :func:`solver.diagnose.selection._stands_out`);
@@ -143,6 +145,7 @@ class Cause(ABC):
     acts_on_forces: ClassVar[bool] = False
     on_marker_motion: ClassVar[str] = "estimated"
     chosen_on_marker_motion: ClassVar[bool] = False
+    chosen_on_own_noise: ClassVar[bool] = False
     distinct_choice: ClassVar[bool] = False
     overlaps: ClassVar[tuple[Cause, ...]] = ()
 
@@ -270,6 +273,7 @@ REQUIRED: dict[str, type | tuple[type, ...]] = {
     "acts_on_forces": bool,
     "on_marker_motion": str,
     "chosen_on_marker_motion": bool,
+    "chosen_on_own_noise": bool,
     "distinct_choice": bool,
 }
 

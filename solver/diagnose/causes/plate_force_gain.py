@@ -3,6 +3,19 @@
 Extension: plate p's wrench divided by the gain. Linear in k = 1 - 1/gain: the corrected
 wrench is (1 - k) W_p, so the residual changes by k W_p (and the plate's idle readings by
 -k times themselves). One alternative per plate; "no effect" is a gain of 1.
+
+A gain may be named from the marker-only motion whitened with its own noise
+(``chosen_on_own_noise``, :func:`solver.diagnose.core.choice_on_marker_motion`). The dynamics
+fit absorbs a treadmill belt's gain: the fitted motion bends toward the scaled force, and the
+stage's mass fit takes up the rest, so on the run a hidden gain of 0.93-0.95 left the fitted
+motion's estimate within 0.4 % of 1, or named a body-mass change. The marker-only motion
+owes nothing to the forces and recovers the gain exactly (the residual changes by
+(1 - g) W_p), but its moment rows carry the inertial noise of a motion no force shaped (on
+the run about 16 times the fitted motion's 2 N·m), and whitened with the fitted motion's
+sigmas a body-mass change, which scales that inertial moment, outscores the gain. Whitened
+with the marker-only motion's own noise (:func:`solver.diagnose.profile.own_noise_sigmas`) the
+force rows, where a gain and a mass change differ (a mass change acts in the flight phases
+too), decide.
 """
 
 from __future__ import annotations
@@ -31,6 +44,7 @@ class PlateForceGain(ForceCorrection):
     main_parameter = "gain"
     min_effect = 0.015  # relative
     max_effect = 0.3  # relative
+    chosen_on_own_noise = True
 
     def alternatives(self, ctx: Context, full: Any) -> list[Alternative]:
         """One alternative per plate: the gain."""
