@@ -41,6 +41,7 @@ from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
+from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 
 if TYPE_CHECKING:  # the dynamics stage (scipy.signal) loads only when it runs
@@ -332,25 +333,6 @@ def _file_digest(path: Path) -> str:
     return h.hexdigest()
 
 
-def _solver_code_digest() -> str:
-    """Digest of the solver package's source files (a code change invalidates caches)."""
-    root = Path(__file__).resolve().parent
-    h = hashlib.blake2b(digest_size=16)
-    for f in sorted(root.rglob("*.py")):
-        h.update(str(f.relative_to(root)).encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()
-
-
-def _addb_version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("addb")
-    except Exception:  # noqa: BLE001 - not installed as a package
-        return "unknown"
-
-
 def kinematics_cache_key(subject: Subject, options: KinematicsOptions | None = None) -> dict[str, Any]:
     """What the kinematics stage of ``subject`` depends on, as a JSON-like dict.
 
@@ -377,8 +359,8 @@ def kinematics_cache_key(subject: Subject, options: KinematicsOptions | None = N
         "inputs": inputs,
         "model": [str(model), mst.st_size, mst.st_mtime_ns, _file_digest(model)],
         "options": repr(options or KinematicsOptions()),
-        "addb_version": _addb_version(),
-        "solver_code": _solver_code_digest(),
+        "addb_version": addb_version(),
+        "solver_code": code_digest(),
     }
 
 

@@ -5,7 +5,7 @@ Modules, in the order a run uses them:
 * :mod:`solver.dataset.discover`: the subject folders under a dataset folder (any depth)
   and where each one's output goes (the output tree mirrors the input tree).
 * :mod:`solver.dataset.manifest`: what an output was made from (hashes of the inputs,
-  addb version, settings, review record) so that a rerun skips what is unchanged.
+  addb version, solver source digest, settings, review record) so that a rerun skips what is unchanged.
 * :mod:`solver.dataset.task`: one subject on one worker: the pipeline, its log, the
   manifest, the summary rows, all moved into place atomically.
 * :mod:`solver.dataset.summary`: per-trial rows and the dataset totals in the terms of the

@@ -2,7 +2,7 @@
 
 Every subject output of a dataset run carries ``manifest.json``::
 
-    {"key": {"schema": 1, "addb_version": "0.1.0",
+    {"key": {"schema": 1, "addb_version": "0.1.0", "code": "<sha256 of the solver's source>",
              "inputs": {"_subject.json": "<sha256>", "trials/walk/markers.trc": "<sha256>", ...},
              "settings": {...}, "annotations": "<sha256 of the reviewer's flags>" | null},
      "status": "ok" | "kinematics_only" | "failed", "error": {...} (failed only),
@@ -16,6 +16,9 @@ such record and runs again. The inputs are every file of the subject folder
 except hidden files, addb's output folder, bone meshes (``Geometry/``, they do not change
 the solution) and the review record, whose unmeasured-force flags enter as ``annotations``
 instead (a digest given by the caller: the solver package does not read review records).
+The ``code`` is a digest of the solver package's Python source (:func:`solver.provenance.code_digest`): the
+version number does not change with every commit, so a rerun after an update of the code
+(a ``git pull`` of an editable install) processes the subjects again.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from solver.provenance import addb_version, code_digest
+
 SCHEMA = 1
 MANIFEST_NAME = "manifest.json"
 
@@ -34,16 +39,6 @@ NOT_INPUTS = frozenset({"addb_out", "Geometry", "__pycache__"})
 
 #: Review record names inside a subject folder (entered as ``annotations``, not inputs).
 REVIEW_RECORDS = frozenset({"annotations.json"})
-
-
-def addb_version() -> str:
-    """The installed addb version (``importlib.metadata``), ``"unknown"`` outside an install."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("addb")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def file_sha256(path: str | Path) -> str:
@@ -93,6 +88,7 @@ def manifest_key(subject_dir: str | Path, settings: dict[str, Any], review: str 
     return {
         "schema": SCHEMA,
         "addb_version": addb_version(),
+        "code": code_digest(),
         "inputs": {rel: file_sha256(p) for rel, p in input_files(subject_dir).items()},
         "settings": json.loads(json.dumps(settings, sort_keys=True)),
         "annotations": review,

@@ -17,7 +17,7 @@ local cluster the scheduler gives up on a task at its first worker death
 A remote scheduler applies its own ``allowed-failures`` (Dask's default 3) before ours.
 
 Resume: a subject whose output carries a manifest with the same key as now (same input
-files, addb version, settings and review record) is skipped without starting a cluster,
+files, addb version and solver source digest, settings and review record) is skipped without starting a cluster,
 and so is a subject whose unchanged data failed before (reported failed again, with its
 stored error); ``force`` reprocesses both. One run at a time per output folder.
 """
@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.dataset.discover import DatasetSubject, find_subjects
-from solver.dataset.manifest import addb_version, current_manifest, manifest_key
+from solver.dataset.manifest import current_manifest, manifest_key
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
     PROGRESS_TOPIC,
@@ -46,6 +46,7 @@ from solver.dataset.task import (
 )
 from solver.errors import DatasetError
 from solver.outputs import write_json
+from solver.provenance import addb_version
 
 SUMMARY_NAME = "dataset_summary.json"
 REPORT_NAME = "dataset_report.html"

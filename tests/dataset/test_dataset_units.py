@@ -64,6 +64,26 @@ def test_manifest_key_follows_the_inputs_and_only_them(tree: Path) -> None:
     assert len(input_files(subject)) == 5
 
 
+def test_manifest_key_follows_the_solver_code(tmp_path: Path) -> None:
+    # the version number stays 0.1.0 across commits: the key carries a digest of the solver
+    # package's source, so a rerun after a code update processes the subjects again
+    import shutil
+
+    import solver
+    from solver.provenance import code_digest
+
+    package = Path(solver.__file__).parent
+    assert manifest_key(tmp_path, {})["code"] == code_digest(package) == code_digest()
+    copy = tmp_path / "solver"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert code_digest(copy) == code_digest()
+    (copy / "notes.txt").write_text("not source")  # only Python source counts
+    assert code_digest(copy) == code_digest()
+    masks = copy / "masks.py"
+    masks.write_text(masks.read_text() + "\n# edited\n")
+    assert code_digest(copy) != code_digest()
+
+
 def test_a_stored_manifest_counts_only_with_an_equal_key_and_a_final_status(tmp_path: Path) -> None:
     key = {"schema": 1, "inputs": {"a": "0"}}
     (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": "ok"}))
