@@ -128,6 +128,8 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-results", "docs/diagnose/RESULTS.md",
            f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
            fence=False),
+    Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
+           f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-offset-opencap-DJ1", "docs/diagnose/RESULTS.md",
            f"{DIAG} --trials DJ1 --causes marker_offset --draws 10 --synthetic 0 --json docs/diagnose/results_marker_offset_opencap_DJ1.json",
            "accuracy", 1.5),
