@@ -10,6 +10,8 @@ plate is loaded) is measured on those frames.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -354,6 +356,13 @@ def test_a_force_error_held_back_by_a_rival_is_not_named_a_mass_distribution() -
     assert choose([segment], ChoiceRule(), make_blocks(T, DT))[0] is segment
 
 
+def _kept_from(shares: dict[tuple[int, int], float]) -> Callable[[Evaluation, Evaluation], float | None]:
+    """A :meth:`JointGains.kept_share` stand-in: the share of ``best``'s gain kept on top of
+    ``rival``, looked up in ``shares`` by ``(id(best), id(rival))`` (None when absent); later
+    entries of ``shares`` count."""
+    return lambda best, rival: shares.get((id(best), id(rival)))
+
+
 REGISTRATION = {"value": [0.02, 0.0, 0.0], "shift_m": [0.02, 0.0, 0.0], "rotation_rad": 0.0, "centre_m": [0.9, 0.0, -0.25], "radius_m": 0.6}
 
 
@@ -377,9 +386,7 @@ def test_overlapping_causes_are_told_apart_by_the_gain_each_keeps(kept_best: flo
     assert overlapping("plate_registration", "plate_position_offset") and overlapping("plate_position_offset", "plate_registration")
     assert not overlapping("plate_position_offset", "force_time_offset")
     shares = {(id(registration), id(shift)): kept_best, (id(shift), id(registration)): kept_rival}
-
-    def kept(best: Evaluation, rival: Evaluation) -> float | None:
-        return shares.get((id(best), id(rival)))
+    kept = _kept_from(shares)
 
     ranked = [registration, shift]
     chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept)
@@ -441,9 +448,7 @@ def test_a_rival_that_keeps_nothing_on_top_does_not_hold_back(kept_best: float, 
     registration = _evaluation("plate_registration", REGISTRATION, 0.3)
     delay.score = 1.05 * registration.score
     shares = {(id(delay), id(registration)): kept_best, (id(registration), id(delay)): kept_rival}
-
-    def kept(best: Evaluation, rival: Evaluation) -> float | None:
-        return shares.get((id(best), id(rival)))
+    kept = _kept_from(shares)
 
     ranked = [delay, registration]
     chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept)
