@@ -412,7 +412,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
 
     def own_noise() -> tuple[list[Evaluation], KeptShare]:
         # the force-side causes on the marker-only motion whitened with its own noise
-        own_sigmas.append(own_noise_sigmas(data_ik, ctx_ik.evaluated, ctx_ik.sigmas))
+        own_sigmas.append(own_noise_sigmas(ctx_ik.ref_rows, ctx_ik.evaluated, ctx_ik.sigmas))
         own_options = replace(ik_options, causes=tuple(c for c in ik_options.causes if cause(c).acts_on_forces))
         _, alts_own, evs_own, _ = evaluate(data_ik, own_options, (ctx.unmeasured, ctx.unmeasured_reasons), own_sigmas[0])
         for ev in evs_own:
@@ -563,9 +563,9 @@ def choice_on_marker_motion(
     shaped, and a body-mass change, which scales that inertial moment, outscored a treadmill
     belt's gain that the marker-only motion recovers exactly (6 of 20 gain draws, all on the
     run, were missed). The causes decided on the moment rows (a delay, a plate's shift, the
-    plates' registration) keep the first comparison: with the moment rows down-weighted, 2 of
-    10 run plate shifts, all 10 run registrations and 1 of 10 walk delays were lost
-    (docs/diagnose/RESULTS.md). The returned evaluation is the cause's own on the marker-only
+    plates' registration) keep the first comparison: with the moment rows down-weighted (an
+    experiment on modified code, docs/diagnose/RESULTS.md "The weakest rows"), run plate
+    shifts, run registrations and a walk delay were lost. The returned evaluation is the cause's own on the marker-only
     motion with the fitted sigmas (the estimate and uncertainty reported for it anyway); the
     sentence says how it was chosen.
 

@@ -65,22 +65,32 @@ class Sigmas:
         return cls(float(fit.get("marker_sigma", 0.01)), float(fit.get("force_sigma", 2.0)), float(fit.get("moment_sigma", 2.0)))
 
 
-def own_noise_sigmas(data: DiagnosisData, evaluated: BoolArray, sigmas: Sigmas) -> Sigmas:
+def own_noise_sigmas(ref_rows: FloatArray, evaluated: BoolArray, sigmas: Sigmas) -> Sigmas:
     """The sigmas that whiten a motion's residual rows with that motion's own noise.
 
     The force and moment sigmas are multiplied by the RMS of the motion's profiled force and
-    moment rows (:class:`Profile`, whitened with ``sigmas``) over the ``evaluated`` frames
-    ``(T,)``, when that RMS is above 1; the marker sigma is kept. Used for the marker-only
-    motion, whose residual no force shaped (on the treadmill run its profiled moment rows
-    have an RMS of about 16, the fitted motion's about 1-2, with the fitted motion's 2 N·m).
+    moment rows over the ``evaluated`` frames, when that RMS is above 1; the marker sigma is
+    kept. Used for the marker-only motion, whose residual no force shaped (on the treadmill
+    run its profiled moment rows are far above those of the fitted motion, with the fitted
+    motion's 2 N·m).
+
+    Parameters
+    ----------
+    ref_rows
+        ``(T, R)`` the motion's profiled reference rows, whitened with ``sigmas``
+        (:attr:`solver.diagnose.candidates.Context.ref_rows`: :meth:`Profile.project` of
+        :meth:`Profile.raw_rows` of its residual).
+    evaluated
+        ``(T,)`` the frames whose rows count.
+    sigmas
+        The sigmas ``ref_rows`` were whitened with.
 
     Returns
     -------
     Sigmas
         m, N and N·m, as ``sigmas``.
     """
-    prof = Profile(data, evaluated, sigmas)
-    rows = prof.project(prof.raw_rows(data.residual(), data.external()[2]))[np.asarray(evaluated, dtype=bool)]
+    rows = np.asarray(ref_rows)[np.asarray(evaluated, dtype=bool)]
     if not len(rows):
         return sigmas
     force = float(np.sqrt(np.mean(rows[:, 3:6] ** 2)))
