@@ -40,8 +40,8 @@ nothing on top of it (:func:`solver.diagnose.selection._stands_out`). A turn of 
 belt's shift. Under the large forces of running the dynamics
 fit turns the body to balance a shifted centre of pressure, so this cause, like a plate's
 shift, may be named from the marker-only motion. The effect noted on the treadmill run:
-both belts' centres of pressure read about 1.3 cm forward on the marker-only motion
-(docs/diagnose/RESULTS.md, ninth session).
+both belts' centres of pressure read 1.6 cm forward and 0.5 cm sideways on the marker-only motion, too
+little of the cost to be named (docs/diagnose/findings_runs_run.md, round 2).
 """
 
 from __future__ import annotations
