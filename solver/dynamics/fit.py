@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.linalg import LinAlgError
+from scipy.linalg.lapack import dpbtrf, dpbtrs
 
-from solver.dynamics.banded import BlockBands, banded_cholesky_solve
-from solver.dynamics.spline import derivative_operators
+from solver.dynamics.banded import BlockBands
+from solver.dynamics.spline import Derivatives
 from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
 
@@ -73,6 +73,18 @@ class FitSettings:
         Stop a round when the relative cost decrease is below this.
     derivative
         ``"spline"`` (OpenSim-consistent) or ``"central"``.
+    direction
+        How a Gauss-Newton step is found. ``"band"`` (default): the gradient and normal
+        matrix of the Jacobian whose derivative operators are truncated to ``band`` frames,
+        solved by banded Cholesky; the step is then not the Gauss-Newton step of the cost,
+        and the fit stalls short of its minimum. ``"exact"`` (opt-in, not yet the default:
+        the diagnosis' thresholds were calibrated on ``"band"``): the exact gradient and
+        the exact Gauss-Newton system with the full operators, solved by conjugate
+        gradients with the banded matrix as preconditioner (tests/benchmarks/RESULTS.md,
+        "Direction of the dynamics fit's steps").
+    cg_iterations, cg_tolerance
+        ``"exact"`` only: at most this many conjugate-gradient iterations per step, stopped
+        when the residual falls below this fraction of the gradient.
     """
 
     marker_sigma: float = 0.01
@@ -87,6 +99,9 @@ class FitSettings:
     band: int = 2
     tolerance: float = 1e-4
     derivative: str = "spline"
+    direction: str = "band"
+    cg_iterations: int = 20
+    cg_tolerance: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -150,7 +165,8 @@ class _TrialProblem:
         self.t = data.q.shape[0]
         self.free = np.flatnonzero(sk.is_independent & ~sk.locked)
         self.nf = self.free.size
-        self.d1, self.d2 = derivative_operators(self.t, data.dt, st.derivative)
+        self.ops = Derivatives(self.t, data.dt, st.derivative)
+        self.b1, self.b2 = self.ops.band(st.band)  # (T, 2 band + 1): D[k, k + o]
         self.seen = np.isfinite(data.observed_markers).all(axis=2)
         self.y = np.nan_to_num(data.observed_markers)
         self.mass = sk.total_mass
@@ -173,7 +189,7 @@ class _TrialProblem:
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        qd, qdd = self.d1 @ q, self.d2 @ q
+        qd, qdd = self.ops(q)
         qp, vp, ap = self.sk.cmap.expand(q, qd, qdd)
         return qd, qdd, qp, vp, ap
 
@@ -231,7 +247,9 @@ class _TrialProblem:
             ``(u + 1, T nf)`` lower band storage (``ab[d, c] = H[c + d, c]``, row 0 the
             diagonal, u = (2 band + 1) nf - 1) for :func:`.banded.banded_cholesky_solve`.
         grad
-            ``(T nf,)`` gradient of half the cost.
+            ``(T nf,)`` gradient of half the cost: of the banded Jacobian with
+            ``direction="band"``, exact with ``"exact"`` (which also keeps the per-frame
+            Jacobians for :meth:`gauss_newton_product`).
         """
         st, t, nf, free = self.st, self.t, self.nf, self.free
         b = st.band
@@ -278,14 +296,22 @@ class _TrialProblem:
         for o in range(-b, b + 1):
             s = idx + o
             ok = (s >= 0) & (s < t)
-            jb[ok, :, o + b] = (self.d1[idx[ok], s[ok]][:, None, None] * dv[ok]
-                                + self.d2[idx[ok], s[ok]][:, None, None] * da[ok]
+            jb[ok, :, o + b] = (self.b1[ok, o + b][:, None, None] * dv[ok]
+                                + self.b2[ok, o + b][:, None, None] * da[ok]
                                 + (dq[ok] if o == 0 else 0.0))
-        gres = np.einsum("kroi,kr->koi", jb, res)  # (T, 2b + 1, nf)
+        # the gradient with the full derivative operators: J^T r = dq^T r + D1^T (dv^T r) + D2^T (da^T r)
+        exact = st.direction == "exact"
+        if exact:
+            # the gradient with the full derivative operators: J^T r = dq^T r + D1^T (dv^T r) + D2^T (da^T r)
+            grad += np.einsum("kri,kr->ki", dq, res) + self.ops.transpose(np.einsum("kri,kr->ki", dv, res), np.einsum("kri,kr->ki", da, res))
+            self._lin = (blocks[:, 0].copy(), dq, dv, da)  # marker blocks J_m^T J_m (before the residual terms), per-frame Jacobians
+        else:
+            gres = np.einsum("kroi,kr->koi", jb, res)  # (T, 2b + 1, nf): the banded Jacobian's gradient
         for o1 in range(-b, b + 1):
             # frames k with k + o1 inside the trial: k in [lo, hi), a contiguous range
             lo, hi = max(0, -o1), min(t, t - o1)
-            grad[lo + o1 : hi + o1] += gres[lo:hi, o1 + b]
+            if not exact:
+                grad[lo + o1 : hi + o1] += gres[lo:hi, o1 + b]
             # blocks H(k + o1, k + o2) for every o2 >= o1 at once: the bands o2 - o1 = 0..b - o1
             # of block row k + o1 are contiguous panel columns (terms with k + o2 past the
             # end are zero, as jb is there)
@@ -328,6 +354,59 @@ class _TrialProblem:
         return vals[:, dof], dof, sel
 
     # -------------------------------------------------------------- steps
+    def gauss_newton_product(self, v: FloatArray) -> FloatArray:
+        """``J^T J v`` with the full derivative operators, at the last :meth:`normal_equations` point.
+
+        Parameters
+        ----------
+        v
+            ``(T, nf)`` a change of the free coordinates.
+
+        Returns
+        -------
+        ``(T, nf)``: markers (per frame), residual wrench (r_k moves with q_k, and with every
+        q_s through the velocity and acceleration operators) and smoothness terms.
+        """
+        jm2, dq, dv, da = self._lin
+        v1, v2 = self.ops(v)
+        u = np.einsum("kri,ki->kr", dq, v) + np.einsum("kri,ki->kr", dv, v1) + np.einsum("kri,ki->kr", da, v2)
+        out = np.einsum("kij,kj->ki", jm2, v) + np.einsum("kri,kr->ki", dq, u)
+        out += self.ops.transpose(np.einsum("kri,kr->ki", dv, u), np.einsum("kri,kr->ki", da, u))
+        ws = 1.0 / (self.data.dt**2 * self.st.accel_sigma)
+        sd = (v[2:] - 2 * v[1:-1] + v[:-2]) * ws**2
+        out[:-2] += sd
+        out[1:-1] -= 2 * sd
+        out[2:] += sd
+        return out
+
+    def _direction(self, chol: FloatArray, grad: FloatArray, keep: FloatArray, damping: FloatArray) -> FloatArray:
+        """The damped Gauss-Newton step: ``(J^T J + mu D) delta = -grad`` on the coordinates
+        ``keep`` (1.0; 0.0 where a bound holds it), by conjugate gradients preconditioned with
+        the banded normal matrix's Cholesky factor (Nocedal & Wright 2006, Algorithm 5.3),
+        to a residual of ``FitSettings.cg_tolerance`` of the gradient's."""
+        nf = self.nf
+        r = -grad.reshape(-1, nf) * keep
+        x = np.zeros_like(r)
+        z = dpbtrs(chol, r.reshape(-1), lower=1)[0].reshape(-1, nf) * keep
+        p = z.copy()
+        rz = float(np.vdot(r, z))
+        stop = self.st.cg_tolerance * np.linalg.norm(r)
+        for _ in range(self.st.cg_iterations):
+            ap = (self.gauss_newton_product(p) + damping * p) * keep
+            pap = float(np.vdot(p, ap))
+            if pap <= 0:
+                break
+            alpha = rz / pap
+            x += alpha * p
+            r -= alpha * ap
+            if np.linalg.norm(r) <= stop:
+                break
+            z = dpbtrs(chol, r.reshape(-1), lower=1)[0].reshape(-1, nf) * keep
+            rz_new = float(np.vdot(r, z))
+            p = z + (rz_new / rz) * p
+            rz = rz_new
+        return x
+
     def step(self, q: FloatArray, mu: float, cost0: float | None = None) -> tuple[FloatArray, float, float]:
         """One damped Gauss-Newton step with a backtracking line search; returns (q, cost, mu).
 
@@ -338,18 +417,21 @@ class _TrialProblem:
         free, nf = self.free, self.nf
         x = q[:, free]
         g2 = grad.reshape(-1, nf)
-        held = (((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))).reshape(-1)
+        held = ((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))
+        keep = (~held).astype(float)
         diag = np.maximum(ab[0].copy(), 1e-9)
-        grad = np.where(held, 0.0, grad)
-        base = ab[0] + held * 1e12
+        base = ab[0] + held.reshape(-1) * 1e12
         cost0 = self.cost(q) if cost0 is None else cost0
         for _ in range(4):
             ab[0] = base + mu * diag
-            try:
-                delta = -banded_cholesky_solve(ab, grad).reshape(-1, nf)
-            except LinAlgError:
+            chol, info = dpbtrf(ab, lower=1, overwrite_ab=0)
+            if info != 0:
                 mu *= 10
                 continue
+            if self.st.direction == "exact":
+                delta = self._direction(chol, grad, keep, (mu * diag).reshape(-1, nf))
+            else:
+                delta = -dpbtrs(chol, grad * keep.reshape(-1), lower=1)[0].reshape(-1, nf)
             for alpha in (1.0, 0.5, 0.25, 0.1):
                 q_new = q.copy()
                 q_new[:, free] += alpha * delta
@@ -451,8 +533,8 @@ def fit_dynamics(
         for i, tr in enumerate(trials):
             if not tr.observed.any():
                 continue
-            d1, d2 = derivative_operators(qs[i].shape[0], tr.dt, st.derivative)
-            a, b_vec, joints = mass_regression(sk, qs[i], d1 @ qs[i], d2 @ qs[i], tr.wrenches, tr.observed)
+            qd, qdd = Derivatives(qs[i].shape[0], tr.dt, st.derivative)(qs[i])
+            a, b_vec, joints = mass_regression(sk, qs[i], qd, qdd, tr.wrenches, tr.observed)
             w = np.tile(np.array([1 / st.force_sigma] * 3 + [1 / st.moment_sigma] * 3), a.shape[0] // 6)
             rows_a.append(a * w[:, None])
             rows_b.append(b_vec * w)

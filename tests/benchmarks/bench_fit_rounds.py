@@ -1,66 +1,97 @@
-"""Rounds of the dynamics fit: what more rounds than the default would change (run on demand).
+"""Rounds and step direction of the dynamics fit: what other settings than the default change (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_fit_rounds.py [--rounds 4 6 8] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_fit_rounds.py [--rounds 4 6 8] [--direction band exact] [SUBJECT ...]
 
 The dynamics fit alternates ``FitSettings.rounds`` rounds (default 4) of at most
 ``FitSettings.iterations`` Gauss-Newton steps of the coordinates with a linear solve of the
 body mass factors, and stops early on a relative cost decrease under
-``FitSettings.tolerance``. For each subject of ../shared/data/subjects (default: the
-Rajagopal walk and run) and each round count, one
-``process_subject(SUBJECT, OUT, options=ProcessOptions(dynamics=DynamicsOptions(fit=FitSettings(rounds=R))))``
+``FitSettings.tolerance``. ``FitSettings.direction`` says how a step is found: ``band``
+(default; the derivative operators truncated to ``band`` frames in the Jacobian and its
+gradient) or ``exact`` (the exact gradient and Gauss-Newton system, by preconditioned
+conjugate gradients). For each subject (default: the Rajagopal walk and run of
+../shared/data/subjects and the Camargo circuit, assembled by
+``scripts/make_example_subject.py camargo2021_levelground``) and each pair of round count
+and direction, one
+``process_subject(SUBJECT, OUT, options=ProcessOptions(dynamics=DynamicsOptions(fit=FitSettings(rounds=R, direction=D))))``
 in this process, into a temporary folder. Prints a Markdown table per trial with force
 plates: wall time of the whole ``process_subject`` (s), the dynamics fit's own time (s),
-measured frames, marker RMS (cm), linear residual RMS and mean (N) and angular residual
-RMS (N·m), from the trial's results.json.
+Gauss-Newton steps taken, measured frames, marker RMS (cm), linear residual RMS and mean
+(N) and angular residual RMS (N·m), from the trial's results.json.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))
 
-from solver.dynamics.fit import FitSettings
-from solver.dynamics.stage import DynamicsOptions
-from solver.pipeline import ProcessOptions, process_subject
+import solver.dynamics.fit as fit_module  # noqa: E402
+from solver.dynamics.fit import FitSettings  # noqa: E402
+from solver.dynamics.stage import DynamicsOptions  # noqa: E402
+from solver.pipeline import ProcessOptions, process_subject  # noqa: E402
 
-SUBJECTS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "subjects"
+SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
+EXAMPLES = ("camargo2021_levelground",)
+
+
+def _subject(name: str, tmp: Path) -> Path:
+    """The subject folder: a shared subject, or an example assembled into ``tmp``."""
+    if name not in EXAMPLES:
+        return SUBJECTS / name
+    dst = tmp / "examples" / name
+    if not dst.exists():
+        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), name, str(dst)], check=True, capture_output=True)
+    return dst
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run"])
-    ap.add_argument("--rounds", type=int, nargs="+", default=[4, 6, 8])
+    ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "camargo2021_levelground"])
+    ap.add_argument("--rounds", type=int, nargs="+", default=[4, 6])
+    ap.add_argument("--direction", nargs="+", default=["band", "exact"], choices=["band", "exact"])
     args = ap.parse_args()
+    steps = [0]
+    step = fit_module._TrialProblem.step
+
+    def counted(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+        steps[0] += 1
+        return step(self, *a, **k)
+
+    fit_module._TrialProblem.step = counted  # type: ignore[method-assign]
     print(
-        "| subject / trial | rounds | wall (s) | dynamics fit (s) | measured frames | marker RMS (cm) "
+        "| subject / trial | direction | rounds | wall (s) | dynamics fit (s) | steps | measured frames | marker RMS (cm) "
         "| linear residual RMS (mean), N | angular residual RMS, N·m |"
     )
-    print("| --- | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.subjects:
-            for rounds in args.rounds:
-                out = Path(tmp) / f"{name}_{rounds}"
-                options = ProcessOptions(dynamics=DynamicsOptions(fit=FitSettings(rounds=rounds)))
-                t0 = time.perf_counter()
-                process_subject(SUBJECTS / name, out, options=options)
-                wall = time.perf_counter() - t0
-                fit_s = (json.loads((out / "subject.json").read_text()).get("dynamics_seconds") or {}).get("dynamics_fit", float("nan"))
-                for res in sorted(out.glob("*/results.json")):
-                    r = json.loads(res.read_text())
-                    if "linear_residual_rms_N" not in r:
-                        continue
-                    print(
-                        f"| {name} / {res.parent.name} | {rounds} | {wall:.1f} | {fit_s:.1f} | {r['n_observed_frames']} "
-                        f"| {r['marker_rms_m'] * 100:.3f} | {r['linear_residual_rms_N']:.2f} ({r['linear_residual_mean_N']:.2f}) "
-                        f"| {r['angular_residual_rms_Nm']:.2f} |",
-                        flush=True,
-                    )
+            subject = _subject(name, Path(tmp))
+            for direction in args.direction:
+                for rounds in args.rounds:
+                    out = Path(tmp) / f"{name}_{direction}_{rounds}"
+                    options = ProcessOptions(dynamics=DynamicsOptions(fit=FitSettings(rounds=rounds, direction=direction)))
+                    steps[0] = 0
+                    t0 = time.perf_counter()
+                    process_subject(subject, out, options=options)
+                    wall = time.perf_counter() - t0
+                    fit_s = (json.loads((out / "subject.json").read_text()).get("dynamics_seconds") or {}).get("dynamics_fit", float("nan"))
+                    for res in sorted(out.glob("*/results.json")):
+                        r = json.loads(res.read_text())
+                        if "linear_residual_rms_N" not in r:
+                            continue
+                        print(
+                            f"| {name} / {res.parent.name} | {direction} | {rounds} | {wall:.1f} | {fit_s:.1f} | {steps[0]} | {r['n_observed_frames']} "
+                            f"| {r['marker_rms_m'] * 100:.3f} | {r['linear_residual_rms_N']:.2f} ({r['linear_residual_mean_N']:.2f}) "
+                            f"| {r['angular_residual_rms_Nm']:.2f} |",
+                            flush=True,
+                        )
 
 
 if __name__ == "__main__":

@@ -142,3 +142,43 @@ def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
     np.testing.assert_allclose(dense[keep], jtj[keep], rtol=0, atol=1e-7 * scale)
     g_fd = jac.T @ r0
     np.testing.assert_allclose(grad[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
+
+
+def test_exact_direction_uses_the_gauss_newton_system_of_the_full_operators() -> None:
+    """With ``direction="exact"`` and a band much narrower than the trial, the gradient is
+    J^T r and :meth:`gauss_newton_product` is J^T J v for the whole Jacobian J (central
+    differences; coordinates of nonlinear joint functions left out, as above), while the
+    banded matrix stays the truncated one (the preconditioner)."""
+    sk = _skeleton()
+    t = 12
+    trial = _synthetic_trial(sk, t)
+    prob = _TrialProblem(sk, trial, replace(FitSettings(), band=1, direction="exact"))
+    q = trial.q
+    r0 = _residual_vector(prob, q)
+    ab, grad = prob.normal_equations(q)
+    nf = prob.nf
+    jac = np.zeros((r0.size, t * nf))
+    h = 1e-6
+    for k in range(t):
+        for i, c in enumerate(prob.free):
+            qp_, qm_ = q.copy(), q.copy()
+            qp_[k, c] += h
+            qm_[k, c] -= h
+            jac[:, k * nf + i] = (_residual_vector(prob, qp_) - _residual_vector(prob, qm_)) / (2 * h)
+    vals, cols = sk.cmap.jacobian_batch(q[:1])
+    bent, _ = sk.cmap.jacobian_batch(q[:1] + 0.1)
+    curved = set(cols[np.flatnonzero(vals[0] != bent[0])].tolist())
+    linear = np.tile([c not in curved for c in prob.free], t)
+    g_fd = jac.T @ r0
+    np.testing.assert_allclose(grad[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
+    v = np.where(linear, np.random.default_rng(5).normal(size=t * nf), 0.0)
+    hv = prob.gauss_newton_product(v.reshape(t, nf)).reshape(-1)
+    hv_fd = jac.T @ (jac @ v)
+    np.testing.assert_allclose(hv[linear], hv_fd[linear], rtol=0, atol=1e-7 * np.abs(hv_fd).max())
+    # the banded matrix leaves out what the truncation drops: far from the exact product
+    dense = np.zeros((t * nf, t * nf))
+    for d in range(min(ab.shape[0], t * nf)):
+        idx = np.arange(t * nf - d)
+        dense[idx + d, idx] = ab[d, : t * nf - d]
+        dense[idx, idx + d] = ab[d, : t * nf - d]
+    assert np.abs(dense @ v - hv_fd)[linear].max() > 1e-3 * np.abs(hv_fd).max()

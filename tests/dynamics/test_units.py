@@ -7,7 +7,7 @@ import pytest
 
 from solver.dynamics.com_fit import ComTrial, fit_com
 from solver.dynamics.preprocess import cop_from_wrench, lowpass, moment_about_origin
-from solver.dynamics.spline import derivative_operators, differentiate
+from solver.dynamics.spline import Derivatives, derivative_operators, differentiate
 from solver.errors import DynamicsError
 
 G = np.array([0.0, -9.80665, 0.0])
@@ -20,6 +20,46 @@ def test_spline_derivatives_are_exact_for_quintic_friendly_signals() -> None:
     inner = slice(10, -10)
     np.testing.assert_allclose(xd[inner], (2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t))[inner, None] * [1.0, 0.5], atol=1e-4)
     np.testing.assert_allclose(xdd[inner], (-(2 * np.pi * 1.5) ** 2 * np.sin(2 * np.pi * 1.5 * t))[inner, None] * [1.0, 0.5], atol=2e-3)
+
+
+def _spline_operators_by_definition(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """D1, D2 (dt = 1) straight from the definition: scipy's natural quintic interpolating
+    spline through each unit sample (third and fourth derivatives zero at both ends)."""
+    from scipy.interpolate import make_interp_spline
+
+    t, zero = np.arange(n, dtype=float), np.zeros(n)
+    spl = make_interp_spline(t, np.eye(n), k=5, bc_type=([(3, zero), (4, zero)], [(3, zero), (4, zero)]))
+    return np.asarray(spl(t, 1)), np.asarray(spl(t, 2))
+
+
+@pytest.mark.parametrize("n", [6, 7, 31, 400])
+def test_linear_time_derivatives_equal_the_dense_spline_operators(n: int) -> None:
+    """The sparse-factor operators (values, adjoint and near-diagonal band) equal the dense
+    matrices of the natural quintic spline to round-off."""
+    dt = 0.01
+    d1, d2 = _spline_operators_by_definition(n)
+    d1, d2 = d1 / dt, d2 / dt**2
+    ops = Derivatives(n, dt)
+    rng = np.random.default_rng(n)
+    q, w1, w2 = (rng.normal(size=(n, 3)) for _ in range(3))
+    qd, qdd = ops(q)
+    np.testing.assert_allclose(qd, d1 @ q, rtol=0, atol=1e-12 * np.abs(d1 @ q).max())
+    np.testing.assert_allclose(qdd, d2 @ q, rtol=0, atol=1e-12 * np.abs(d2 @ q).max())
+    adj = d1.T @ w1 + d2.T @ w2
+    np.testing.assert_allclose(ops.transpose(w1, w2), adj, rtol=0, atol=1e-12 * np.abs(adj).max())
+    b1, b2 = ops.band(3)
+    for k in (0, 1, n // 2, n - 1):
+        for o in range(-3, 4):
+            inside = 0 <= k + o < n
+            assert b1[k, o + 3] == pytest.approx(d1[k, k + o] if inside else 0.0, rel=1e-12, abs=1e-12 * np.abs(d1).max())
+            assert b2[k, o + 3] == pytest.approx(d2[k, k + o] if inside else 0.0, rel=1e-12, abs=1e-12 * np.abs(d2).max())
+
+
+def test_derivatives_reject_too_few_frames_and_unknown_methods() -> None:
+    with pytest.raises(DynamicsError, match="at least 6 frames"):
+        Derivatives(5, 0.01)
+    with pytest.raises(DynamicsError, match="unknown derivative method"):
+        Derivatives(10, 0.01, "cubic")
 
 
 def test_central_difference_operator_matches_the_formula() -> None:
