@@ -423,8 +423,11 @@ class _TrialProblem:
         base = ab[0] + held.reshape(-1) * 1e12
         cost0 = self.cost(q) if cost0 is None else cost0
         for _ in range(4):
+            if ab is None:  # factored in place by the last attempt: the same matrix again
+                ab = self._bands.lower_band_storage()
             ab[0] = base + mu * diag
-            chol, info = dpbtrf(ab, lower=1, overwrite_ab=0)
+            chol, info = dpbtrf(ab, lower=1, overwrite_ab=1)  # in place: one band matrix in memory, not two
+            ab = None
             if info != 0:
                 mu *= 10
                 continue
