@@ -92,6 +92,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
     Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 1.0, fence=False),
     Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 1.0, fence=False),
+    Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
     Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 0.5),
     Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 0.5),
