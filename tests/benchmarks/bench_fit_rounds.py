@@ -32,10 +32,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-import solver.dynamics.fit as fit_module  # noqa: E402
-from solver.dynamics.fit import FitSettings  # noqa: E402
-from solver.dynamics.stage import DynamicsOptions  # noqa: E402
-from solver.pipeline import ProcessOptions, process_subject  # noqa: E402
+import solver.dynamics.fit as fit_module
+from solver.dynamics.fit import FitSettings
+from solver.dynamics.stage import DynamicsOptions
+from solver.pipeline import ProcessOptions, process_subject
 
 SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
 EXAMPLES = ("camargo2021_levelground",)
@@ -60,7 +60,7 @@ def main() -> None:
     steps = [0]
     step = fit_module._TrialProblem.step
 
-    def counted(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+    def counted(self, *a, **k):
         steps[0] += 1
         return step(self, *a, **k)
 

@@ -100,6 +100,28 @@ def _residual_vector(prob: _TrialProblem, q: np.ndarray) -> np.ndarray:
     return np.concatenate([e.ravel(), r.ravel(), smooth.ravel()])
 
 
+def _jacobian_by_central_differences(prob: _TrialProblem, q: np.ndarray) -> np.ndarray:
+    """``(residuals, T nf)`` Jacobian of :func:`_residual_vector` in the free coordinates."""
+    t, nf = q.shape[0], prob.nf
+    jac = np.zeros((_residual_vector(prob, q).size, t * nf))
+    h = 1e-6
+    for k in range(t):
+        for i, c in enumerate(prob.free):
+            qp_, qm_ = q.copy(), q.copy()
+            qp_[k, c] += h
+            qm_[k, c] -= h
+            jac[:, k * nf + i] = (_residual_vector(prob, qp_) - _residual_vector(prob, qm_)) / (2 * h)
+    return jac
+
+
+def _linear_columns(prob: _TrialProblem, q: np.ndarray) -> np.ndarray:
+    """``(T nf,)`` True for the free coordinates that drive no nonlinear joint function."""
+    vals, cols = prob.sk.cmap.jacobian_batch(q[:1])
+    bent, _ = prob.sk.cmap.jacobian_batch(q[:1] + 0.1)
+    curved = set(cols[np.flatnonzero(vals[0] != bent[0])].tolist())
+    return np.tile([c not in curved for c in prob.free], q.shape[0])
+
+
 def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
     """With the band covering the trial (no truncation) H = J^T J and grad = J^T r for the
     Jacobian J of the weighted residuals, here by central differences.
@@ -117,14 +139,7 @@ def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
     assert np.sum(r0**2) == pytest.approx(prob.cost(q), rel=1e-12)
     ab, grad = prob.normal_equations(q)
     nf = prob.nf
-    jac = np.zeros((r0.size, t * nf))
-    h = 1e-6
-    for k in range(t):
-        for i, c in enumerate(prob.free):
-            qp_, qm_ = q.copy(), q.copy()
-            qp_[k, c] += h
-            qm_[k, c] -= h
-            jac[:, k * nf + i] = (_residual_vector(prob, qp_) - _residual_vector(prob, qm_)) / (2 * h)
+    jac = _jacobian_by_central_differences(prob, q)
     jtj = jac.T @ jac
     n = t * nf
     dense = np.zeros((n, n))
@@ -132,10 +147,7 @@ def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
         idx = np.arange(n - d)
         dense[idx + d, idx] = ab[d, : n - d]
         dense[idx, idx + d] = ab[d, : n - d]
-    vals, cols = sk.cmap.jacobian_batch(q[:1])
-    bent, _ = sk.cmap.jacobian_batch(q[:1] + 0.1)
-    curved = set(cols[np.flatnonzero(vals[0] != bent[0])].tolist())
-    linear = np.tile([c not in curved for c in prob.free], t)
+    linear = _linear_columns(prob, q)
     assert linear.sum() > t * nf // 2 and not linear.all()
     scale = np.abs(jtj).max()
     keep = np.ix_(linear, linear)
@@ -157,18 +169,8 @@ def test_exact_direction_uses_the_gauss_newton_system_of_the_full_operators() ->
     r0 = _residual_vector(prob, q)
     ab, grad = prob.normal_equations(q)
     nf = prob.nf
-    jac = np.zeros((r0.size, t * nf))
-    h = 1e-6
-    for k in range(t):
-        for i, c in enumerate(prob.free):
-            qp_, qm_ = q.copy(), q.copy()
-            qp_[k, c] += h
-            qm_[k, c] -= h
-            jac[:, k * nf + i] = (_residual_vector(prob, qp_) - _residual_vector(prob, qm_)) / (2 * h)
-    vals, cols = sk.cmap.jacobian_batch(q[:1])
-    bent, _ = sk.cmap.jacobian_batch(q[:1] + 0.1)
-    curved = set(cols[np.flatnonzero(vals[0] != bent[0])].tolist())
-    linear = np.tile([c not in curved for c in prob.free], t)
+    jac = _jacobian_by_central_differences(prob, q)
+    linear = _linear_columns(prob, q)
     g_fd = jac.T @ r0
     np.testing.assert_allclose(grad[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
     v = np.where(linear, np.random.default_rng(5).normal(size=t * nf), 0.0)
