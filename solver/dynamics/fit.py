@@ -37,6 +37,7 @@ from scipy.linalg.lapack import dpbtrf, dpbtrs
 
 from solver.dynamics.banded import BlockBands
 from solver.dynamics.spline import Derivatives
+from solver.errors import DynamicsError
 from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
 
@@ -77,11 +78,13 @@ class FitSettings:
         How a Gauss-Newton step is found. ``"band"`` (default): the gradient and normal
         matrix of the Jacobian whose derivative operators are truncated to ``band`` frames,
         solved by banded Cholesky; the step is then not the Gauss-Newton step of the cost,
-        and the fit stalls short of its minimum. ``"exact"`` (opt-in, not yet the default:
-        the diagnosis' thresholds were calibrated on ``"band"``): the exact gradient and
-        the exact Gauss-Newton system with the full operators, solved by conjugate
-        gradients with the banded matrix as preconditioner (tests/benchmarks/RESULTS.md,
-        "Direction of the dynamics fit's steps").
+        and the fit stalls short of its minimum. ``"exact"`` (opt-in): the exact gradient
+        and the exact Gauss-Newton system with the full operators, solved by conjugate
+        gradients with the banded matrix as preconditioner (Nocedal & Wright 2006, §5.1
+        and §7.1). Much lower residuals, but marker RMS rises on some subjects at these
+        weights, and the diagnosis' thresholds were calibrated on ``"band"``, so it is not
+        the default (tests/benchmarks/RESULTS.md, "Rounds and step direction of the
+        dynamics fit").
     cg_iterations, cg_tolerance
         ``"exact"`` only: at most this many conjugate-gradient iterations per step, stopped
         when the residual falls below this fraction of the gradient.
@@ -165,6 +168,8 @@ class _TrialProblem:
         self.t = data.q.shape[0]
         self.free = np.flatnonzero(sk.is_independent & ~sk.locked)
         self.nf = self.free.size
+        if st.direction not in ("band", "exact"):
+            raise DynamicsError(f"unknown fit direction {st.direction!r} (use 'band' or 'exact')")
         self.ops = Derivatives(self.t, data.dt, st.derivative)
         self.b1, self.b2 = self.ops.band(st.band)  # (T, 2 band + 1): D[k, k + o]
         self.seen = np.isfinite(data.observed_markers).all(axis=2)

@@ -12,6 +12,7 @@ from scipy.linalg import LinAlgError, solveh_banded
 
 from solver.dynamics.banded import banded_cholesky_solve, lower_band_storage
 from solver.dynamics.fit import FitSettings, FitTrialInput, _TrialProblem
+from solver.errors import DynamicsError
 from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
 
@@ -184,3 +185,9 @@ def test_exact_direction_uses_the_gauss_newton_system_of_the_full_operators() ->
         dense[idx + d, idx] = ab[d, : t * nf - d]
         dense[idx, idx + d] = ab[d, : t * nf - d]
     assert np.abs(dense @ v - hv_fd)[linear].max() > 1e-3 * np.abs(hv_fd).max()
+
+
+def test_an_unknown_fit_direction_is_refused() -> None:
+    sk = _skeleton()
+    with pytest.raises(DynamicsError, match="unknown fit direction 'newton'"):
+        _TrialProblem(sk, _synthetic_trial(sk, 7), replace(FitSettings(), direction="newton"))
