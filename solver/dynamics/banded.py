@@ -83,6 +83,58 @@ def lower_band_storage(blocks: FloatArray) -> FloatArray:
     return bands.lower_band_storage()
 
 
+def banded_cholesky(ab: FloatArray, overwrite: bool = False) -> FloatArray:
+    """Cholesky factor of a symmetric positive definite banded H (LAPACK dpbtrf).
+
+    Parameters
+    ----------
+    ab
+        ``(u + 1, N)`` lower band storage, ``ab[d, c] = H[c + d, c]``.
+    overwrite
+        Factor in place (``ab`` must then be Fortran-ordered; it holds the factor after).
+
+    Returns
+    -------
+    ``(u + 1, N)`` the lower factor in the same storage, for :func:`banded_cholesky_back`.
+
+    Raises
+    ------
+    LinAlgError
+        H is not positive definite (or a LAPACK argument error).
+    """
+    c, info = dpbtrf(ab, lower=1, overwrite_ab=int(overwrite))
+    if info > 0:
+        raise LinAlgError(f"{info}-th leading minor not positive definite")
+    if info < 0:
+        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrf")
+    return c
+
+
+def banded_cholesky_back(factor: FloatArray, rhs: FloatArray) -> FloatArray:
+    """Solve H x = rhs with the factor of :func:`banded_cholesky` (LAPACK dpbtrs).
+
+    Parameters
+    ----------
+    factor
+        ``(u + 1, N)`` from :func:`banded_cholesky`.
+    rhs
+        ``(N,)`` right-hand side.
+
+    Returns
+    -------
+    ``(N,)`` solution.
+
+    Raises
+    ------
+    LinAlgError
+        A LAPACK argument error.
+    """
+    x, info = dpbtrs(factor, rhs, lower=1)
+    if info != 0:
+        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrs")
+    return x
+
+
 def banded_cholesky_solve(ab: FloatArray, rhs: FloatArray) -> FloatArray:
     """Solve H x = rhs for a symmetric positive definite banded H (LAPACK dpbtrf + dpbtrs).
 
@@ -105,12 +157,4 @@ def banded_cholesky_solve(ab: FloatArray, rhs: FloatArray) -> FloatArray:
     LinAlgError
         H is not positive definite (or a LAPACK argument error).
     """
-    c, info = dpbtrf(ab, lower=1, overwrite_ab=0)
-    if info > 0:
-        raise LinAlgError(f"{info}-th leading minor not positive definite")
-    if info < 0:
-        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrf")
-    x, info = dpbtrs(c, rhs, lower=1)
-    if info != 0:
-        raise LinAlgError(f"illegal value in {-info}-th argument of dpbtrs")
-    return x
+    return banded_cholesky_back(banded_cholesky(ab), rhs)

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpbtrf, dpbtrs
+from scipy.linalg import LinAlgError
 
-from solver.dynamics.banded import BlockBands
+from solver.dynamics.banded import BlockBands, banded_cholesky, banded_cholesky_back
 from solver.dynamics.spline import Derivatives
 from solver.errors import DynamicsError
 from solver.kinematics.ik import solver_bounds
@@ -250,7 +250,7 @@ class _TrialProblem:
         -------
         ab
             ``(u + 1, T nf)`` lower band storage (``ab[d, c] = H[c + d, c]``, row 0 the
-            diagonal, u = (2 band + 1) nf - 1) for :func:`.banded.banded_cholesky_solve`.
+            diagonal, u = (2 band + 1) nf - 1) for :func:`.banded.banded_cholesky`.
         grad
             ``(T nf,)`` gradient of half the cost: of the banded Jacobian with
             ``direction="band"``, exact with ``"exact"`` (which also keeps the per-frame
@@ -304,7 +304,6 @@ class _TrialProblem:
             jb[ok, :, o + b] = (self.b1[ok, o + b][:, None, None] * dv[ok]
                                 + self.b2[ok, o + b][:, None, None] * da[ok]
                                 + (dq[ok] if o == 0 else 0.0))
-        # the gradient with the full derivative operators: J^T r = dq^T r + D1^T (dv^T r) + D2^T (da^T r)
         exact = st.direction == "exact"
         if exact:
             # the gradient with the full derivative operators: J^T r = dq^T r + D1^T (dv^T r) + D2^T (da^T r)
@@ -392,7 +391,7 @@ class _TrialProblem:
         nf = self.nf
         r = -grad.reshape(-1, nf) * keep
         x = np.zeros_like(r)
-        z = dpbtrs(chol, r.reshape(-1), lower=1)[0].reshape(-1, nf) * keep
+        z = banded_cholesky_back(chol, r.reshape(-1)).reshape(-1, nf) * keep
         p = z.copy()
         rz = float(np.vdot(r, z))
         stop = self.st.cg_tolerance * np.linalg.norm(r)
@@ -406,7 +405,7 @@ class _TrialProblem:
             r -= alpha * ap
             if np.linalg.norm(r) <= stop:
                 break
-            z = dpbtrs(chol, r.reshape(-1), lower=1)[0].reshape(-1, nf) * keep
+            z = banded_cholesky_back(chol, r.reshape(-1)).reshape(-1, nf) * keep
             rz_new = float(np.vdot(r, z))
             p = z + (rz_new / rz) * p
             rz = rz_new
@@ -431,15 +430,17 @@ class _TrialProblem:
             if ab is None:  # factored in place by the last attempt: the same matrix again
                 ab = self._bands.lower_band_storage()
             ab[0] = base + mu * diag
-            chol, info = dpbtrf(ab, lower=1, overwrite_ab=1)  # in place: one band matrix in memory, not two
-            ab = None
-            if info != 0:
+            try:
+                chol = banded_cholesky(ab, overwrite=True)  # in place: one band matrix in memory, not two
+            except LinAlgError:
                 mu *= 10
                 continue
+            finally:
+                ab = None
             if self.st.direction == "exact":
                 delta = self._direction(chol, grad, keep, (mu * diag).reshape(-1, nf))
             else:
-                delta = -dpbtrs(chol, grad * keep.reshape(-1), lower=1)[0].reshape(-1, nf)
+                delta = -banded_cholesky_back(chol, grad * keep.reshape(-1)).reshape(-1, nf)
             for alpha in (1.0, 0.5, 0.25, 0.1):
                 q_new = q.copy()
                 q_new[:, free] += alpha * delta
