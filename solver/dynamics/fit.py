@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+import scipy.sparse as sps
 from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
 
@@ -42,6 +43,10 @@ from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
 
 FloatArray = NDArray[np.float64]
+#: Weight of a held coordinate's row in the coefficient system, relative to the normal matrix's diagonal.
+HOLD = 1e4
+#: Solves per step of the coefficient direction's active set.
+ACTIVE_PASSES = 1
 IntArray = NDArray[np.intp]
 
 
@@ -65,7 +70,12 @@ class FitSettings:
     mass_sigma
         Prior deviation of each body's mass factor from 1 (relative).
     rounds
-        Alternations of coordinate steps and mass solves.
+        At most this many alternations of coordinate steps and mass solves.
+    mass_tolerance
+        Stop the alternation when a mass solve changes no body's mass factor by more than
+        this (relative) after a round whose coordinate steps all stopped on ``tolerance``:
+        the coordinates were fitted to the masses the solve returns. When the steps did not
+        stop, the masses stand and another round of steps follows.
     iterations
         Gauss-Newton iterations per round.
     band
@@ -99,10 +109,11 @@ class FitSettings:
     mass_sigma: float = 0.25
     rounds: int = 4
     iterations: int = 12
+    mass_tolerance: float = 0.01
     band: int = 2
     tolerance: float = 1e-4
     derivative: str = "spline"
-    direction: str = "band"
+    direction: str = "coefficients"
     cg_iterations: int = 20
     cg_tolerance: float = 0.05
 
@@ -160,6 +171,13 @@ def _skew_batch(v: FloatArray) -> FloatArray:
     return out
 
 
+def _rows(idx: IntArray) -> IntArray | slice:
+    """Row indices as a slice when they are consecutive (a view: no copy on ``+=``)."""
+    if idx.size and idx[-1] - idx[0] == idx.size - 1 and np.all(np.diff(idx) == 1):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
 class _TrialProblem:
     """Residuals and linearization of one trial for a fixed model."""
 
@@ -168,10 +186,13 @@ class _TrialProblem:
         self.t = data.q.shape[0]
         self.free = np.flatnonzero(sk.is_independent & ~sk.locked)
         self.nf = self.free.size
-        if st.direction not in ("band", "exact"):
-            raise DynamicsError(f"unknown fit direction {st.direction!r} (use 'band' or 'exact')")
+        if st.direction not in ("band", "exact", "coefficients"):
+            raise DynamicsError(f"unknown fit direction {st.direction!r} (use 'band', 'exact' or 'coefficients')")
         self.ops = Derivatives(self.t, data.dt, st.derivative)
-        self.b1, self.b2 = self.ops.band(st.band)  # (T, 2 band + 1): D[k, k + o]
+        if st.direction == "coefficients":
+            self._init_coefficients()
+        else:
+            self.b1, self.b2 = self.ops.band(st.band)  # (T, 2 band + 1): D[k, k + o]
         self.seen = np.isfinite(data.observed_markers).all(axis=2)
         self.y = np.nan_to_num(data.observed_markers)
         self.mass = sk.total_mass
@@ -191,6 +212,22 @@ class _TrialProblem:
         # linearized next, and its centroidal terms are the ones the line search computed
         self._state: tuple[FloatArray, ...] | None = None
         self._bands: BlockBands | None = None  # the normal matrix's storage, reused
+
+    def _init_coefficients(self) -> None:
+        """The pieces of :meth:`coefficient_equations` that do not change with q."""
+        cm = self.cmaps = self.ops.coefficient_maps()
+        nc = cm.e0.shape[1]
+        # frames in passes whose windows start at distinct coefficients (all frames at once
+        # for the quintic spline; the end frames of central differences share a window)
+        first = np.searchsorted(cm.start, cm.start, side="left")
+        rank = np.arange(self.t) - first
+        self._passes = [np.flatnonzero(rank == r) for r in range(int(rank.max()) + 1)]
+        second = sps.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(self.t - 2, self.t)) @ cm.e0
+        smooth = (second.T @ second).tocsr()
+        rows, cols = smooth.nonzero()
+        width = max(cm.width, int(np.abs(cols - rows).max(initial=0)) + 1)
+        self._nb = width - 1  # block bandwidth
+        self._smooth_bands = np.array([np.pad(smooth.diagonal(o), (0, o)) for o in range(width)])  # [o, i] = S[i, i + o]
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -239,6 +276,61 @@ class _TrialProblem:
         return total + float(np.sum(smooth**2))
 
     # -------------------------------------------------------------- linearization
+    def _linearize(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The cost's pieces at q, per frame, on the free coordinates.
+
+        Returns
+        -------
+        gm, g0
+            ``(T, nf, nf)`` J_m^T J_m and ``(T, nf)`` J_m^T e of the marker terms (frame k
+            depends on q_k only; unseen markers contribute nothing).
+        res
+            ``(T, 6)`` weighted root residual wrench.
+        dq, dv, da
+            ``(T, 6, nf)`` its derivatives with respect to the coordinates, velocities and
+            accelerations of the same frame.
+        """
+        t, nf, free = self.t, self.nf, self.free
+        qp, vp, ap, hdot_all, com_all = self._dynamics_state(q)
+        model, data = self.sk.model, self.sk.data
+        sm = self.st.marker_sigma
+        pos, jac = self.sk.marker_jacobians(q, self.data.markers, free)  # (T, M, 3), (T, M, 3, nf)
+        jac[~self.seen] = 0.0  # in place: the Jacobian is a fresh array
+        jac /= sm
+        jm = jac.reshape(t, -1, nf)
+        rm = (np.where(self.seen[..., None], pos - self.y, 0.0) / sm).reshape(t, -1, 1)
+        jmt = jm.transpose(0, 2, 1)
+        gm = jmt @ jm
+        g0 = (jmt @ rm)[:, :, 0]
+        # every frame has a residual term (unmeasured frames with a weaker weight)
+        res = self.residual_wrench(hdot_all, com_all) * self.w_res
+        nv = self.sk.nv
+        hq = np.empty((t, 6, nv))
+        hv = np.empty((t, 6, nv))
+        ha = np.empty((t, 6, nv))
+        for k in range(t):
+            _, hq[k], hv[k], ha[k] = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+        # the external moment about the centre of mass moves with it: d/dq of c x F_ext, with
+        # the centre-of-mass Jacobian J_c = A_g[:3] / m (d hdot / d a is the centroidal
+        # momentum matrix A_g, whose linear rows are m J_c; Orin et al. 2013)
+        jcom = ha[:, :3] / data.mass[0]
+        hq[:, 3:] -= _skew_batch(self.data.force) @ jcom
+        vals, dof, sel = self._coupling_free(q)
+        w = self.w_res[:, :, None]
+        dq, dv, da = (((h[:, :, dof] * vals[:, None, :]).reshape(-1, dof.size) @ sel).reshape(t, 6, nf) * w for h in (hq, hv, ha))
+        return gm, g0, res, dq, dv, da
+
+    def _smoothness(self, q: FloatArray) -> tuple[float, FloatArray]:
+        """``(ws, (T, nf))``: the smoothness rows' weight 1 / (h² s_a) and the gradient of
+        their half squared sum, on the free coordinates."""
+        ws = 1.0 / (self.data.dt**2 * self.st.accel_sigma)
+        sd = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) * ws**2  # (T-2, nf)
+        g = np.zeros((self.t, self.nf))
+        g[:-2] += sd
+        g[1:-1] -= 2 * sd
+        g[2:] += sd
+        return ws, g
+
     def normal_equations(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Banded normal matrix and gradient for a step on the free coordinates.
 
@@ -256,7 +348,7 @@ class _TrialProblem:
             ``direction="band"``, exact with ``"exact"`` (which also keeps the per-frame
             Jacobians for :meth:`gauss_newton_product`).
         """
-        st, t, nf, free = self.st, self.t, self.nf, self.free
+        st, t, nf = self.st, self.t, self.nf
         b = st.band
         nb = 2 * b  # block bandwidth of J^T J
         if self._bands is None:  # one buffer per trial problem (fresh zeroed pages cost more than a fill)
@@ -265,35 +357,8 @@ class _TrialProblem:
             self._bands.panel.fill(0.0)
         bands = self._bands
         blocks = bands.blocks  # blocks[i, o] = H(i, i + o)
-        grad = np.zeros((t, nf))
-        qp, vp, ap, hdot_all, com_all = self._dynamics_state(q)
-        model, data = self.sk.model, self.sk.data
-        sm = self.st.marker_sigma
-        # markers: frame k depends on q_k only; unseen markers contribute zero rows
-        pos, jac = self.sk.marker_jacobians(q, self.data.markers, free)  # (T, M, 3), (T, M, 3, nf)
-        jac[~self.seen] = 0.0  # in place: the Jacobian is a fresh array
-        jac /= sm
-        jm = jac.reshape(t, -1, nf)
-        rm = (np.where(self.seen[..., None], pos - self.y, 0.0) / sm).reshape(t, -1, 1)
-        jmt = jm.transpose(0, 2, 1)
-        blocks[:, 0] += jmt @ jm
-        grad += (jmt @ rm)[:, :, 0]
-        # every frame has a residual term (unmeasured frames with a weaker weight)
-        res = self.residual_wrench(hdot_all, com_all) * self.w_res
-        nv = self.sk.nv
-        hq = np.empty((t, 6, nv))
-        hv = np.empty((t, 6, nv))
-        ha = np.empty((t, 6, nv))
-        for k in range(t):
-            _, hq[k], hv[k], ha[k] = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-        # the external moment about the centre of mass moves with it: d/dq of c x F_ext, with
-        # the centre-of-mass Jacobian J_c = A_g[:3] / m (d hdot / d a is the centroidal
-        # momentum matrix A_g, whose linear rows are m J_c; Orin et al. 2013)
-        jcom = ha[:, :3] / data.mass[0]
-        hq[:, 3:] -= _skew_batch(self.data.force) @ jcom
-        vals, dof, sel = self._coupling_free(q)
-        w = self.w_res[:, :, None]
-        dq, dv, da = (((h[:, :, dof] * vals[:, None, :]).reshape(-1, dof.size) @ sel).reshape(t, 6, nf) * w for h in (hq, hv, ha))
+        gm, grad, res, dq, dv, da = self._linearize(q)
+        blocks[:, 0] += gm
         # residual terms: r_k depends on q_s through D1[k, s] dv + D2[k, s] da (+ dq at s = k);
         # jb[k, :, o + b] = d r_k / d q_{k+o}, zero past the ends
         idx = np.arange(t)
@@ -308,7 +373,7 @@ class _TrialProblem:
         if exact:
             # the gradient with the full derivative operators: J^T r = dq^T r + D1^T (dv^T r) + D2^T (da^T r)
             grad += np.einsum("kri,kr->ki", dq, res) + self.ops.transpose(np.einsum("kri,kr->ki", dv, res), np.einsum("kri,kr->ki", da, res))
-            self._lin = (blocks[:, 0].copy(), dq, dv, da)  # marker blocks J_m^T J_m (before the residual terms), per-frame Jacobians
+            self._lin = (gm, dq, dv, da)  # marker blocks J_m^T J_m, per-frame Jacobians
         else:
             gres = np.einsum("kroi,kr->koi", jb, res)  # (T, 2b + 1, nf): the banded Jacobian's gradient
         for o1 in range(-b, b + 1):
@@ -322,16 +387,68 @@ class _TrialProblem:
             m = b - o1 + 1
             j1t = jb[lo:hi, :, o1 + b].transpose(0, 2, 1)  # (k, nf, 6)
             bands.panel[lo + o1 : hi + o1, :, : m * nf] += j1t @ jb[lo:hi, :, o1 + b :].reshape(hi - lo, 6, m * nf)
-        # smoothness: central second differences
-        ws = 1.0 / (self.data.dt**2 * st.accel_sigma)
-        sd = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) * ws  # (T-2, nf)
+        # smoothness: central second differences, a scalar band per coordinate
+        ws, gs = self._smoothness(q)
+        grad += gs
         coef = np.array([1.0, -2.0, 1.0]) * ws
         diag = np.arange(nf)
         for a in range(3):
-            grad[a : a + t - 2] += coef[a] * sd
             for c in range(a, 3):
                 blocks[a : a + t - 2, c - a][:, diag, diag] += coef[a] * coef[c]
         return bands.lower_band_storage(), grad.reshape(-1)
+
+    def coefficient_equations(self, q: FloatArray) -> tuple[BlockBands, FloatArray, FloatArray, FloatArray]:
+        """The exact Gauss-Newton system in the spline's coefficients (``direction="coefficients"``).
+
+        With c the B-spline coefficients of the coordinates' spline (q = E0 c, qd = E1 c,
+        qdd = E2 c; :class:`.spline.CoefficientMaps`), each frame's rows depend on the
+        ``width`` coefficients of its window only, so ``J_c^T J_c`` is block-banded: the
+        Gauss-Newton step of the cost with the full (dense) derivative operators, found by
+        one banded Cholesky factorization.
+
+        Returns
+        -------
+        bands
+            The normal matrix's upper block bands, ``nc`` block rows of ``nf``.
+        g_c
+            ``(nc, nf)`` gradient of half the cost with respect to c.
+        g_q
+            ``(T, nf)`` the same gradient with respect to q (exact; for the bounds).
+        diag
+            ``(nc, nf)`` the normal matrix's diagonal (for the damping).
+        """
+        cm, nf, t = self.cmaps, self.nf, self.t
+        nc = cm.e0.shape[1]
+        if self._bands is None:
+            self._bands = BlockBands(nc, self._nb + 1, nf)
+        else:
+            self._bands.panel.fill(0.0)
+        bands = self._bands
+        gm, g0, res, dq, dv, da = self._linearize(q)
+        ws, gs = self._smoothness(q)
+        g0 = g0 + gs + np.einsum("kri,kr->ki", dq, res)
+        g1, g2 = np.einsum("kri,kr->ki", dv, res), np.einsum("kri,kr->ki", da, res)
+        g_c = cm.e0.T @ g0 + cm.e1.T @ g1 + cm.e2.T @ g2
+        g_q = g0 + self.ops.transpose(g1, g2)
+        w0, w1, w2 = cm.weights  # (T, W) each
+        width = cm.width
+        # x[k, :, a] = d r_k / d c_{start_k + a}
+        x = dq[:, :, None, :] * w0[:, None, :, None] + dv[:, :, None, :] * w1[:, None, :, None] + da[:, :, None, :] * w2[:, None, :, None]
+        for frames in self._passes:  # frames whose windows start at distinct coefficients
+            s, xk, wk, gk = cm.start[frames], x[frames], w0[frames], gm[frames]
+            for a in range(width):
+                m = width - a
+                # block row s + a, bands 0..m-1: residual rows x_a^T x_b, marker rows w_a w_b J_m^T J_m
+                add = xk[:, :, a].transpose(0, 2, 1) @ xk[:, :, a:].reshape(s.size, 6, m * nf)
+                add.reshape(s.size, nf, m, nf)[...] += (wk[:, a, None] * wk[:, a:])[:, None, :, None] * gk[:, :, None, :]
+                bands.panel[_rows(s + a), :, : m * nf] += add
+        # the smoothness rows: the same scalar band matrix (E0-mapped second differences) for every coordinate
+        blocks = bands.blocks
+        idx = np.arange(nf)
+        for o, d in enumerate(self._smooth_bands * ws**2):
+            blocks[: nc - o, o][:, idx, idx] += d[: nc - o, None]
+        diag = np.einsum("kii->ki", blocks[:, 0]).copy()
+        return bands, g_c, g_q, diag
 
     def _coupling_free(self, q: FloatArray) -> tuple[FloatArray, IntArray, FloatArray]:
         """The coupling Jacobian d q_pin / d q restricted to the free coordinates, sparse.
@@ -411,15 +528,94 @@ class _TrialProblem:
             rz = rz_new
         return x
 
+    def _hold(self, bands: BlockBands, grad: FloatArray, held: NDArray[np.bool_], diag: FloatArray, target: FloatArray | None = None) -> None:
+        """Stiff rows ``E0[k] da = target`` (default 0) in the coefficient system for the
+        ``(T, nf)`` coordinates ``held`` (at a bound, or carried past one by the step),
+        weighted ``HOLD`` times the largest diagonal entry of the normal matrix ``diag``
+        (``(nc, nf)``) in the frame's window; adds to ``bands`` and the gradient ``grad``
+        (``(nc, nf)``) in place."""
+        cm, nf = self.cmaps, self.nf
+        blocks = bands.blocks
+        idx = np.arange(nf)
+        w0 = cm.weights[0]
+        for frames in self._passes:
+            frames = frames[held[frames].any(axis=1)]
+            s = cm.start[frames]
+            win = np.max([diag[s + a] for a in range(cm.width)], axis=0)  # (k, nf)
+            h = held[frames] * HOLD * win
+            for a in range(cm.width):
+                if target is not None:
+                    grad[s + a] -= w0[frames, a, None] * h * target[frames]
+                for b in range(a, cm.width):
+                    blocks[(s + a)[:, None], b - a, idx, idx] += (w0[frames, a] * w0[frames, b])[:, None] * h
+
+    def _take(self, q: FloatArray, delta: FloatArray) -> FloatArray:
+        """q with ``(T, nf)`` delta added to the free coordinates, clipped to the bounds,
+        locked coordinates at their defaults and dependent ones completed."""
+        q_new = q.copy()
+        q_new[:, self.free] += delta
+        q_new = np.clip(q_new, self.lo, self.hi)
+        q_new[:, self.sk.locked] = self.sk.defaults[self.sk.locked]
+        return self.sk.cmap.complete(q_new)
+
+    def _coefficient_step(self, q: FloatArray, mu: float, cost0: float) -> tuple[FloatArray, float, float]:
+        """One Levenberg-Marquardt step of ``direction="coefficients"``; returns (q, cost, mu).
+
+        The damped system ``(H + mu diag(H)) da = -g`` in the coefficients
+        (:meth:`coefficient_equations`), with a coordinate at a bound that the gradient
+        pushes out held, and one the step would carry past a bound stopped at it (an
+        active-set pass, at most three). The step is taken when it lowers the cost; mu then
+        follows the ratio rho of the actual to the predicted decrease (Nielsen 1999:
+        ``mu *= max(1/3, 1 - (2 rho - 1)^3)``), and grows 4-fold when the cost rose.
+        """
+        free, nf = self.free, self.nf
+        x = q[:, free]
+        bands, grad, g_q, diag = self.coefficient_equations(q)
+        held = ((x <= self.lo[free]) & (g_q > 0)) | ((x >= self.hi[free]) & (g_q < 0))
+        grad = grad.copy()
+        if held.any():
+            self._hold(bands, grad, held, diag)
+        damp = np.maximum(diag.reshape(-1), 1e-9)
+        for _ in range(6):
+            for _ in range(ACTIVE_PASSES):  # active-set passes
+                ab = bands.lower_band_storage()
+                ab[0] += mu * damp
+                try:
+                    chol = banded_cholesky(ab, overwrite=True)
+                except LinAlgError:
+                    da = None
+                    break
+                da = -banded_cholesky_back(chol, grad.reshape(-1))
+                delta = self.cmaps.e0 @ da.reshape(-1, nf)
+                over = ((x + delta < self.lo[free]) | (x + delta > self.hi[free])) & ~held
+                if not over.any():
+                    break
+                held |= over
+                self._hold(bands, grad, over, diag, np.clip(x + delta, self.lo[free], self.hi[free]) - x)
+            if da is None:
+                mu *= 10
+                continue
+            predicted = float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
+            q_new = self._take(q, delta)
+            cost1 = self.cost(q_new)
+            if cost1 < cost0:
+                rho = (cost0 - cost1) / max(predicted, 1e-300)
+                return q_new, cost1, max(mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12)
+            mu *= 4
+        return q, cost0, mu
+
     def step(self, q: FloatArray, mu: float, cost0: float | None = None) -> tuple[FloatArray, float, float]:
         """One damped Gauss-Newton step with a backtracking line search; returns (q, cost, mu).
 
         The damping grows (and the system is solved again) only when no step length along
         the current direction lowers the cost.
         """
-        ab, grad = self.normal_equations(q)
+        cost0 = self.cost(q) if cost0 is None else cost0
+        if self.st.direction == "coefficients":
+            return self._coefficient_step(q, mu, cost0)
         free, nf = self.free, self.nf
         x = q[:, free]
+        ab, grad = self.normal_equations(q)
         g2 = grad.reshape(-1, nf)
         held = ((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))
         keep = (~held).astype(float)
@@ -442,11 +638,7 @@ class _TrialProblem:
             else:
                 delta = -banded_cholesky_back(chol, grad * keep.reshape(-1)).reshape(-1, nf)
             for alpha in (1.0, 0.5, 0.25, 0.1):
-                q_new = q.copy()
-                q_new[:, free] += alpha * delta
-                q_new = np.clip(q_new, self.lo, self.hi)
-                q_new[:, self.sk.locked] = self.sk.defaults[self.sk.locked]
-                q_new = self.sk.cmap.complete(q_new)
+                q_new = self._take(q, alpha * delta)
                 cost1 = self.cost(q_new)
                 if cost1 < cost0:
                     return q_new, cost1, (max(mu / 3, 1e-9) if alpha == 1.0 else mu)
@@ -521,6 +713,7 @@ def fit_dynamics(
     for b, j in zip(sk.body_names, sk.body_joint):
         body_of_joint.setdefault(int(j), []).append(b)
     for rnd in range(st.rounds):
+        settled = True  # every trial's coordinate steps stopped on the tolerance
         for i, tr in enumerate(trials):
             prob = _TrialProblem(sk, tr, st)
             cost = prob.cost(qs[i])
@@ -533,6 +726,8 @@ def fit_dynamics(
                 qs[i], cost = q_new, cost_new
                 if rel < st.tolerance:
                     break
+            else:
+                settled = False
             history.append(cost)
         if rnd == st.rounds - 1:
             break
@@ -559,6 +754,10 @@ def fit_dynamics(
         rhs = np.concatenate([-b_all, prior_w])
         k_new, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
         k_new = np.clip(k_new, 0.5, 2.0)
+        if np.abs(k_new - 1.0).max() < st.mass_tolerance:
+            if settled:  # converged: the motion was fitted to the masses the solve returns
+                break
+            continue  # the masses stand; more coordinate steps
         for j, k in zip(joints, k_new):
             for body in body_of_joint.get(j, []):
                 factors[body] = factors.get(body, 1.0) * float(k)

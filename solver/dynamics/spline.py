@@ -22,12 +22,14 @@ matrices (tests and short trials).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sps
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
+from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from solver.errors import DynamicsError
@@ -77,6 +79,15 @@ def _unit(n: int, method: str) -> tuple[object, sps.csr_matrix, sps.csr_matrix]:
 
     ``("spline", lu of M, E1, E2)`` pieces as in the module docstring, or for central
     differences ``(None, D1, D2)`` as sparse matrices."""
+    lu, _, e1, e2, _ = _pieces(n, method)
+    return lu, e1, e2
+
+
+@lru_cache(maxsize=16)
+def _pieces(n: int, method: str) -> tuple[object, sps.csr_matrix, sps.csr_matrix, sps.csr_matrix, sps.csr_matrix]:
+    """``(lu of M, E0, E1, E2, B)`` at dt = 1: E0..E2 the values and derivatives of the
+    basis at the samples (``(n, nc)``), B the ``(4, nc)`` end conditions (rows of M);
+    for central differences the basis is the samples themselves (E0 = I, no end rows)."""
     if method == "central":
         i = np.arange(1, n - 1)
         d1 = sps.lil_matrix((n, n))
@@ -87,13 +98,70 @@ def _unit(n: int, method: str) -> tuple[object, sps.csr_matrix, sps.csr_matrix]:
         d1[n - 1, n - 3 :] = [0.5, -2.0, 1.5]
         d2[0, :3] = d2[1, :3]
         d2[n - 1, n - 3 :] = d2[n - 2, n - 3 :]
-        return None, d1.tocsr(), d2.tocsr()
+        return None, sps.identity(n, format="csr"), d1.tocsr(), d2.tocsr(), sps.csr_matrix((0, n))
     k = _DEGREE
     x = np.arange(n, dtype=float)
     knots = np.r_[[0.0] * (k + 1), x[1:-1], [x[-1]] * (k + 1)]
     ends = [_basis(x[:1], knots, nu) for nu in (3, 4)] + [_basis(x[-1:], knots, nu) for nu in (3, 4)]
-    m = sps.vstack([ends[0], ends[1], _basis(x, knots, 0), ends[2], ends[3]]).tocsc()
-    return splu(m), _basis(x, knots, 1), _basis(x, knots, 2)
+    e0 = _basis(x, knots, 0)
+    m = sps.vstack([ends[0], ends[1], e0, ends[2], ends[3]]).tocsc()
+    return splu(m), e0, _basis(x, knots, 1), _basis(x, knots, 2), sps.vstack(ends).tocsr()
+
+
+def _natural_basis(ends: sps.csr_matrix) -> sps.csr_matrix:
+    """``(nc, nc - r)`` Z whose columns span the coefficients with ``ends @ c = 0`` and are local.
+
+    The r = 4 end conditions of the quintic spline act on the first and last five
+    coefficients only (the B-splines whose third or fourth derivative is nonzero at an
+    end), two each. They fix the two outermost coefficients at each end from the next
+    three, ``[c0, c1] = -B[:, :2]^-1 B[:, 2:5] c[2:5]``; the other coefficients are the
+    unknowns, so every sample still depends on five consecutive unknowns. With no end
+    conditions (central differences) Z is the identity."""
+    nc = ends.shape[1]
+    if ends.shape[0] == 0:
+        return sps.identity(nc, format="csr")
+    dense = ends.toarray()
+    head = -np.linalg.solve(dense[:2, :2], dense[:2, 2:5])  # (2, 3): c0, c1 from c2..c4
+    tail = -np.linalg.solve(dense[2:, -2:], dense[2:, -5:-2])  # (2, 3): c[-2:] from c[-5:-2]
+    z = sps.lil_matrix((nc, nc - 4))
+    z[2:-2, :] = sps.identity(nc - 4)
+    z[:2, :3] = head
+    z[-2:, -3:] = tail
+    return z.tocsr()
+
+
+@dataclass(frozen=True)
+class CoefficientMaps:
+    """Coefficients of the natural spline as the unknowns: every map from them is sparse and banded.
+
+    The natural quintic splines with knots at the n samples form an n-dimensional space
+    (B-spline coefficients c, n + 4 of them, with the four end conditions ``B c = 0``).
+    With a local basis of that space, c = Z a (:func:`_natural_basis`), the samples,
+    velocities and accelerations are ``q = E0 a``, ``qd = E1 a``, ``qdd = E2 a``, and
+    row k of E0, E1 and E2 is zero outside the ``width`` coefficients from ``start[k]`` on
+    (5 for the quintic spline). So a cost of q, qd and qdd has a banded Gauss-Newton
+    matrix in a, where its matrix in q is dense (de Boor 2001, ch. IX: the B-spline basis
+    has local support). For central differences a = q, E0 = I.
+
+    Attributes
+    ----------
+    e0, e1, e2
+        ``(n, n)`` sparse: values, first (1/s) and second (1/s²) time derivatives.
+    start
+        ``(n,)`` first coefficient of each row's window (non-decreasing; strictly increasing
+        for the quintic spline).
+    width
+        Coefficients in a row's window.
+    weights
+        ``(3, n, width)`` the rows of E0, E1, E2 inside their windows.
+    """
+
+    e0: sps.csr_matrix
+    e1: sps.csr_matrix
+    e2: sps.csr_matrix
+    start: NDArray[np.intp]
+    width: int
+    weights: FloatArray
 
 
 class Derivatives:
@@ -145,6 +213,23 @@ class Derivatives:
         if self._lu is not None:
             y = self._lu.solve(y, trans="T")[2:-2]
         return y.reshape(shape)
+
+    def coefficient_maps(self) -> CoefficientMaps:
+        """The sparse maps from a local basis of the natural splines (:class:`CoefficientMaps`), at this ``dt``."""
+        _, e0, e1, e2, ends = _pieces(self.n, self.method)
+        z = _natural_basis(ends)
+        rows = [(e0 @ z).tocsr(), (e1 @ z / self.dt).tocsr(), (e2 @ z / self.dt**2).tocsr()]
+        for e in rows:
+            e.eliminate_zeros()
+        lo = np.min([np.minimum.reduceat(e.indices, e.indptr[:-1]) for e in rows], axis=0)
+        hi = np.max([np.maximum.reduceat(e.indices, e.indptr[:-1]) for e in rows], axis=0)
+        width = int((hi - lo).max()) + 1
+        lo = np.minimum(lo, z.shape[1] - width)  # windows inside the coefficients
+        weights = np.zeros((3, self.n, width))
+        for i, e in enumerate(rows):
+            r = np.repeat(np.arange(self.n), np.diff(e.indptr))
+            weights[i, r, e.indices - lo[r]] = e.data
+        return CoefficientMaps(rows[0], rows[1], rows[2], lo.astype(np.intp), width, weights)
 
     def band(self, b: int) -> tuple[FloatArray, FloatArray]:
         """Entries of D1 and D2 within ``b`` samples of the diagonal.

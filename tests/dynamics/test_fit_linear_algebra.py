@@ -134,7 +134,7 @@ def test_normal_equations_are_the_gauss_newton_system_of_the_cost() -> None:
     sk = _skeleton()
     t = 7
     trial = _synthetic_trial(sk, t)
-    prob = _TrialProblem(sk, trial, replace(FitSettings(), band=t))
+    prob = _TrialProblem(sk, trial, replace(FitSettings(), band=t, direction="band"))
     q = trial.q
     r0 = _residual_vector(prob, q)
     assert np.sum(r0**2) == pytest.approx(prob.cost(q), rel=1e-12)
@@ -185,6 +185,40 @@ def test_exact_direction_uses_the_gauss_newton_system_of_the_full_operators() ->
         dense[idx + d, idx] = ab[d, : t * nf - d]
         dense[idx, idx + d] = ab[d, : t * nf - d]
     assert np.abs(dense @ v - hv_fd)[linear].max() > 1e-3 * np.abs(hv_fd).max()
+
+
+def test_coefficient_direction_is_the_gauss_newton_system_of_the_cost() -> None:
+    """With ``direction="coefficients"`` the banded system in the natural spline's local
+    coefficients a (q = E0 a) is the Gauss-Newton system of the cost with the full
+    derivative operators: with N = E0^-1 (the coefficients of unit samples), N^T H N = J^T J
+    and N^T g = J^T r for the Jacobian J in q by central differences (coordinates of
+    nonlinear joint functions left out, as above), and the gradient in q it returns is
+    J^T r too. The trial is long enough for every window to lie inside it."""
+    sk = _skeleton()
+    t = 14
+    trial = _synthetic_trial(sk, t)
+    prob = _TrialProblem(sk, trial, replace(FitSettings(), direction="coefficients"))
+    q = trial.q
+    nf = prob.nf
+    bands, g_c, g_q, _ = prob.coefficient_equations(q)
+    ab = bands.lower_band_storage()
+    n = g_c.size
+    dense = np.zeros((n, n))
+    for d in range(min(ab.shape[0], n)):
+        idx = np.arange(n - d)
+        dense[idx + d, idx] = ab[d, : n - d]
+        dense[idx, idx + d] = ab[d, : n - d]
+    e0 = prob.cmaps.e0.toarray()
+    assert e0.shape == (t, t) and prob.cmaps.width == 5
+    big_n = np.kron(np.linalg.inv(e0), np.eye(nf))
+    jac = _jacobian_by_central_differences(prob, q)
+    r0 = _residual_vector(prob, q)
+    linear = _linear_columns(prob, q)
+    jtj, g_fd = jac.T @ jac, jac.T @ r0
+    keep = np.ix_(linear, linear)
+    np.testing.assert_allclose((big_n.T @ dense @ big_n)[keep], jtj[keep], rtol=0, atol=1e-7 * np.abs(jtj).max())
+    np.testing.assert_allclose((big_n.T @ g_c.reshape(-1))[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
+    np.testing.assert_allclose(g_q.reshape(-1)[linear], g_fd[linear], rtol=0, atol=1e-7 * np.abs(g_fd).max())
 
 
 def test_an_unknown_fit_direction_is_refused() -> None:
