@@ -91,8 +91,11 @@ FIGURES: tuple[Figure, ...] = (
     Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
     Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 1.0, fence=False),
+    Figure("process-converged", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit converged "
+           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 2.0, fence=False),
     Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 1.0, fence=False),
     Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 1.0, fence=False),
+    Figure("growth-converged", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit converged", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
     Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 0.5),
     Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 0.5),
@@ -116,6 +119,8 @@ FIGURES: tuple[Figure, ...] = (
         "accuracy", 4.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 3.0, fence=False),
+    Figure("reprocess-converged", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit converged walk camargo",
+           "timing", 3.0, fence=False),
     # ---- documents of their own
     Figure("ablation", "docs/dynamics/ABLATION.md", f"{PY} tests/benchmarks/bench_ablation.py", "accuracy", 0.5, fence=False),
     Figure("expert-comparison", "docs/kinematics/EXPERT_COMPARISON.md", f"{PY} tests/benchmarks/bench_expert_comparison.py",

@@ -16,6 +16,7 @@ the dynamics alone.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import pickle
 import time
@@ -45,7 +46,7 @@ from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 
 if TYPE_CHECKING:  # the dynamics stage (scipy.signal) loads only when it runs
-    from solver.dynamics.stage import DynamicsResult, TrialDynamics
+    from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics
 
 Progress = Callable[[str, float], None]
 
@@ -250,7 +251,7 @@ def reprocess_dynamics(
     progress: Progress | None = None,
     *,
     options: ProcessOptions | None = None,
-    warm_start: bool = False,
+    warm_start: bool | None = None,
 ) -> ProcessResult:
     """Rerun the dynamics stage only (after a flag edit) and write ``trials`` into ``out_dir``.
 
@@ -272,14 +273,14 @@ def reprocess_dynamics(
     equal the stage's common frames) instead of the filtered, centre-of-mass shifted IK.
     Contact, the centre-of-mass mass fit (so the mass and the unobserved frames stay exactly
     those of a full run) and the bounds are computed as in a full run; the body mass
-    factors start from 1 (each mass solve's prior pulls toward the current factors, so
-    starting from the previous ones would change the answer). The fit is about 3x faster
-    then, but it does not land on the full run's answer: the fit stops on a relative cost
-    decrease below ``FitSettings.tolerance`` or after ``rounds x iterations`` steps, well
+    factors start from 1. A fit that runs to convergence
+    (:func:`solver.dynamics.fit.converged_fit`) lands on a full run's answer to its
+    tolerance from there, in fewer steps (tests/dynamics/test_reprocess_dynamics.py). The
+    default ``"band"`` fit does not: it stops after ``rounds x iterations`` steps, well
     before the coordinates stop moving, so its end point depends on its start (measured on
     the walk with frames 100-120 flagged: marker RMS 2 % apart, linear residual RMS 4.3 N
-    vs 2.7 N, coordinates up to 0.43 rad apart). It is therefore off by default and the
-    review app does not use it.
+    vs 2.7 N, coordinates up to 0.43 rad apart). By default (``None``) the warm start is
+    therefore on exactly when the fit runs to convergence.
 
     Parameters
     ----------
@@ -297,9 +298,12 @@ def reprocess_dynamics(
         Called with (message, fraction done).
     options
         Stage options (its ``trials`` is replaced by ``trials``); the kinematics options
-        are part of the cache key.
+        are part of the cache key. Default: those of the run that wrote ``out_dir``, as far
+        as it recorded them (the dynamics stage's settings in subject.json:
+        :func:`recorded_dynamics_options`).
     warm_start
-        Start the dynamics fit from the previous solutions (see above).
+        Start the dynamics fit from the previous solutions (see above); None: when the fit
+        runs to convergence.
 
     Returns
     -------
@@ -310,9 +314,14 @@ def reprocess_dynamics(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
         As :func:`process_subject`.
     """
-    opts = replace(options or ProcessOptions(), trials=tuple(trials))
+    if options is None:
+        options = ProcessOptions(dynamics=recorded_dynamics_options(out_dir))
+    opts = replace(options, trials=tuple(trials))
     if not opts.trials:
         raise KinematicsError("reprocess_dynamics: name at least one trial to write")
+    if warm_start is None:
+        fit = opts.dynamics.fit if opts.dynamics is not None else None
+        warm_start = fit is not None and fit.direction == "coefficients" and fit.mass_tolerance > 0
     with single_threaded_blas():
         return _process_subject(subject_dir, out_dir, opts, unmeasured_force, progress, dynamics_only=True, warm_start=warm_start)
 
@@ -403,6 +412,49 @@ def load_kinematics_cache(out_dir: str | Path, key: dict[str, Any]) -> tuple[Sub
             changed[changed.index("inputs")] = "input files " + ", ".join(files[:5]) + (" ..." if len(files) > 5 else "")
         return None, f"kinematics cache is stale ({'; '.join(changed) or 'key'} changed)"
     return data["kinematics"], "kinematics cache is valid"
+
+
+FIT_CHOICES = ("default", "converged")
+"""Names of the dynamics fits ``addb process --fit`` offers (:func:`options_for_fit`)."""
+
+
+def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOptions:
+    """Process options for a named dynamics fit: ``"default"`` (the ``"band"`` direction,
+    fixed rounds; the diagnosis is calibrated on it) or ``"converged"``
+    (:func:`solver.dynamics.fit.converged_fit`: exact banded steps until the cost and the
+    body mass factors settle).
+
+    Raises
+    ------
+    ValueError
+        An unknown name.
+    """
+    if name not in FIT_CHOICES:
+        raise ValueError(f"unknown dynamics fit {name!r} (use one of {', '.join(FIT_CHOICES)})")
+    dynamics = None
+    if name == "converged":
+        from solver.dynamics.fit import converged_fit
+        from solver.dynamics.stage import DynamicsOptions
+
+        dynamics = DynamicsOptions(fit=converged_fit())
+    return ProcessOptions(trials=tuple(trials) if trials else None, dynamics=dynamics)
+
+
+def recorded_dynamics_options(out_dir: str | Path) -> DynamicsOptions:
+    """The dynamics stage's options recorded in ``out_dir/subject.json`` by the run that wrote it.
+
+    The fit's settings (``dynamics_settings["fit"]``) are restored, fields this version does
+    not know ignored; everything else, and everything when the file or the record is missing
+    or unreadable, is the default."""
+    from solver.dynamics.fit import FitSettings
+    from solver.dynamics.stage import DynamicsOptions
+
+    try:
+        record = json.loads((Path(out_dir) / "subject.json").read_text())["dynamics_settings"]["fit"]
+        known = {k: v for k, v in record.items() if k in FitSettings.__dataclass_fields__}
+        return DynamicsOptions(fit=FitSettings(**known))
+    except (OSError, ValueError, KeyError, TypeError):
+        return DynamicsOptions()
 
 
 def previous_solutions(out_dir: str | Path, names: Sequence[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -21,7 +21,7 @@ def run_dataset(args: argparse.Namespace) -> int:
         raise SystemExit("addb process: --trial and --annotations apply to one subject folder, not a dataset")
     opts = DatasetOptions(
         workers=args.workers, scheduler=args.scheduler, retries=args.retries, force=args.force,
-        memory_limit=args.memory_limit,
+        memory_limit=args.memory_limit, settings={"fit": args.fit} if args.fit != "default" else {},
     )  # fmt: skip
     run = process_dataset(
         args.subject, args.out, options=opts, masks=subject_masks, review_digest=review_digest,
@@ -66,9 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if any(x is not None for x in (args.workers, args.scheduler)) or args.force:
         raise SystemExit("addb process: --workers, --scheduler and --force apply to a dataset folder")
     from addb_viewer.progress import ProgressBar, table
-    from solver.pipeline import ProcessOptions, process_subject
+    from solver.pipeline import options_for_fit, process_subject
 
-    opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
+    opts = options_for_fit(args.fit, args.trial)
     unmeasured_force = None
     if args.annotations:
         from addb_viewer.review_masks import masks_from_file
@@ -114,6 +114,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("subject", help="AddBiomechanics subject folder, or a dataset folder of subject folders")
     p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
+    p.add_argument(
+        "--fit", choices=("default", "converged"), default="default",
+        help="dynamics fit: 'default' (fixed rounds; what addb diagnose is calibrated on) or 'converged' "
+             "(exact banded Gauss-Newton steps until the cost and the mass factors settle: lower residuals "
+             "and marker RMS, faster on long trials; not yet the default, see tests/benchmarks/RESULTS.md)",
+    )  # fmt: skip
     p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")
     d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")

@@ -73,7 +73,9 @@ class DatasetOptions:
         Memory limit per local worker (``"4GB"``, bytes, or ``"auto"``: the machine's
         memory divided among the workers).
     settings
-        Settings recorded in each manifest (a change reprocesses every subject).
+        Settings recorded in each manifest (a change reprocesses every subject); the
+        worker reads ``"fit"`` (a name of :data:`solver.pipeline.FIT_CHOICES`, default
+        ``"default"``) to choose the dynamics fit.
     """
 
     workers: int | None = None

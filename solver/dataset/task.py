@@ -145,7 +145,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     """
     from solver.dataset.manifest import MANIFEST_NAME
     from solver.dataset.summary import subject_rows
-    from solver.pipeline import process_subject
+    from solver.pipeline import options_for_fit, process_subject
 
     t0 = time.perf_counter()
     final = Path(job.out_dir)
@@ -160,7 +160,8 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
             unmeasured_force = job.masks(job.subject_dir, job.out_dir) if job.masks is not None else None
             if unmeasured_force:
                 log(f"reviewer flags used for {', '.join(sorted(unmeasured_force))}")
-            result = process_subject(job.subject_dir, work / "out", unmeasured_force=unmeasured_force, progress=log)
+            fit = str((job.key.get("settings") or {}).get("fit", "default"))
+            result = process_subject(job.subject_dir, work / "out", options=options_for_fit(fit), unmeasured_force=unmeasured_force, progress=log)
         for w in caught:
             log(f"warning: {w.message}")
         rows = subject_rows(work / "out")

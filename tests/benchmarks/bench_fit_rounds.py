@@ -1,14 +1,16 @@
 """Rounds and step direction of the dynamics fit: what other settings than the default change (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_fit_rounds.py [--rounds 4 6 8] [--direction band exact] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_fit_rounds.py [--rounds 4 6 8] [--direction band exact coefficients] [SUBJECT ...]
 
 The dynamics fit alternates ``FitSettings.rounds`` rounds (default 4) of at most
 ``FitSettings.iterations`` Gauss-Newton steps of the coordinates with a linear solve of the
 body mass factors, and stops early on a relative cost decrease under
 ``FitSettings.tolerance``. ``FitSettings.direction`` says how a step is found: ``band``
 (default; the derivative operators truncated to ``band`` frames in the Jacobian and its
-gradient) or ``exact`` (the exact gradient and Gauss-Newton system, by preconditioned
-conjugate gradients). For each subject (default: the Rajagopal walk and run of
+gradient), ``exact`` (the exact gradient and Gauss-Newton system, by preconditioned
+conjugate gradients) or ``coefficients`` (exact banded steps in the spline's coefficients,
+run as ``converged_fit(rounds=R)``: R is then the most rounds, which stop when the mass
+factors settle; what ``addb process --fit converged`` runs with R = 4). For each subject (default: the Rajagopal walk and run of
 ../shared/data/subjects and the Camargo circuit, assembled by
 ``scripts/make_example_subject.py camargo2021_levelground``) and each pair of round count
 and direction, one
@@ -33,7 +35,7 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 import solver.dynamics.fit as fit_module
-from solver.dynamics.fit import FitSettings
+from solver.dynamics.fit import FitSettings, converged_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
 
@@ -55,7 +57,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "camargo2021_levelground"])
     ap.add_argument("--rounds", type=int, nargs="+", default=[4, 6])
-    ap.add_argument("--direction", nargs="+", default=["band", "exact"], choices=["band", "exact"])
+    ap.add_argument("--direction", nargs="+", default=["band", "exact", "coefficients"], choices=["band", "exact", "coefficients"])
     args = ap.parse_args()
     steps = [0]
     step = fit_module._TrialProblem.step
@@ -76,7 +78,8 @@ def main() -> None:
             for direction in args.direction:
                 for rounds in args.rounds:
                     out = Path(tmp) / f"{name}_{direction}_{rounds}"
-                    options = ProcessOptions(dynamics=DynamicsOptions(fit=FitSettings(rounds=rounds, direction=direction)))
+                    fit = converged_fit(rounds=rounds) if direction == "coefficients" else FitSettings(rounds=rounds, direction=direction)
+                    options = ProcessOptions(dynamics=DynamicsOptions(fit=fit))
                     steps[0] = 0
                     t0 = time.perf_counter()
                     process_subject(subject, out, options=options)

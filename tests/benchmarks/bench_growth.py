@@ -1,6 +1,6 @@
 """Growth of ``addb process`` with the trial's length, and its peak memory (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_growth.py [--cuts 500 1000 1534] [--rate-for-memory 130.4]
+    .venv/bin/python tests/benchmarks/bench_growth.py [--cuts 500 1000 1534] [--rate-for-memory 130.4] [--fit converged]
 
 The Camargo level-ground circuit (``scripts/make_example_subject.py camargo2021_levelground``,
 1534 frames at the default 100 Hz) is cut to its first N frames' worth of time (the TRC's
@@ -12,6 +12,7 @@ about 2,000 frames; the recording is at 200 Hz) for the issue's memory target (u
 and peak resident memory of the child (``os.wait4``), the dynamics' frames (trial.npz),
 CPU milliseconds per frame (flat
 when the cost is linear in the length), and the dynamics fit's own time from subject.json.
+``--fit converged`` runs every process with ``addb process --fit converged``'s options.
 """
 
 from __future__ import annotations
@@ -31,8 +32,10 @@ REPO = Path(__file__).resolve().parents[2]
 NAME = "camargo2021_levelground"
 CHILD = (
     "import sys; from pathlib import Path; sys.path.insert(0, {repo!r});"
-    "from solver.dynamics.stage import DynamicsOptions; from solver.pipeline import ProcessOptions, process_subject;"
-    "process_subject(Path({subject!r}), Path({out!r}), options=ProcessOptions(dynamics=DynamicsOptions(rate_hz={rate!r})))"
+    "from dataclasses import replace; from solver.dynamics.stage import DynamicsOptions;"
+    "from solver.pipeline import options_for_fit, process_subject; o = options_for_fit({fit!r});"
+    "o = replace(o, dynamics=replace(o.dynamics or DynamicsOptions(), rate_hz={rate!r}));"
+    "process_subject(Path({subject!r}), Path({out!r}), options=o)"
 )
 
 
@@ -59,9 +62,9 @@ def _cut_subject(src: Path, dst: Path, frames: int) -> None:
     (out / "grf.mot").write_text("\n".join(head + rows) + "\n")
 
 
-def _run(subject: Path, out: Path, rate: float) -> tuple[float, float, float]:
+def _run(subject: Path, out: Path, rate: float, fit: str) -> tuple[float, float, float]:
     """One fresh process: (wall s, CPU s, peak resident MB)."""
-    code = CHILD.format(repo=str(REPO), subject=str(subject), out=str(out), rate=rate)
+    code = CHILD.format(repo=str(REPO), subject=str(subject), out=str(out), rate=rate, fit=fit)
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -75,6 +78,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cuts", type=int, nargs="+", default=[500, 1000, 1534])
     ap.add_argument("--rate-for-memory", type=float, default=130.4)
+    ap.add_argument("--fit", default="default", choices=["default", "converged"])
     args = ap.parse_args()
     print("| run | frames | wall (s) | CPU (s) | CPU ms per frame | dynamics fit (s) | peak memory (MB) |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
@@ -88,7 +92,7 @@ def main() -> None:
                 subject = Path(tmp) / f"cut{frames}"
                 _cut_subject(whole, subject, frames)
             out = Path(tmp) / f"out_{label.replace(' ', '_')}"
-            wall, cpu, peak = _run(subject, out, rate)
+            wall, cpu, peak = _run(subject, out, rate, args.fit)
             with np.load(out / "levelground" / "trial.npz") as z:
                 n = int(z["time"].size)  # the dynamics' frames (results.json's n_frames counts marker frames)
             fit_s = (json.loads((out / "subject.json").read_text()).get("dynamics_seconds") or {}).get("dynamics_fit", float("nan"))

@@ -1,6 +1,6 @@
 """End-to-end ``addb process`` timing on the shared subjects (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR] [--fit converged] [SUBJECT ...]
 
 Runs the command in a fresh process per subject (as a user would), ``--repeat`` times each
 (default 3; the table shows the median and the range of the wall times), and prints the
@@ -10,6 +10,10 @@ frames per CPU-second (the issue's "frames per core-second"; the machine's other
 does not count in it), the per-stage times of the median run from subject.json / results.json
 and the quality metrics. ``--src DIR`` runs another source tree's ``solver`` package (e.g.
 an export of an earlier commit) with this venv, for before/after figures on one machine.
+``--fit converged`` passes ``--fit converged`` to ``addb process`` (the dynamics fit run to
+convergence). SUBJECT is a folder of ../shared/data/subjects or
+``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
+by scripts/make_example_subject.py, outside the timed runs).
 Target (issue): 200 frames per core-second.
 """
 
@@ -29,10 +33,24 @@ from pathlib import Path
 SUBJECTS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "subjects"
 
 
-def _run(name: str, out: Path, src: str | None) -> tuple[float, float]:
-    """One ``addb process`` of subject ``name``: (wall s, CPU s user + sys of the child)."""
+EXAMPLES = ("camargo2021_levelground",)
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _subject(name: str, tmp: Path) -> Path:
+    """The subject folder: a shared subject, or an example assembled into ``tmp``."""
+    if name not in EXAMPLES:
+        return SUBJECTS / name
+    dst = tmp / "examples" / name
+    if not dst.exists():
+        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), name, str(dst)], check=True, capture_output=True)
+    return dst
+
+
+def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, float]:
+    """One ``addb process`` of ``subject``: (wall s, CPU s user + sys of the child)."""
     env = dict(os.environ)
-    cmd = [str(Path(sys.executable).parent / "addb"), "process", str(SUBJECTS / name), "--out", str(out)]
+    cmd = [str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out), "--fit", fit]
     cwd = None
     if src:  # the other tree's `solver` first on the path; run outside the repo so '' does not shadow it
         env["PYTHONPATH"] = os.pathsep.join([src, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
@@ -50,6 +68,7 @@ def main() -> None:
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
+    ap.add_argument("--fit", default="default", choices=["default", "converged"], help="addb process --fit")
     args = ap.parse_args()
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
@@ -60,7 +79,7 @@ def main() -> None:
         for name in args.subjects:
             walls, cpus = [], []
             for i in range(args.repeat):
-                w, c = _run(name, Path(tmp) / f"{name}_{i}", args.src)
+                w, c = _run(_subject(name, Path(tmp)), Path(tmp) / f"{name}_{i}", args.src, args.fit)
                 walls.append((w, i))
                 cpus.append(c)
             wall, i_med = sorted(walls)[len(walls) // 2]

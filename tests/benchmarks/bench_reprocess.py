@@ -1,6 +1,6 @@
 """Reprocess after a flag edit: time from the button to the updated before/after table.
 
-    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [walk] [camargo]
+    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [--fit converged] [walk] [camargo]
 
 For each subject (the shared rajagopal2016_walk; the Camargo level-ground circuit assembled
 by scripts/make_example_subject.py) in a temporary folder: one full ``process_subject``
@@ -19,7 +19,12 @@ frames plus 20 frames of stance, and ``--repeat`` times each (median and range p
   ``load_processed`` of the trial and ``comparison_markdown`` of the before/after summaries
   (what the app does in ``Reprocessor._install``; the 3-D scene reload is not counted);
 * ``in process``: ``reprocess_dynamics`` called in this process (no child start and
-  imports), without and with the opt-in warm start, to show where the time goes.
+  imports), without and with the warm start, to show where the time goes.
+
+``--fit converged``: the first full process uses ``addb process --fit converged``'s
+options; every Reprocess then uses the fit recorded in the output (as the app does), which
+for the converged fit is warm-started by default (the job rows), and the ``in process``
+row is asked for no warm start explicitly.
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ sys.path.insert(0, str(REPO))
 
 from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare  # noqa: E402
 from addb_viewer.app.summary import comparison_markdown, trial_summary  # noqa: E402
-from solver.pipeline import process_subject, reprocess_dynamics  # noqa: E402
+from solver.pipeline import options_for_fit, process_subject, reprocess_dynamics  # noqa: E402
 from solver.results import load_processed  # noqa: E402
 
 SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
@@ -102,6 +107,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("which", nargs="*", default=["walk", "camargo"], choices=["walk", "camargo"])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--fit", default="default", choices=["default", "converged"], help="the first full process's fit (addb process --fit)")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -111,7 +117,7 @@ def main() -> None:
             subject, trial = _subject(which, root)
             out = root / "out"
             t0 = time.perf_counter()
-            process_subject(subject, out)
+            process_subject(subject, out, options=options_for_fit(args.fit))
             first = time.perf_counter() - t0
             flags = _flags(out, trial)
             times: dict[str, list[float]] = {"dynamics only": [], "cold child": [], "full run": [], "in process": [], "in process, warm": []}
@@ -120,15 +126,15 @@ def main() -> None:
                 times["cold child"].append(_job_to_table(subject, out, trial, flags, True, root / f"job-c{i}", warm=False))
                 times["full run"].append(_job_to_table(subject, out, trial, flags, False, root / f"job-f{i}"))
                 t0 = time.perf_counter()
-                reprocess_dynamics(subject, out, (trial,), flags)
+                reprocess_dynamics(subject, out, (trial,), flags, warm_start=False)
                 times["in process"].append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 reprocess_dynamics(subject, out, (trial,), flags, warm_start=True)
                 times["in process, warm"].append(time.perf_counter() - t0)
-                reprocess_dynamics(subject, out, (trial,), flags)  # back to the cold answer for the next round
+                reprocess_dynamics(subject, out, (trial,), flags, warm_start=False)  # back to the cold answer for the next round
             r = json.loads((out / trial / "results.json").read_text())
             rows.append((which, trial, r["n_frames"], first, times, r["stage_seconds"]))
-    print(f"Reprocess after a flag edit, button to table, s (median (range) of {args.repeat}); {time.strftime('%Y-%m-%d')}")
+    print(f"Reprocess after a flag edit, button to table, s (median (range) of {args.repeat}); fit {args.fit}; {time.strftime('%Y-%m-%d')}")
     print("| subject | trial | frames | first full process (in process) | Reprocess: dynamics only (job, warm child) | same, cold child | Reprocess: full run (job, warm child) | dynamics only, in process | same, warm start |")
     print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for which, trial, n, first, t, _ in rows:
