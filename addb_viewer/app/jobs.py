@@ -72,7 +72,9 @@ class JobSpec:
         For ``"process"`` with ``trials``: rerun the dynamics stage only, on the kinematics
         cached in ``out_dir`` by the last full run
         (:func:`solver.pipeline.reprocess_dynamics`; a full run when that cache is missing
-        or stale). The reviewer's flags do not change the kinematics.
+        or stale). The reviewer's flags do not change the kinematics. Either way the
+        dynamics fit is the one ``out_dir`` was made with
+        (:func:`solver.pipeline.recorded_dynamics_options`; the default for a first run).
     """
 
     subject_dir: Path
@@ -396,7 +398,7 @@ def _child(spec_path: str) -> int:
         spec = json.loads(Path(spec_path).read_text())
         with np.load(spec["unmeasured_force"]) as data:
             unmeasured_force = {t: data[f"m{i}"] for i, t in enumerate(spec["unmeasured_force_trials"])}
-        from solver.pipeline import ProcessOptions, process_subject
+        from solver.pipeline import ProcessOptions, process_subject, recorded_dynamics_options
 
         trials = tuple(spec["trials"]) if spec["trials"] is not None else None
         _emit({"progress": "loading the subject", "fraction": 0.0})
@@ -425,7 +427,8 @@ def _child(spec_path: str) -> int:
         process_subject(
             spec["subject_dir"],
             spec["out_dir"],
-            options=ProcessOptions(trials=trials),
+            # the fit the output was made with (a first processing: the default)
+            options=ProcessOptions(trials=trials, dynamics=recorded_dynamics_options(spec["out_dir"])),
             unmeasured_force=unmeasured_force or None,
             progress=lambda m, f: _emit({"progress": m, "fraction": f}),
         )

@@ -57,6 +57,8 @@ from solver.model.skeleton import Skeleton
 FloatArray = NDArray[np.float64]
 #: Weight of a held coordinate's row in the coefficient system, relative to the normal matrix's diagonal.
 HOLD = 1e4
+#: Frames per chunk when the coefficient system is assembled (bounds its temporaries' memory).
+ASSEMBLY_FRAMES = 256
 IntArray = NDArray[np.intp]
 
 
@@ -427,24 +429,25 @@ class _TrialProblem:
     def coefficient_equations(self, q: FloatArray) -> tuple[BlockBands, FloatArray, FloatArray, FloatArray]:
         """The exact Gauss-Newton system in the spline's coefficients (``direction="coefficients"``).
 
-        With c the B-spline coefficients of the coordinates' spline (q = E0 c, qd = E1 c,
-        qdd = E2 c; :class:`.spline.CoefficientMaps`), each frame's rows depend on the
-        ``width`` coefficients of its window only, so ``J_c^T J_c`` is block-banded: the
-        Gauss-Newton step of the cost with the full (dense) derivative operators, found by
-        one banded Cholesky factorization.
+        With a the coefficients of the coordinates' natural spline in a local basis
+        (q = E0 a, qd = E1 a, qdd = E2 a; :class:`.spline.CoefficientMaps`), each frame's
+        rows depend on the ``width`` coefficients of its window only, so ``J_a^T J_a`` is
+        block-banded: the Gauss-Newton step of the cost with the full (dense in q)
+        derivative operators, found by one banded Cholesky factorization
+        (tests/dynamics/test_fit_linear_algebra.py checks it against the Jacobian in q).
 
         Returns
         -------
         bands
-            The normal matrix's upper block bands, ``nc`` block rows of ``nf``.
+            The normal matrix's upper block bands, ``nc`` block rows of ``nf`` (nc = T).
         g_c
-            ``(nc, nf)`` gradient of half the cost with respect to c.
+            ``(nc, nf)`` gradient of half the cost with respect to a.
         g_q
             ``(T, nf)`` the same gradient with respect to q (exact; for the bounds).
         diag
             ``(nc, nf)`` the normal matrix's diagonal (for the damping).
         """
-        cm, nf, t = self.cmaps, self.nf, self.t
+        cm, nf = self.cmaps, self.nf
         nc = cm.e0.shape[1]
         if self._bands is None:
             self._bands = BlockBands(nc, self._nb + 1, nf)
@@ -459,16 +462,19 @@ class _TrialProblem:
         g_q = g0 + self.ops.transpose(g1, g2)
         w0, w1, w2 = cm.weights  # (T, W) each
         width = cm.width
-        # x[k, :, a] = d r_k / d c_{start_k + a}
-        x = dq[:, :, None, :] * w0[:, None, :, None] + dv[:, :, None, :] * w1[:, None, :, None] + da[:, :, None, :] * w2[:, None, :, None]
         for frames in self._passes:  # frames whose windows start at distinct coefficients
-            s, xk, wk, gk = cm.start[frames], x[frames], w0[frames], gm[frames]
-            for a in range(width):
-                m = width - a
-                # block row s + a, bands 0..m-1: residual rows x_a^T x_b, marker rows w_a w_b J_m^T J_m
-                add = xk[:, :, a].transpose(0, 2, 1) @ xk[:, :, a:].reshape(s.size, 6, m * nf)
-                add.reshape(s.size, nf, m, nf)[...] += (wk[:, a, None] * wk[:, a:])[:, None, :, None] * gk[:, :, None, :]
-                bands.panel[_rows(s + a), :, : m * nf] += add
+            for lo in range(0, frames.size, ASSEMBLY_FRAMES):  # in chunks: the temporaries stay small
+                f = frames[lo : lo + ASSEMBLY_FRAMES]
+                s, wk, gk = cm.start[f], w0[f], gm[f]
+                # xk[k, :, a] = d r_k / d a_{start_k + a}
+                xk = (dq[f][:, :, None, :] * wk[:, None, :, None] + dv[f][:, :, None, :] * w1[f][:, None, :, None]
+                      + da[f][:, :, None, :] * w2[f][:, None, :, None])  # fmt: skip
+                for a in range(width):
+                    m = width - a
+                    # block row s + a, bands 0..m-1: residual rows x_a^T x_b, marker rows w_a w_b J_m^T J_m
+                    add = xk[:, :, a].transpose(0, 2, 1) @ xk[:, :, a:].reshape(s.size, 6, m * nf)
+                    add.reshape(s.size, nf, m, nf)[...] += (wk[:, a, None] * wk[:, a:])[:, None, :, None] * gk[:, :, None, :]
+                    bands.panel[_rows(s + a), :, : m * nf] += add
         # the smoothness rows: the same scalar band matrix (E0-mapped second differences) for every coordinate
         blocks = bands.blocks
         idx = np.arange(nf)

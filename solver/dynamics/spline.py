@@ -29,7 +29,6 @@ import numpy as np
 import scipy.sparse as sps
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
-from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from solver.errors import DynamicsError
