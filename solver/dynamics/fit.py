@@ -6,6 +6,7 @@ solved here by Gauss-Newton on a banded system):
     min_Q  sum_t sum_m |p_m(q_t) - y_tm|² / s_m²                              markers, every frame
          + sum_{t observed} |F_res(t)|² / s_F² + |M_res(t)|² / s_M²            residuals, measured frames only
          + sum_t |q_{t+1} - 2 q_t + q_{t-1}|² / (h² s_a)²                       smoothness
+                 (|qdd_t|² / s_a², the spline's accelerations, with direction "coefficients")
 
 where F_res = pdot - m g - F_ext and M_res = kdot_G - sum_i (r_i - c) x f_i - tau_i are the
 net force and the net moment about the centre of mass that the ground would have to add
@@ -44,7 +45,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-import scipy.sparse as sps
 from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
 
@@ -75,7 +75,9 @@ class FitSettings:
     moment_sigma
         s_M, N·m per residual moment component.
     accel_sigma
-        s_a, rad/s² (m/s²) per coordinate: a weak smoothness prior.
+        s_a, rad/s² (m/s²) per coordinate: a weak smoothness prior on the accelerations
+        (central second differences; the spline's accelerations with ``"coefficients"``,
+        whose normal matrix stays as narrow as a frame's window then).
     unobserved_force_sigma, unobserved_moment_sigma
         s_F and s_M on frames with unmeasured force: a weak pull of the free centre-of-mass
         accelerations there (the unmeasured force stays free to reach body weight).
@@ -251,8 +253,8 @@ class _TrialProblem:
         first = np.searchsorted(cm.start, cm.start, side="left")
         rank = np.arange(self.t) - first
         self._passes = [np.flatnonzero(rank == r) for r in range(int(rank.max()) + 1)]
-        second = sps.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(self.t - 2, self.t)) @ cm.e0
-        smooth = (second.T @ second).tocsr()
+        # the smoothness rows are the spline's accelerations qdd = E2 a (see cost): as wide as a window
+        smooth = (cm.e2.T @ cm.e2).tocsr()
         rows, cols = smooth.nonzero()
         width = max(cm.width, int(np.abs(cols - rows).max(initial=0)) + 1)
         self._nb = width - 1  # block bandwidth
@@ -301,7 +303,10 @@ class _TrialProblem:
         # residual terms on every frame (weights per frame)
         r = self.residual_wrench(hdot, com) * self.w_res
         total += float(np.sum(r**2))
-        smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
+        if st.direction == "coefficients":  # the spline's accelerations (what the dynamics see)
+            smooth = self.ops(q[:, self.free])[1] / st.accel_sigma
+        else:  # central second differences
+            smooth = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) / (self.data.dt**2 * st.accel_sigma)
         return total + float(np.sum(smooth**2))
 
     # -------------------------------------------------------------- linearization
@@ -455,9 +460,10 @@ class _TrialProblem:
             self._bands.panel.fill(0.0)
         bands = self._bands
         gm, g0, res, dq, dv, da = self._linearize(q)
-        ws, gs = self._smoothness(q)
-        g0 = g0 + gs + np.einsum("kri,kr->ki", dq, res)
+        g0 = g0 + np.einsum("kri,kr->ki", dq, res)
         g1, g2 = np.einsum("kri,kr->ki", dv, res), np.einsum("kri,kr->ki", da, res)
+        ws = 1.0 / self.st.accel_sigma  # smoothness rows qdd / s_a: through E2 like the residuals' accelerations
+        g2 += self.ops(q[:, self.free])[1] * ws**2
         g_c = cm.e0.T @ g0 + cm.e1.T @ g1 + cm.e2.T @ g2
         g_q = g0 + self.ops.transpose(g1, g2)
         w0, w1, w2 = cm.weights  # (T, W) each
@@ -475,7 +481,7 @@ class _TrialProblem:
                     add = xk[:, :, a].transpose(0, 2, 1) @ xk[:, :, a:].reshape(s.size, 6, m * nf)
                     add.reshape(s.size, nf, m, nf)[...] += (wk[:, a, None] * wk[:, a:])[:, None, :, None] * gk[:, :, None, :]
                     bands.panel[_rows(s + a), :, : m * nf] += add
-        # the smoothness rows: the same scalar band matrix (E0-mapped second differences) for every coordinate
+        # the smoothness rows: the same scalar band matrix E2^T E2 / s_a² for every coordinate
         blocks = bands.blocks
         idx = np.arange(nf)
         for o, d in enumerate(self._smooth_bands * ws**2):

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -38,19 +37,7 @@ import solver.dynamics.fit as fit_module
 from solver.dynamics.fit import FitSettings, converged_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
-
-SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
-EXAMPLES = ("camargo2021_levelground",)
-
-
-def _subject(name: str, tmp: Path) -> Path:
-    """The subject folder: a shared subject, or an example assembled into ``tmp``."""
-    if name not in EXAMPLES:
-        return SUBJECTS / name
-    dst = tmp / "examples" / name
-    if not dst.exists():
-        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), name, str(dst)], check=True, capture_output=True)
-    return dst
+from tests.benchmarks.example_subjects import subject_folder
 
 
 def main() -> None:
@@ -74,7 +61,7 @@ def main() -> None:
     print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.subjects:
-            subject = _subject(name, Path(tmp))
+            subject = subject_folder(name, Path(tmp))
             for direction in args.direction:
                 for rounds in args.rounds:
                     out = Path(tmp) / f"{name}_{direction}_{rounds}"

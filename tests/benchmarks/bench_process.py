@@ -30,21 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-SUBJECTS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "subjects"
-
-
-EXAMPLES = ("camargo2021_levelground",)
-REPO = Path(__file__).resolve().parents[2]
-
-
-def _subject(name: str, tmp: Path) -> Path:
-    """The subject folder: a shared subject, or an example assembled into ``tmp``."""
-    if name not in EXAMPLES:
-        return SUBJECTS / name
-    dst = tmp / "examples" / name
-    if not dst.exists():
-        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), name, str(dst)], check=True, capture_output=True)
-    return dst
+from example_subjects import subject_folder  # this folder: the script's own
 
 
 def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, float]:
@@ -79,7 +65,7 @@ def main() -> None:
         for name in args.subjects:
             walls, cpus = [], []
             for i in range(args.repeat):
-                w, c = _run(_subject(name, Path(tmp)), Path(tmp) / f"{name}_{i}", args.src, args.fit)
+                w, c = _run(subject_folder(name, Path(tmp)), Path(tmp) / f"{name}_{i}", args.src, args.fit)
                 walls.append((w, i))
                 cpus.append(c)
             wall, i_med = sorted(walls)[len(walls) // 2]

@@ -97,7 +97,10 @@ def _residual_vector(prob: _TrialProblem, q: np.ndarray) -> np.ndarray:
     e = np.where(prob.seen[..., None], pos - prob.y, 0.0) / st.marker_sigma
     _, _, qp, vp, ap = prob.kinematics(q)
     r = prob.residual_wrench(*prob.momentum_rate(qp, vp, ap)) * prob.w_res
-    smooth = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) / (prob.data.dt**2 * st.accel_sigma)
+    if st.direction == "coefficients":  # the spline's accelerations
+        smooth = prob.kinematics(q)[1][:, free] / st.accel_sigma
+    else:
+        smooth = (q[2:, free] - 2 * q[1:-1, free] + q[:-2, free]) / (prob.data.dt**2 * st.accel_sigma)
     return np.concatenate([e.ravel(), r.ravel(), smooth.ravel()])
 
 
@@ -193,13 +196,15 @@ def test_coefficient_direction_is_the_gauss_newton_system_of_the_cost() -> None:
     derivative operators: with N = E0^-1 (the coefficients of unit samples), N^T H N = J^T J
     and N^T g = J^T r for the Jacobian J in q by central differences (coordinates of
     nonlinear joint functions left out, as above), and the gradient in q it returns is
-    J^T r too. The trial is long enough for every window to lie inside it."""
+    J^T r too (its smoothness rows are the spline's accelerations), and the cost is the sum
+    of the squared residuals."""
     sk = _skeleton()
     t = 14
     trial = _synthetic_trial(sk, t)
     prob = _TrialProblem(sk, trial, replace(FitSettings(), direction="coefficients"))
     q = trial.q
     nf = prob.nf
+    assert np.sum(_residual_vector(prob, q) ** 2) == pytest.approx(prob.cost(q), rel=1e-12)
     bands, g_c, g_q, _ = prob.coefficient_equations(q)
     ab = bands.lower_band_storage()
     n = g_c.size
