@@ -320,8 +320,7 @@ def reprocess_dynamics(
     if not opts.trials:
         raise KinematicsError("reprocess_dynamics: name at least one trial to write")
     if warm_start is None:
-        fit = opts.dynamics.fit if opts.dynamics is not None else None
-        warm_start = fit is not None and fit.direction == "coefficients" and fit.mass_tolerance > 0
+        warm_start = opts.dynamics is not None and opts.dynamics.fit.converges
     with single_threaded_blas():
         return _process_subject(subject_dir, out_dir, opts, unmeasured_force, progress, dynamics_only=True, warm_start=warm_start)
 

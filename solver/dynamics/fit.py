@@ -136,6 +136,12 @@ class FitSettings:
     cg_iterations: int = 20
     cg_tolerance: float = 0.05
 
+    @property
+    def converges(self) -> bool:
+        """The fit runs until it settles (exact steps, rounds stopped on the mass factors, as
+        :func:`converged_fit`), so its end point does not depend on where it starts."""
+        return self.direction == "coefficients" and self.mass_tolerance > 0
+
 
 def converged_fit(**changes: object) -> FitSettings:
     """Settings of a fit that runs to convergence: ``direction="coefficients"`` (exact banded
@@ -200,6 +206,17 @@ def _skew_batch(v: FloatArray) -> FloatArray:
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def _add_second_difference_normal(out: FloatArray, x: FloatArray, ws: float) -> FloatArray:
+    """Add ``ws² L^T L x`` to ``out`` in place and return it, for ``(T, n)`` x and out, L the
+    ``(T - 2, T)`` central second differences: the smoothness rows' normal product (their
+    gradient at x, their Gauss-Newton product with a step x)."""
+    sd = (x[2:] - 2 * x[1:-1] + x[:-2]) * ws**2
+    out[:-2] += sd
+    out[1:-1] -= 2 * sd
+    out[2:] += sd
     return out
 
 
@@ -358,12 +375,7 @@ class _TrialProblem:
         """``(ws, (T, nf))``: the smoothness rows' weight 1 / (h² s_a) and the gradient of
         their half squared sum, on the free coordinates."""
         ws = 1.0 / (self.data.dt**2 * self.st.accel_sigma)
-        sd = (q[2:, self.free] - 2 * q[1:-1, self.free] + q[:-2, self.free]) * ws**2  # (T-2, nf)
-        g = np.zeros((self.t, self.nf))
-        g[:-2] += sd
-        g[1:-1] -= 2 * sd
-        g[2:] += sd
-        return ws, g
+        return ws, _add_second_difference_normal(np.zeros((self.t, self.nf)), q[:, self.free], ws)
 
     def normal_equations(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Banded normal matrix and gradient for a step on the free coordinates.
@@ -532,12 +544,7 @@ class _TrialProblem:
         u = np.einsum("kri,ki->kr", dq, v) + np.einsum("kri,ki->kr", dv, v1) + np.einsum("kri,ki->kr", da, v2)
         out = np.einsum("kij,kj->ki", jm2, v) + np.einsum("kri,kr->ki", dq, u)
         out += self.ops.transpose(np.einsum("kri,kr->ki", dv, u), np.einsum("kri,kr->ki", da, u))
-        ws = 1.0 / (self.data.dt**2 * self.st.accel_sigma)
-        sd = (v[2:] - 2 * v[1:-1] + v[:-2]) * ws**2
-        out[:-2] += sd
-        out[1:-1] -= 2 * sd
-        out[2:] += sd
-        return out
+        return _add_second_difference_normal(out, v, 1.0 / (self.data.dt**2 * self.st.accel_sigma))
 
     def _direction(self, chol: FloatArray, grad: FloatArray, keep: FloatArray, damping: FloatArray) -> FloatArray:
         """The damped Gauss-Newton step: ``(J^T J + mu D) delta = -grad`` on the coordinates
@@ -656,7 +663,6 @@ class _TrialProblem:
         keep = (~held).astype(float)
         diag = np.maximum(ab[0].copy(), 1e-9)
         base = ab[0] + held.reshape(-1) * 1e12
-        cost0 = self.cost(q) if cost0 is None else cost0
         for _ in range(4):
             if ab is None:  # factored in place by the last attempt: the same matrix again
                 ab = self._bands.lower_band_storage()

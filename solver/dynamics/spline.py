@@ -73,16 +73,6 @@ def _basis(x: FloatArray, knots: FloatArray, nu: int, chunk: int = 64) -> sps.cs
 
 
 @lru_cache(maxsize=16)
-def _unit(n: int, method: str) -> tuple[object, sps.csr_matrix, sps.csr_matrix]:
-    """Unit-interval pieces (dt = 1) for ``n`` samples; cached.
-
-    ``("spline", lu of M, E1, E2)`` pieces as in the module docstring, or for central
-    differences ``(None, D1, D2)`` as sparse matrices."""
-    lu, _, e1, e2, _ = _pieces(n, method)
-    return lu, e1, e2
-
-
-@lru_cache(maxsize=16)
 def _pieces(n: int, method: str) -> tuple[object, sps.csr_matrix, sps.csr_matrix, sps.csr_matrix, sps.csr_matrix]:
     """``(lu of M, E0, E1, E2, B)`` at dt = 1: E0..E2 the values and derivatives of the
     basis at the samples (``(n, nc)``), B the ``(4, nc)`` end conditions (rows of M);
@@ -188,7 +178,7 @@ class Derivatives:
         n = int(n)
         _check(n, method)
         self.n, self.dt, self.method = n, float(dt), method
-        self._lu, self._e1, self._e2 = _unit(n, method)
+        self._lu, _, self._e1, self._e2, _ = _pieces(n, method)
 
     def __call__(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(n, ...)`` samples -> their first and second time derivatives, same shape."""
