@@ -16,8 +16,9 @@ Which trials
 Which frames
     The record stores flags on the frames of the trial it was made on, with their count
     and rate (``n_frames``, ``rate_hz``); the review app records the processed frames, so
-    those flags are passed as they are. A record at another rate (``addb convert`` of a
-    ``.b3d`` stores its marker frames) is put on the processed frames by the one
+    those flags are passed as they are (``addb convert`` of a ``.b3d`` records them there
+    too, since 2026-11-24). A record at another rate (an older ``addb convert``'s, on the
+    ``.b3d``'s own frames) is put on the processed frames by the one
     resampling rule, :func:`solver.masks.resample_mask`, both starting at the trial's first
     processed frame. A record at the processed rate with another frame count was made on
     another version of the trial and is refused (AnnotationError naming the trial and both

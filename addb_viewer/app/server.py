@@ -283,7 +283,7 @@ class ReviewApp:
         for body, files in trial.body_meshes.items():
             meshes[body], p = body_mesh(search, files) if files else (None, [])
             problems += p
-        editor = self._editor_for(trial)
+        editor, record_problem = self._editor_for(trial)
         view = editor.view() if editor is not None else None
         with self._lock:
             self._drop_trial()
@@ -305,19 +305,34 @@ class ReviewApp:
         self.clear_error()
         if problems:
             self.show_error("Some bone meshes could not be read (drawn as axes)", "; ".join(problems[:5]))
+        if record_problem is not None:
+            self.show_error(*record_problem)
         if self.first_frame_seconds is None:
             self.first_frame_seconds = time.monotonic() - self.started_at
 
-    def _editor_for(self, trial: ProcessedTrial) -> TrialEditor | None:
+    def _editor_for(self, trial: ProcessedTrial) -> tuple[TrialEditor | None, tuple[str, BaseException | str] | None]:
+        """The trial's flag editor (None without a review record, or when the record holds the
+        trial on other frames) and the problem to show once the trial is loaded, if any."""
         if self.store is None:
-            return None
+            return None, None
         rev = self.store.review(trial.trial)
+        if rev.rate_hz is not None and trial.rate_hz and abs(rev.rate_hz / trial.rate_hz - 1.0) > 1e-6:
+            # a record on other frames (an older addb convert stored a .b3d's own frames):
+            # its flags would be read, and new ones written, on the wrong frames
+            return None, (
+                "The review record of this trial is on other frames: its flags are not shown or edited",
+                (
+                    f"the record holds this trial at {rev.rate_hz:g} Hz, the app shows its processed frames at "
+                    f"{trial.rate_hz:g} Hz; convert the .b3d again (addb convert --force) to review it here"
+                ),
+            )
+        problem = None
         if rev.n_frames != trial.n_frames:
             try:
                 self.store.set_trial_info(trial.trial, n_frames=trial.n_frames, rate_hz=trial.rate_hz or None)
             except AnnotationError as exc:
-                self.show_error("The review record does not match this trial's length", exc)
-        return TrialEditor(self.store, trial.trial, trial.proposed, trial.proposal_reasons)
+                problem = ("The review record does not match this trial's length", exc)
+        return TrialEditor(self.store, trial.trial, trial.proposed, trial.proposal_reasons), problem
 
     def _drop_trial(self) -> None:
         if self.scene is not None:

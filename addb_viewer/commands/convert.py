@@ -4,6 +4,14 @@ The folder is one ``addb process`` solves (:func:`solver.io.b3d_convert.b3d_to_s
 the file's missing-GRF labels become the subject's review record (``annotations.json``,
 provenance ``imported``): frames with a reason other than ``notMissingGRF`` are flagged
 ``unmeasured_force``, and each run of one reason carries a note naming it.
+
+The record holds the flags on the frames the review app shows and edits, the trial's
+processed frames (100 Hz over the span the markers and the plates share,
+:func:`addb_viewer.review_masks.processed_frames`), put there from the file's frames by the
+one resampling rule (:func:`solver.masks.resample_mask`). Until 2026-11-24 they were stored
+on the file's frames: for a file at another rate than 100 Hz the app then read them, and
+wrote the reviewer's own flags, on the wrong frames. A trial without force plates keeps the
+file's frames (it has no processed frames to flag).
 """
 
 from __future__ import annotations
@@ -28,19 +36,29 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
     Path
         The review record (where :mod:`addb_viewer.locations` says the subject's record lives).
     """
-    from addb_viewer.locations import annotations_path, default_output_dir
-    from annotations import AnnotationStore
-    from solver.masks import true_runs
+    import numpy as np
 
+    from addb_viewer.locations import annotations_path, default_output_dir
+    from addb_viewer.review_masks import processed_frames
+    from annotations import AnnotationStore
+    from solver.io.subject import load_subject, load_trial
+    from solver.masks import resample_mask, true_runs
+
+    subject = load_subject(converted.path)
     path = annotations_path(converted.path, default_output_dir(converted.path))
     with AnnotationStore.open(path, reviewer=reviewer) as store:
         for t in converted.trials:
-            store.set_trial_info(t.name, n_frames=t.n_frames, rate_hz=t.rate_hz)
-            store.set_mask(t.name, t.missing_mask, kind="unmeasured_force", source="imported", overwrite=True)
-            reasons = t.missing_grf
-            for reason in sorted(set(reasons) - {"notMissingGRF"}):
-                mask = [r == reason for r in reasons]
-                for start, stop in true_runs(mask):
+            reasons = np.asarray(t.missing_grf)
+            file_time = np.asarray(load_trial(subject.trial(t.name)).markers.time)  # the file's frames, as written
+            time = processed_frames(subject, t.name)
+            if time is None:  # no dynamics: the file's own frames
+                time = file_time
+            rate = 1.0 / float(np.median(np.diff(time))) if time.size > 1 else t.rate_hz
+            store.set_trial_info(t.name, n_frames=int(time.size), rate_hz=rate)
+            missing = resample_mask(reasons != "notMissingGRF", file_time, time)
+            store.set_mask(t.name, missing, kind="unmeasured_force", source="imported", overwrite=True)
+            for reason in sorted(set(t.missing_grf) - {"notMissingGRF"}):
+                for start, stop in true_runs(resample_mask(reasons == reason, file_time, time)):
                     store.add_note(t.name, f"AddBiomechanics: missing GRF ({reason})", start=start, stop=stop, source="imported")
     return path
 

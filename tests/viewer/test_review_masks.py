@@ -120,7 +120,7 @@ def test_app_process_and_diagnose_give_the_solver_the_same_masks(camargo: Path, 
 
 
 def test_a_record_at_the_marker_rate_is_resampled_by_the_overlap_rule(camargo: Path) -> None:
-    """``addb convert`` stores a .b3d's labels on its marker frames (here 200 Hz): marker
+    """A record on the marker frames (an older ``addb convert``'s, here 200 Hz): marker
     frames 1000-1099 ([5.0025, 5.5025) s) become processed frames 500-550 (frame 550 overlaps
     by 2.5 ms), as an AddBiomechanics review.json of the same frames does."""
     flags = np.zeros(N_MARKERS, dtype=bool)
@@ -134,6 +134,31 @@ def test_a_record_at_the_marker_rate_is_resampled_by_the_overlap_rule(camargo: P
     write_addb_review(review, flags)
     from_file = masks_from_file(review, camargo, reviewer="test")
     np.testing.assert_array_equal(from_file["levelground"], masks["levelground"])
+
+
+def test_a_converted_b3d_at_another_rate_is_recorded_on_the_processed_frames(camargo: Path) -> None:
+    """``addb convert`` (and ``addb view FILE.b3d``) store a .b3d's missing-GRF labels on the
+    processed frames the review app shows and edits: labels on marker frames 1000-1099 of a
+    200 Hz file become processed frames 500-550 at 100 Hz, the frames the solver takes from a
+    record on the marker frames (test above), with their note on the same frames. Stored on
+    the file's frames (until 2026-11-24), the app read them, and wrote new flags, as if they
+    were processed frames: 10-11 s instead of 5-5.5 s."""
+    from addb_viewer.commands.convert import write_review_record
+    from solver.io.b3d_convert import ConvertedSubject, ConvertedTrial
+
+    reasons = ["notMissingGRF"] * N_MARKERS
+    reasons[1000:1100] = ["notOverForcePlate"] * 100
+    converted = ConvertedSubject(camargo, camargo / "source.b3d", (ConvertedTrial("levelground", "levelground", N_MARKERS, 200.0, tuple(reasons)),))
+    record = write_review_record(converted, reviewer="addb convert")
+    with AnnotationStore.open(record, reviewer="test") as store:
+        review = store.review("levelground")
+        assert (review.n_frames, review.rate_hz) == (N_FRAMES, pytest.approx(100.0))
+        assert true_runs(store.mask("levelground")) == [(500, 551)]
+        assert store.flag("levelground", 500).provenance.source == "imported"
+        assert [(n.start, n.stop, n.text) for n in store.notes("levelground")] == [(500, 551, "AddBiomechanics: missing GRF (notOverForcePlate)")]
+        masks = unmeasured_force(store, camargo)
+    # the solver's mask is the record's own (no second resampling: the record is at the processed rate)
+    assert true_runs(masks["levelground"]) == [(500, 551)]
 
 
 def test_which_trials_enter_and_flags_made_on_other_frames(tmp_path: Path) -> None:

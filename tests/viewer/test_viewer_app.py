@@ -58,6 +58,32 @@ def test_unreadable_trial_file_is_reported_and_others_still_load(demo_paths, mak
     assert not app.panel.error.visible
 
 
+def test_a_record_on_other_frames_is_not_edited_and_says_why(demo_paths, make_app) -> None:
+    """A review record that holds a trial on other frames (an older ``addb convert`` of a
+    200 Hz .b3d) gets no flag editor, so no flag is read or written on the wrong frames, and
+    the page says why after the trial has loaded; a record of another length at the
+    trial's rate keeps its editor and its problem is shown too (until 2026-11-24 both
+    messages were cleared by the end of the loading)."""
+    from addb_viewer.locations import annotations_path
+    from annotations import AnnotationStore
+
+    record = annotations_path(demo_paths.subject_dir, demo_paths.out_dir)
+    with AnnotationStore.open(record, reviewer="addb convert") as store:
+        store.set_trial_info("walk", n_frames=476, rate_hz=200.0)
+        store.set_unmeasured("walk", [300])
+        store.set_trial_info("static", n_frames=400, rate_hz=100.0)
+        store.set_unmeasured("static", [350])  # beyond the processed static's frames
+    app = make_app(demo_paths)
+    app.load_trial("walk")
+    assert app.trial.trial == "walk" and app.editor is None
+    assert app.panel.error.visible and "on other frames" in app.panel.error.content and "200 Hz" in app.panel.error.content
+    app.load_trial("static")
+    assert app.editor is not None and app.trial.n_frames < 351
+    assert app.panel.error.visible and "does not match this trial's length" in app.panel.error.content
+    with AnnotationStore.open(record, reviewer="test") as store:  # nothing was rewritten
+        assert (store.review("walk").rate_hz, store.ranges("walk")) == (200.0, [(300, 301)])
+
+
 def test_trial_picker_refuses_names_from_the_page_that_leave_the_output(demo_paths, make_app) -> None:
     app = make_app(demo_paths)
     assert app.panel.trial.options == ("static", "walk") and app.panel.trial.value == "walk"
