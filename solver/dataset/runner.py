@@ -30,7 +30,7 @@ import os
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -183,8 +183,13 @@ def process_dataset(
         worker, at most twice a second) and ``("done", outcome)`` as each finishes (the
         review workbench's queue).
     stop
-        A ``threading.Event``: once set, the subjects not finished are cancelled (their
-        outputs stay as they were) and listed with status ``"cancelled"``.
+        A ``threading.Event``: once set, the subjects not finished are given up (their
+        outputs stay as they were) and listed with status ``"cancelled"``. A running
+        subject stops at its next progress message (at most
+        :data:`~solver.dataset.task.PROGRESS_INTERVAL_S` apart) or just before its output
+        would be put in place, through a ``distributed.Event`` its task reads: the
+        cluster cannot interrupt a running task, and a task cancelled only on the client
+        would still put its output in place after the run called it cancelled.
 
     Returns
     -------
@@ -298,12 +303,17 @@ def _run_jobs(
             return futures[-1]
 
         client.subscribe_topic(PROGRESS_TOPIC, lambda event: notify("progress", dict(event[1])))
+        if stop is not None:  # every task reads it: the tasks themselves give up their subject
+            from distributed import Event
+
+            stop_event = Event(f"addb-stop-{run_id}", client=client)
+            jobs = [replace(j, stop_event=stop_event.name) for j in jobs]
         pending = as_completed([submit(j) for j in jobs])
-        if stop is not None:  # cancel what is left once asked to stop (while the run lasts)
+        if stop is not None:  # ask the tasks to stop once asked to (while the run lasts)
             def watch() -> None:
                 while not run_over.is_set():
                     if stop.wait(0.2):
-                        client.cancel([f for f in futures if not f.done()])
+                        stop_event.set()
                         return
 
             watcher = threading.Thread(target=watch, name="addb-dataset-stop", daemon=True)

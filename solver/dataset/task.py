@@ -60,6 +60,10 @@ class SubjectJob:
         The manifest key computed by the runner (:func:`solver.dataset.manifest.manifest_key`).
     masks
         Loader of the reviewer's unmeasured-force masks, or None (automatic proposals).
+    stop_event
+        Name of the run's ``distributed.Event`` that asks it to stop, or None: once set,
+        the subject is given up (before it starts, at its next progress message, or
+        before its output is put in place) and its outcome is ``"cancelled"``.
     """
 
     rel: str
@@ -67,6 +71,11 @@ class SubjectJob:
     out_dir: str
     key: dict[str, Any]
     masks: MaskLoader | None = None
+    stop_event: str | None = None
+
+
+class Stopped(Exception):
+    """The run was asked to stop while this subject ran (:attr:`SubjectJob.stop_event`)."""
 
 
 class _Log:
@@ -74,9 +83,10 @@ class _Log:
     on a Dask worker, the progress also goes to the client as :data:`PROGRESS_TOPIC`
     events (at most one per :data:`PROGRESS_INTERVAL_S`)."""
 
-    def __init__(self, path: Path, rel: str = "") -> None:
+    def __init__(self, path: Path, rel: str = "", stop_event: str | None = None) -> None:
         self.path = path
         self.rel = rel
+        self.stop_event = stop_event
         self.t0 = time.perf_counter()
         self._f = open(path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
         self._last = ""
@@ -96,9 +106,19 @@ class _Log:
         if self._worker is not None and fraction is not None and now - self._sent >= PROGRESS_INTERVAL_S:
             self._sent = now
             self._worker.log_event(PROGRESS_TOPIC, {"rel": self.rel, "message": message, "fraction": float(fraction)})
+            self.check_stop()
         pct = "" if fraction is None else f"[{100 * fraction:5.1f}%] "
         self._f.write(f"{time.perf_counter() - self.t0:8.2f}s {pct}{message}\n")
         self._f.flush()
+
+    def check_stop(self) -> None:
+        """Raise :class:`Stopped` when the run's stop event is set (on a Dask worker)."""
+        if self._worker is None or self.stop_event is None:
+            return
+        from distributed import Event
+
+        if Event(self.stop_event).is_set():
+            raise Stopped(f"subject {self.rel}: the run was stopped")
 
     def close(self) -> None:
         self._f.close()
@@ -137,7 +157,8 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``rel``, ``status`` (``"ok"``, ``"kinematics_only"`` or ``"failed"``), ``error``
+        ``rel``, ``status`` (``"ok"``, ``"kinematics_only"``, ``"failed"``, or
+        ``"cancelled"`` when the run's stop event was set: nothing was written), ``error``
         (:meth:`AddbError.to_dict` form, failed only), ``trials`` (summary rows),
         ``mass_kg`` (given) and ``fitted_mass_kg``, ``seconds`` (wall time of the
         subject), ``worker_pid`` and ``worker_peak_rss_mb`` (the worker process's peak
@@ -151,10 +172,11 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     final = Path(job.out_dir)
     final.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{final.name}-", dir=final.parent))
-    log = _Log(work / LOG_NAME, job.rel)
+    log = _Log(work / LOG_NAME, job.rel, job.stop_event)
     log(f"subject {job.rel}: {job.subject_dir} -> {job.out_dir} (pid {os.getpid()})")
     outcome: dict[str, Any] = {"rel": job.rel, "worker_pid": os.getpid()}
     try:
+        log.check_stop()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             unmeasured_force = job.masks(job.subject_dir, job.out_dir) if job.masks is not None else None
@@ -177,7 +199,11 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         log.close()
         os.replace(work / LOG_NAME, work / "out" / LOG_NAME)
         write_json(work / "out" / MANIFEST_NAME, {"key": job.key, **outcome})
+        log.check_stop()  # the last moment the subject can be given up without a trace
         _replace_dir(work / "out", final)
+    except Stopped:
+        log.close()
+        outcome = {"rel": job.rel, "worker_pid": os.getpid(), "status": "cancelled", "trials": [], "seconds": time.perf_counter() - t0}
     except Exception as exc:  # noqa: BLE001 - the data's or the solver's failure: recorded, the batch goes on
         log(f"failed: {exc}")
         log(traceback.format_exc().rstrip())
