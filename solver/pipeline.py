@@ -413,15 +413,16 @@ def load_kinematics_cache(out_dir: str | Path, key: dict[str, Any]) -> tuple[Sub
     return data["kinematics"], "kinematics cache is valid"
 
 
-FIT_CHOICES = ("default", "converged")
+FIT_CHOICES = ("default", "converged", "band")
 """Names of the dynamics fits ``addb process --fit`` offers (:func:`options_for_fit`)."""
 
 
 def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOptions:
-    """Process options for a named dynamics fit: ``"default"`` (the ``"band"`` direction,
-    fixed rounds; the diagnosis is calibrated on it) or ``"converged"``
-    (:func:`solver.dynamics.fit.converged_fit`: exact banded steps until the cost and the
-    body mass factors settle).
+    """Process options for a named dynamics fit: ``"default"`` (the same as ``"converged"``),
+    ``"converged"`` (:func:`solver.dynamics.fit.converged_fit`: exact banded Gauss-Newton
+    steps until the cost and the body mass factors settle) or ``"band"`` (``FitSettings()``:
+    truncated-band steps, a fixed number of rounds; the fit the diagnosis judges on,
+    :mod:`solver.diagnose.judged_fit`).
 
     Raises
     ------
@@ -431,11 +432,11 @@ def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOp
     if name not in FIT_CHOICES:
         raise ValueError(f"unknown dynamics fit {name!r} (use one of {', '.join(FIT_CHOICES)})")
     dynamics = None
-    if name == "converged":
-        from solver.dynamics.fit import converged_fit
+    if name == "band":
+        from solver.dynamics.fit import FitSettings
         from solver.dynamics.stage import DynamicsOptions
 
-        dynamics = DynamicsOptions(fit=converged_fit())
+        dynamics = DynamicsOptions(fit=FitSettings())
     return ProcessOptions(trials=tuple(trials) if trials else None, dynamics=dynamics)
 
 

@@ -408,7 +408,7 @@ def _child(spec_path: str) -> int:
 
             (trial,) = trials or ("",)
             diag = diagnose_trial(spec["subject_dir"], trial, spec["out_dir"], unmeasured_force=unmeasured_force.get(trial),
-                                  progress=lambda m, f: _emit({"progress": m, "fraction": f}))  # fmt: skip
+                                  subject_flags=unmeasured_force, progress=lambda m, f: _emit({"progress": m, "fraction": f}))  # fmt: skip
             write_report(diag, spec["out_dir"], trial)
             _emit({"done": True})
             return 0

@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
         args.trial,
         out,
         unmeasured_force=masks.get(args.trial),
+        subject_flags=masks,
         options=DiagnoseOptions(refit=not args.no_refit),
         progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
     )

@@ -23,7 +23,7 @@
 from __future__ import annotations
 
 import time as _time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -678,8 +678,15 @@ def diagnose_trial(
     unmeasured_force: BoolArray | None = None,
     options: DiagnoseOptions | None = None,
     progress: Progress | None = None,
+    subject_flags: Mapping[str, BoolArray] | None = None,
 ) -> Diagnosis:
     """Diagnose one processed trial of a subject.
+
+    The trial is judged on the fit the diagnosis was calibrated on
+    (:mod:`solver.diagnose.judged_fit`): when the output was made with another fit (the
+    pipeline's default converged fit), the subject's dynamics are run again with it in a
+    scratch folder first, and the report's figures are that fit's
+    (``settings["judged_fit"]``).
 
     Parameters
     ----------
@@ -696,6 +703,10 @@ def diagnose_trial(
         Folds, thresholds, refit.
     progress
         Called with (message, fraction).
+    subject_flags
+        Trial name -> the reviewer's flags of every trial the output was processed with
+        (the body mass factors are fitted over all of them), for the judged fit's run;
+        default: ``unmeasured_force`` for ``trial`` alone.
 
     Raises
     ------
@@ -704,6 +715,21 @@ def diagnose_trial(
     DiagnosisError
         The trial has no dynamics (no force plates).
     """
-    inputs = load_inputs(subject_dir, trial, out_dir, unmeasured_force)
-    processed = load_processed(out_dir, trial)
-    return diagnose_processed(processed, inputs, options, progress)
+    from solver.diagnose.judged_fit import is_judged_fit, judged_fit, judged_output
+    from solver.pipeline import recorded_dynamics_options
+
+    say = progress or (lambda m, f: None)
+    processed_fit = recorded_dynamics_options(out_dir).fit
+    rebuilt = not is_judged_fit(processed_fit)
+    share = 0.3 if rebuilt else 0.0  # of the progress: the judged fit's run
+    flags = dict(subject_flags) if subject_flags is not None else ({} if unmeasured_force is None else {trial: unmeasured_force})
+    with judged_output(subject_dir, out_dir, trial, flags, lambda m, f: say(m, share * f)) as base:
+        inputs = load_inputs(subject_dir, trial, base, unmeasured_force)
+        processed = load_processed(base, trial)
+        diag = diagnose_processed(processed, inputs, options, lambda m, f: say(m, share + (1 - share) * f))
+    diag.settings["judged_fit"] = {
+        "direction": judged_fit(processed_fit).direction,
+        "processed_direction": processed_fit.direction,
+        "rebuilt": rebuilt,
+    }
+    return diag

@@ -214,6 +214,16 @@ def to_text(diag: Diagnosis) -> str:
     ot = a["over_time"]
     lines = [
         f"Diagnosis of {diag.subject} / {diag.trial}",
+        *(
+            [
+                (
+                    "  (judged on the band dynamics fit the diagnosis is calibrated on, run again for it: the trial was "
+                    f"processed with the {diag.settings['judged_fit']['processed_direction']!r} fit, whose residuals are lower than the ones below)"
+                )
+            ]
+            if diag.settings.get("judged_fit", {}).get("rebuilt")
+            else []
+        ),
         "",
         "What is wrong",
         (

@@ -78,7 +78,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cuts", type=int, nargs="+", default=[500, 1000, 1534])
     ap.add_argument("--rate-for-memory", type=float, default=130.4)
-    ap.add_argument("--fit", default="default", choices=["default", "converged"])
+    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"])
     args = ap.parse_args()
     print("| run | frames | wall (s) | CPU (s) | CPU ms per frame | dynamics fit (s) | peak memory (MB) |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")

@@ -54,7 +54,7 @@ def main() -> None:
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
-    ap.add_argument("--fit", default="default", choices=["default", "converged"], help="addb process --fit")
+    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="addb process --fit")
     args = ap.parse_args()
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "

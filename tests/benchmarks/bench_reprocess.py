@@ -107,7 +107,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("which", nargs="*", default=["walk", "camargo"], choices=["walk", "camargo"])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--fit", default="default", choices=["default", "converged"], help="the first full process's fit (addb process --fit)")
+    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="the first full process's fit (addb process --fit)")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -60,7 +60,7 @@ class Base:
 
     @property
     def processed(self) -> ProcessedTrial:
-        """The processed trial of the base (its default output folder)."""
+        """The processed trial of the base (its default output folder, band fit)."""
         return load_processed(self.subject / "addb_out", self.trial)
 
 
@@ -74,7 +74,7 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 8) -> Base:
     applied = []
     report: dict[str, Any] = {}
     for _ in range(max_rounds):
-        shutil.rmtree(subject / "addb_out", ignore_errors=True)
+        _process_band(subject)
         report = diagnose_json(subject, trial, "--apply")
         others = [a["extension"] for a in report.get("also_standing_out", [])]
         for entry in others:
@@ -83,9 +83,20 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 8) -> Base:
             break
         applied += ([report["extension"]] if report["chosen"] is not None else []) + others
     else:
-        shutil.rmtree(subject / "addb_out", ignore_errors=True)
+        _process_band(subject)
         report = diagnose_json(subject, trial)
     return Base(subject, trial, report, applied)
+
+
+def _process_band(subject: Path) -> None:
+    """Process ``subject`` into its default output folder with the band fit, the one the
+    diagnosis judges on (:mod:`solver.diagnose.judged_fit`): a base's processed motion,
+    on which hidden marker offsets and consistent trials are built, is then the one the
+    diagnosis was calibrated with (the draws themselves are processed by ``addb
+    diagnose`` with the pipeline's default fit)."""
+    shutil.rmtree(subject / "addb_out", ignore_errors=True)
+    if cli(["process", str(subject), "--out", str(subject / "addb_out"), "--fit", "band"]) != 0:
+        raise RuntimeError(f"addb process --fit band failed on {subject}")
 
 
 def draw(cause: str, index: int, keys: tuple[str, ...] = ("walk", "run")) -> tuple[str, int]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,7 +21,6 @@ import solver.pipeline as pipeline
 from solver.pipeline import (
     CACHE_DIR,
     KINEMATICS_CACHE,
-    ProcessOptions,
     process_subject,
     reprocess_dynamics,
 )
@@ -30,17 +30,19 @@ from tests.conftest import SHARED_DATA, writable_copy
 pytestmark = pytest.mark.slow
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+BAND = pipeline.options_for_fit("band")
 KEYS = ("marker_rms_m", "marker_max_m", "linear_residual_rms_N", "angular_residual_rms_Nm", "mass_kg", "unobserved_frames")
 ARRAYS = ("q", "tau", "residual_force", "residual_moment", "unobserved", "com")
 
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(subject copy, output of a full run without flags)."""
+    """(subject copy, output of a full run with the band fit (``--fit band``), without
+    flags): a Reprocess of it is not warm-started, so it equals a full run bit for bit."""
     root = tmp_path_factory.mktemp("reprocess")
     subject = writable_copy(WALK, root / "rajagopal2016_walk")
     out = root / "out"
-    process_subject(subject, out)
+    process_subject(subject, out, options=BAND)
     return subject, out
 
 
@@ -100,7 +102,7 @@ def test_flag_edit_reruns_the_dynamics_only_and_equals_a_full_run(
     subject, out = base
     flags = _flags(out)
     reference = tmp_path / "full"
-    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured_force=flags)
+    process_subject(subject, reference, options=replace(BAND, trials=("walk",)), unmeasured_force=flags)
 
     fast = _copy_out(out, tmp_path / "fast")
     before_static = (fast / "static" / "trial.npz").stat().st_mtime_ns
@@ -129,14 +131,14 @@ def test_flag_edit_reruns_the_dynamics_only_and_equals_a_full_run(
 def test_warm_start_skips_kinematics_and_keeps_mass_and_flags_exact(
     base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The opt-in warm start: mass and unobserved frames are a full run's exactly (they come
+    """The opt-in warm start of the band fit: mass and unobserved frames are a full run's exactly (they come
     from the centre-of-mass fit on the kinematics); the fitted motion lands elsewhere (the
     fit stops on its relative-decrease tolerance, so its end point depends on its start):
     measured 2 % on the marker RMS, which is what this bounds."""
     subject, out = base
     flags = _flags(out)
     reference = tmp_path / "full"
-    process_subject(subject, reference, options=ProcessOptions(trials=("walk",)), unmeasured_force=flags)
+    process_subject(subject, reference, options=replace(BAND, trials=("walk",)), unmeasured_force=flags)
     warm = _copy_out(out, tmp_path / "warm")
     _no_kinematics(monkeypatch)
     reprocess_dynamics(subject, warm, ("walk",), flags, warm_start=True)
@@ -241,20 +243,20 @@ def test_app_reprocess_job_reruns_the_dynamics_only(
 
 @pytest.fixture(scope="module")
 def converged_base(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(subject copy, output of a full run with ``addb process --fit converged``, no flags)."""
+    """(subject copy, output of a full run with the default fit, no flags)."""
     root = tmp_path_factory.mktemp("reprocess_converged")
     subject = writable_copy(WALK, root / "rajagopal2016_walk")
     out = root / "out"
-    process_subject(subject, out, options=pipeline.options_for_fit("converged"))
+    process_subject(subject, out)
     return subject, out
 
 
-def test_converged_fit_has_lower_residuals_and_marker_error_than_the_default(
+def test_default_converged_fit_has_lower_residuals_and_marker_error_than_the_band_fit(
     base: tuple[Path, Path], converged_base: tuple[Path, Path]
 ) -> None:
-    """The converged fit (exact banded Gauss-Newton steps) reaches a lower marker RMS *and*
-    lower linear and angular residuals than the default fit on the same measured frames;
-    the run records its settings."""
+    """The default fit is the converged one (exact banded Gauss-Newton steps): it reaches a
+    lower marker RMS *and* lower linear and angular residuals than the band fit on the same
+    measured frames; the run records its settings."""
     a, b = _results(converged_base[1]), _results(base[1])
     assert a["n_observed_frames"] == b["n_observed_frames"]
     assert a["marker_rms_m"] < b["marker_rms_m"]

@@ -9,6 +9,7 @@ On the real walk (rajagopal2016_walk), a Reprocess of the walk (dynamics only) w
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -62,11 +63,15 @@ def _arrays(out: Path) -> dict[str, np.ndarray]:
 
 
 def test_warm_child_runs_the_job_and_gives_a_fresh_childs_numbers(processed, tmp_path: Path, monkeypatch) -> None:
-    subject, out, flags = processed
+    subject, out0, flags = processed
+    # each job reprocesses its own copy of the output: the (converged) fit starts from the
+    # previous solution, so both must start from the same one
+    out = shutil.copytree(out0, tmp_path / "cold_out", symlinks=True)
     cold, _ = _run(subject, out, flags, tmp_path / "jobs" / "cold", monkeypatch, warm=False)
     assert cold.status == "done", cold.message
     ref = _arrays(out)
     ref_results = json.loads((out / "walk" / "results.json").read_text())
+    out = shutil.copytree(out0, tmp_path / "warm_out", symlinks=True)
     warm, _ = _run(subject, out, flags, tmp_path / "jobs" / "warm", monkeypatch, warm=True)
     assert warm.status == "done", warm.message
     assert (tmp_path / "jobs" / "warm" / "child.log").is_file()  # the spare wrote its log beside the spec
