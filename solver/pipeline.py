@@ -418,11 +418,12 @@ FIT_CHOICES = ("default", "converged", "band")
 
 
 def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOptions:
-    """Process options for a named dynamics fit: ``"default"`` (the same as ``"converged"``),
-    ``"converged"`` (:func:`solver.dynamics.fit.converged_fit`: exact banded Gauss-Newton
-    steps until the cost and the body mass factors settle) or ``"band"`` (``FitSettings()``:
-    truncated-band steps, a fixed number of rounds; the fit the diagnosis judges on,
-    :mod:`solver.diagnose.judged_fit`).
+    """Process options for a named dynamics fit: ``"default"`` (the same as ``"band"``),
+    ``"band"`` (``FitSettings()``: truncated-band steps, a fixed number of rounds; the fit
+    the diagnosis is calibrated on) or ``"converged"``
+    (:func:`solver.dynamics.fit.converged_fit`: exact banded steps until the cost and the
+    body mass factors settle; lower residuals, but joint torques far from OpenSim's ID:
+    tests/dynamics/test_joint_torques_opensim.py).
 
     Raises
     ------
@@ -432,11 +433,11 @@ def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOp
     if name not in FIT_CHOICES:
         raise ValueError(f"unknown dynamics fit {name!r} (use one of {', '.join(FIT_CHOICES)})")
     dynamics = None
-    if name == "band":
-        from solver.dynamics.fit import FitSettings
+    if name == "converged":
+        from solver.dynamics.fit import converged_fit
         from solver.dynamics.stage import DynamicsOptions
 
-        dynamics = DynamicsOptions(fit=FitSettings())
+        dynamics = DynamicsOptions(fit=converged_fit())
     return ProcessOptions(trials=tuple(trials) if trials else None, dynamics=dynamics)
 
 

@@ -3,19 +3,19 @@
 The diagnosis' choice rule (its 10 % relative gain, the folds, the plausible sizes, the
 neutral bases of its benchmark: docs/diagnose/RESULTS.md) was calibrated on the dynamics
 fit with ``direction="band"`` and a fixed number of rounds
-(:class:`solver.dynamics.fit.FitSettings`'s defaults). The pipeline's default is the fit
-that runs to convergence (:func:`solver.dynamics.fit.converged_fit`), which moves the
-motion further toward the measured forces: a hidden force error then shows far less in
-the residual forces and more in the marker errors, and 10 of the 58 hidden-cause tests of
-tests/diagnose failed when the diagnosis judged that motion with its thresholds
-(measured 2026-11-24; docs/diagnose/RESULTS.md, "The fit it judges on").
+(:class:`solver.dynamics.fit.FitSettings`'s defaults, the pipeline's default fit). The fit
+that runs to convergence (:func:`solver.dynamics.fit.converged_fit`, ``addb process --fit
+converged``) moves the motion further toward the measured forces: a hidden force error
+then shows far less in the residual forces and more in the marker errors, and 10 of the 58
+hidden-cause tests of tests/diagnose failed when the diagnosis judged that motion with its
+thresholds (measured 2026-11-24; docs/diagnose/RESULTS.md, "The fit it judges on").
 
-So, until the rule is re-derived on the converged fit, the diagnosis judges every trial on
-the band fit: when the trial's output was made with another fit, the dynamics stage is run
-again with the same settings but ``direction="band"`` (and no mass tolerance) into a
-scratch folder, from the output's cached kinematics
-(:func:`solver.pipeline.reprocess_dynamics`, which equals a full run with the same flags
-bit for bit), and the diagnosis reads that folder. The user's output is not touched.
+So the diagnosis judges every trial on the band fit: when the trial's output was made with
+another fit, the dynamics stage is run again with the same settings but
+``direction="band"`` (and no mass tolerance) into a scratch folder, from the output's
+cached kinematics (:func:`solver.pipeline.reprocess_dynamics`, which equals a full run
+with the same flags bit for bit), and the diagnosis reads that folder. The user's output
+is not touched.
 """
 
 from __future__ import annotations

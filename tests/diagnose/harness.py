@@ -92,8 +92,8 @@ def _process_band(subject: Path) -> None:
     """Process ``subject`` into its default output folder with the band fit, the one the
     diagnosis judges on (:mod:`solver.diagnose.judged_fit`): a base's processed motion,
     on which hidden marker offsets and consistent trials are built, is then the one the
-    diagnosis was calibrated with (the draws themselves are processed by ``addb
-    diagnose`` with the pipeline's default fit)."""
+    diagnosis was calibrated with, whatever the pipeline's default (the draws themselves
+    are processed by ``addb diagnose`` with the default fit)."""
     shutil.rmtree(subject / "addb_out", ignore_errors=True)
     if cli(["process", str(subject), "--out", str(subject / "addb_out"), "--fit", "band"]) != 0:
         raise RuntimeError(f"addb process --fit band failed on {subject}")
