@@ -11,7 +11,7 @@ trials included):
 with s the scale factors of the body groups (:mod:`solver.kinematics.scale_groups`),
 s_h the height ratio, d_m a body-fixed offset of marker m, n_m the number of fit frames
 that observe marker m. It is solved by Levenberg-Marquardt with analytic Jacobians:
-the batched marker Jacobian for q (:meth:`Skeleton.marker_jacobians`), the exact affine scale/offset Jacobian of
+pinocchio's marker Jacobian for q, the exact affine scale/offset Jacobian of
 :mod:`solver.kinematics.scale_jacobian` for (s, d). The per-frame pose blocks are
 eliminated with a Schur complement, so a step costs one small dense solve per frame
 and one of size 3 G + 3 M. This is the AddBiomechanics idea (Werling et al. 2023,
@@ -228,7 +228,11 @@ def fit_model(problem: ScaleFitProblem, q_init: FloatArray, scales0: FloatArray)
     y = np.nan_to_num(problem.obs)
     for _ in range(st.max_iterations):
         # ---- linearize: residuals and Jacobians of all frames, weighted, 0 where unseen
-        pos, jq = sk.marker_jacobians(q, midx, free)  # (F, M, 3), (F, M, 3, nf): batched forward kinematics
+        pos = np.empty((n_f, n_m, 3))
+        jq = np.empty((n_f, n_m, 3, nf))
+        for f in range(n_f):
+            pos[f], jfull = sk.marker_jacobian(q[f], midx)
+            jq[f] = jfull[:, :, free]
         ww = w_seen[:, :, None]
         r = ww * (pos - y)  # (F, M, 3)
         jq *= ww[..., None]
