@@ -682,9 +682,9 @@ def diagnose_trial(
 ) -> Diagnosis:
     """Diagnose one processed trial of a subject.
 
-    The trial is judged on the fit the diagnosis was calibrated on
-    (:mod:`solver.diagnose.judged_fit`): when the output was made with another fit (the
-    pipeline's default converged fit), the subject's dynamics are run again with it in a
+    The trial is judged on the fit the diagnosis was calibrated on, the pipeline's default
+    band fit (:mod:`solver.diagnose.judged_fit`): when the output was made with another
+    (``addb process --fit converged``), the subject's dynamics are run again with it in a
     scratch folder first, and the report's figures are that fit's
     (``settings["judged_fit"]``).
 
@@ -719,11 +719,12 @@ def diagnose_trial(
     from solver.pipeline import recorded_dynamics_options
 
     say = progress or (lambda m, f: None)
-    processed_fit = recorded_dynamics_options(out_dir).fit
+    recorded = recorded_dynamics_options(out_dir)
+    processed_fit = recorded.fit
     rebuilt = not is_judged_fit(processed_fit)
     share = 0.3 if rebuilt else 0.0  # of the progress: the judged fit's run
     flags = dict(subject_flags) if subject_flags is not None else ({} if unmeasured_force is None else {trial: unmeasured_force})
-    with judged_output(subject_dir, out_dir, trial, flags, lambda m, f: say(m, share * f)) as base:
+    with judged_output(subject_dir, out_dir, trial, flags, lambda m, f: say(m, share * f), recorded=recorded) as base:
         inputs = load_inputs(subject_dir, trial, base, unmeasured_force)
         processed = load_processed(base, trial)
         diag = diagnose_processed(processed, inputs, options, lambda m, f: say(m, share + (1 - share) * f))

@@ -26,10 +26,14 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from solver.dynamics.fit import FitSettings
+
+if TYPE_CHECKING:
+    from solver.dynamics.stage import DynamicsOptions
 
 Progress = Callable[[str, float], None]
 
@@ -57,6 +61,8 @@ def judged_output(
     trial: str,
     unmeasured_force: Mapping[str, np.ndarray] | None = None,
     progress: Progress | None = None,
+    *,
+    recorded: DynamicsOptions | None = None,
 ) -> Iterator[Path]:
     """The output folder to diagnose ``trial`` in: ``out_dir`` itself when it was made with
     the judged fit, else a scratch folder with the trial processed again with it (removed
@@ -75,6 +81,9 @@ def judged_output(
         processed with (every trial's: the body mass factors are fitted over all of them).
     progress
         Called with (message, fraction).
+    recorded
+        The dynamics options ``out_dir`` was made with, when the caller has read them
+        already (default: :func:`solver.pipeline.recorded_dynamics_options`).
 
     Raises
     ------
@@ -88,7 +97,8 @@ def judged_output(
         reprocess_dynamics,
     )
 
-    recorded = recorded_dynamics_options(out_dir)
+    if recorded is None:
+        recorded = recorded_dynamics_options(out_dir)
     if is_judged_fit(recorded.fit):
         yield Path(out_dir)
         return

@@ -214,16 +214,6 @@ def to_text(diag: Diagnosis) -> str:
     ot = a["over_time"]
     lines = [
         f"Diagnosis of {diag.subject} / {diag.trial}",
-        *(
-            [
-                (
-                    "  (judged on the band dynamics fit the diagnosis is calibrated on, run again for it: the trial was "
-                    f"processed with the {diag.settings['judged_fit']['processed_direction']!r} fit, whose residuals are lower than the ones below)"
-                )
-            ]
-            if diag.settings.get("judged_fit", {}).get("rebuilt")
-            else []
-        ),
         "",
         "What is wrong",
         (
@@ -235,6 +225,12 @@ def to_text(diag: Diagnosis) -> str:
             f"moment RMS {ot['angular_rms_Nm']:.1f} N·m (peak {ot['angular_peak_Nm']:.1f} N·m at {ot['angular_peak_time_s']:.2f} s)"
         ),
     ]
+    judged = diag.settings.get("judged_fit", {})
+    if judged.get("rebuilt"):
+        lines.insert(1, (
+            "  (judged on the band dynamics fit the diagnosis is calibrated on, run again for it: the trial was "
+            f"processed with the {judged['processed_direction']!r} fit, whose residuals are lower than the ones below)"
+        ))  # fmt: skip
     lo = a["left_out"]
     if lo["frames"]:
         spans = ", ".join(f"{s:.2f}-{e:.2f} s" for s, e in lo["times_s"][:8])

@@ -64,8 +64,8 @@ def _arrays(out: Path) -> dict[str, np.ndarray]:
 
 def test_warm_child_runs_the_job_and_gives_a_fresh_childs_numbers(processed, tmp_path: Path, monkeypatch) -> None:
     subject, out0, flags = processed
-    # each job reprocesses its own copy of the output: the (converged) fit starts from the
-    # previous solution, so both must start from the same one
+    # each job reprocesses its own copy of the output, so that both start from the same one
+    # (a fit that warm-starts would otherwise start the second job from the first's result)
     out = shutil.copytree(out0, tmp_path / "cold_out", symlinks=True)
     cold, _ = _run(subject, out, flags, tmp_path / "jobs" / "cold", monkeypatch, warm=False)
     assert cold.status == "done", cold.message
