@@ -90,13 +90,15 @@ FIGURES: tuple[Figure, ...] = (
     Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.2),
     Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
-    Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3", "timing", 1.0, fence=False),
-    Figure("process-converged", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit converged "
-           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 2.0, fence=False),
+    Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 "
+           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 1.0, fence=False),
+    Figure("process-band", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit band "
+           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 2.5, fence=False),
     Figure("joint-torques", RESULTS, f"{PY} tests/benchmarks/bench_joint_torques.py", "accuracy", 0.3, fence=False),
+    Figure("converged-weights", RESULTS, f"{PY} tests/benchmarks/bench_converged_weights.py", "accuracy", 4.0, fence=False),
     Figure("fit-rounds", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py", "accuracy", 1.0, fence=False),
-    Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 1.0, fence=False),
-    Figure("growth-converged", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit converged", "timing", 1.0, fence=False),
+    Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 0.5, fence=False),
+    Figure("growth-band", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit band", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
     Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 0.5),
     Figure("viewer", RESULTS, f"{PY} tests/benchmarks/bench_viewer.py", "timing", 0.5),
@@ -115,13 +117,13 @@ FIGURES: tuple[Figure, ...] = (
         f"{EXPORT_BEFORE} && rm -rf /tmp/addb_exact_before /tmp/addb_exact_after && R=$PWD && "
         "for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
         f"(cd /tmp && PYTHONPATH={BEFORE_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_exact_before/$s >/dev/null) && "
-        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s >/dev/null; done && "
+        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s --fit band >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 4.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
-    Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 3.0, fence=False),
-    Figure("reprocess-converged", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit converged walk camargo",
-           "timing", 3.0, fence=False),
+    Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 1.5, fence=False),
+    Figure("reprocess-band", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit band walk camargo",
+           "timing", 5.0, fence=False),
     # ---- documents of their own
     Figure("ablation", "docs/dynamics/ABLATION.md", f"{PY} tests/benchmarks/bench_ablation.py", "accuracy", 0.5, fence=False),
     Figure("expert-comparison", "docs/kinematics/EXPERT_COMPARISON.md", f"{PY} tests/benchmarks/bench_expert_comparison.py",

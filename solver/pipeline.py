@@ -276,7 +276,7 @@ def reprocess_dynamics(
     factors start from 1. A fit that runs to convergence
     (:func:`solver.dynamics.fit.converged_fit`) lands on a full run's answer to its
     tolerance from there, in fewer steps (tests/dynamics/test_reprocess_dynamics.py). The
-    default ``"band"`` fit does not: it stops after ``rounds x iterations`` steps, well
+    ``"band"`` fit (``--fit band``) does not: it stops after ``rounds x iterations`` steps, well
     before the coordinates stop moving, so its end point depends on its start (measured on
     the walk with frames 100-120 flagged: marker RMS 2 % apart, linear residual RMS 4.3 N
     vs 2.7 N, coordinates up to 0.43 rad apart). By default (``None``) the warm start is
@@ -418,12 +418,11 @@ FIT_CHOICES = ("default", "converged", "band")
 
 
 def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOptions:
-    """Process options for a named dynamics fit: ``"default"`` (the same as ``"band"``),
-    ``"band"`` (``FitSettings()``: truncated-band steps, a fixed number of rounds; the fit
-    the diagnosis is calibrated on) or ``"converged"``
-    (:func:`solver.dynamics.fit.converged_fit`: exact banded steps until the cost and the
-    body mass factors settle; lower residuals, but joint torques far from OpenSim's ID:
-    tests/dynamics/test_joint_torques_opensim.py).
+    """Process options for a named dynamics fit: ``"default"`` (the same as ``"converged"``),
+    ``"converged"`` (:func:`solver.dynamics.fit.converged_fit`: exact banded Gauss-Newton
+    steps until the cost and the body mass factors settle) or ``"band"`` (``FitSettings()``:
+    truncated-band steps, a fixed number of rounds; the fit the diagnosis judges on,
+    :mod:`solver.diagnose.judged_fit`).
 
     Raises
     ------
@@ -433,11 +432,11 @@ def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOp
     if name not in FIT_CHOICES:
         raise ValueError(f"unknown dynamics fit {name!r} (use one of {', '.join(FIT_CHOICES)})")
     dynamics = None
-    if name == "converged":
-        from solver.dynamics.fit import converged_fit
+    if name == "band":
+        from solver.dynamics.fit import FitSettings
         from solver.dynamics.stage import DynamicsOptions
 
-        dynamics = DynamicsOptions(fit=converged_fit())
+        dynamics = DynamicsOptions(fit=FitSettings())
     return ProcessOptions(trials=tuple(trials) if trials else None, dynamics=dynamics)
 
 

@@ -116,10 +116,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
         "--fit", choices=("default", "converged", "band"), default="default",
-        help="dynamics fit: 'default' = 'band' (truncated-band Gauss-Newton steps, a fixed number of rounds; "
-             "what addb diagnose is calibrated on) or 'converged' (exact banded steps until the cost and the "
-             "mass factors settle: far lower residuals, but joint torques far from OpenSim's ID, the motion's "
-             "accelerations absorbing the residual; experimental, see tests/benchmarks/RESULTS.md)",
+        help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps until the cost and the "
+             "body mass factors settle) or 'band' (truncated-band steps, a fixed number of rounds: the older "
+             "default, which addb diagnose judges on; see tests/benchmarks/RESULTS.md)",
     )  # fmt: skip
     p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")

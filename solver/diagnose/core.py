@@ -682,9 +682,9 @@ def diagnose_trial(
 ) -> Diagnosis:
     """Diagnose one processed trial of a subject.
 
-    The trial is judged on the fit the diagnosis was calibrated on, the pipeline's default
-    band fit (:mod:`solver.diagnose.judged_fit`): when the output was made with another
-    (``addb process --fit converged``), the subject's dynamics are run again with it in a
+    The trial is judged on the fit the diagnosis was calibrated on, the band fit
+    (:mod:`solver.diagnose.judged_fit`): when the output was made with another (the
+    pipeline's default converged fit), the subject's dynamics are run again with it in a
     scratch folder first, and the report's figures are that fit's
     (``settings["judged_fit"]``).
 

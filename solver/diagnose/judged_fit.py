@@ -2,17 +2,18 @@
 
 The diagnosis' choice rule (its 10 % relative gain, the folds, the plausible sizes, the
 neutral bases of its benchmark: docs/diagnose/RESULTS.md) was calibrated on the dynamics
-fit with ``direction="band"`` and a fixed number of rounds
-(:class:`solver.dynamics.fit.FitSettings`'s defaults, the pipeline's default fit). The fit
-that runs to convergence (:func:`solver.dynamics.fit.converged_fit`, ``addb process --fit
-converged``) moves the motion further toward the measured forces: a hidden force error
-then shows far less in the residual forces and more in the marker errors, and 10 of the 58
+fit with ``direction="band"``, a fixed number of rounds and its weights
+(:class:`solver.dynamics.fit.FitSettings`'s defaults, ``addb process --fit band``). The
+fit that runs to convergence (:func:`solver.dynamics.fit.converged_fit`, the pipeline's
+default) moves the motion further toward the measured forces: a hidden force error then
+shows far less in the residual forces and more in the marker errors, and 10 of the 58
 hidden-cause tests of tests/diagnose failed when the diagnosis judged that motion with its
-thresholds (measured 2026-11-24; docs/diagnose/RESULTS.md, "The fit it judges on").
+thresholds (measured 2026-11-24 with the converged fit's first weights;
+docs/diagnose/RESULTS.md, "The fit it judges on").
 
 So the diagnosis judges every trial on the band fit: when the trial's output was made with
-another fit, the dynamics stage is run again with the same settings but
-``direction="band"`` (and no mass tolerance) into a scratch folder, from the output's
+another fit, the dynamics stage is run again with ``FitSettings()`` (the recorded
+``derivative`` kept) into a scratch folder, from the output's
 cached kinematics (:func:`solver.pipeline.reprocess_dynamics`, which equals a full run
 with the same flags bit for bit), and the diagnosis reads that folder. The user's output
 is not touched.
@@ -42,11 +43,11 @@ JUDGED_DIRECTION = "band"
 
 
 def judged_fit(recorded: FitSettings) -> FitSettings:
-    """The fit the diagnosis judges a trial processed with ``recorded`` on: the same weights,
-    ``direction="band"``, rounds stopping on their number only (``mass_tolerance=0``), and
-    :class:`~solver.dynamics.fit.FitSettings`' default rounds, steps and tolerance."""
-    d = FitSettings()
-    return replace(recorded, direction=JUDGED_DIRECTION, mass_tolerance=0.0, rounds=d.rounds, iterations=d.iterations, tolerance=d.tolerance)
+    """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
+    thresholds were calibrated on, :class:`~solver.dynamics.fit.FitSettings`' defaults
+    (``direction="band"``, its weights, rounds stopping on their number only), with the
+    recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
+    return replace(FitSettings(), direction=JUDGED_DIRECTION, derivative=recorded.derivative)
 
 
 def is_judged_fit(recorded: FitSettings) -> bool:

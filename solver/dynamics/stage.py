@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from solver.dynamics.com_fit import ComTrial, fit_com
 from solver.dynamics.contact import ContactResult, ContactSettings, assign_contacts
-from solver.dynamics.fit import FitSettings, FitTrialInput, fit_dynamics
+from solver.dynamics.fit import FitSettings, FitTrialInput, converged_fit, fit_dynamics
 from solver.dynamics.metrics import residual_metrics
 from solver.dynamics.preprocess import (
     common_time,
@@ -73,10 +73,9 @@ class DynamicsOptions:
         Thresholds of contact assignment and proposals.
     fit
         Weights and stopping rule of the dynamics fit (its ``derivative`` also sets the
-        ID's derivatives); default ``FitSettings()``, the fixed-rounds ``"band"`` fit.
-        :func:`solver.dynamics.fit.converged_fit` runs to convergence (``addb process
-        --fit converged``): lower residuals, but its joint torques are far from OpenSim's
-        ID (tests/dynamics/test_joint_torques_opensim.py), so it is not the default.
+        ID's derivatives); default :func:`solver.dynamics.fit.converged_fit`, the fit that
+        runs to convergence (``FitSettings()`` is the fixed-rounds ``"band"`` fit, ``addb
+        process --fit band``, which the diagnosis judges on: :mod:`solver.diagnose.judged_fit`).
     """
 
     rate_hz: float = 100.0
@@ -85,7 +84,7 @@ class DynamicsOptions:
     alpha: float = 1e-6
     fit_motion: bool = True
     contact: ContactSettings = field(default_factory=ContactSettings)
-    fit: FitSettings = field(default_factory=FitSettings)
+    fit: FitSettings = field(default_factory=converged_fit)
 
 
 @dataclass(frozen=True)

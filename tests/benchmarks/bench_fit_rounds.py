@@ -10,7 +10,7 @@ body mass factors, and stops early on a relative cost decrease under
 gradient), ``exact`` (the exact gradient and Gauss-Newton system, by preconditioned
 conjugate gradients) or ``coefficients`` (exact banded steps in the spline's coefficients,
 run as ``converged_fit(rounds=R)``: R is then the most rounds, which stop when the mass
-factors settle; what ``addb process --fit converged`` runs with R = 4). For each subject (default: the Rajagopal walk and run of
+factors settle; what ``addb process`` runs by default, with R = 4). For each subject (default: the Rajagopal walk and run of
 ../shared/data/subjects and the Camargo circuit, assembled by
 ``scripts/make_example_subject.py camargo2021_levelground``) and each pair of round count
 and direction, one

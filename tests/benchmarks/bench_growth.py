@@ -1,6 +1,6 @@
 """Growth of ``addb process`` with the trial's length, and its peak memory (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_growth.py [--cuts 500 1000 1534] [--rate-for-memory 130.4] [--fit converged]
+    .venv/bin/python tests/benchmarks/bench_growth.py [--cuts 500 1000 1534] [--rate-for-memory 130.4] [--fit band]
 
 The Camargo level-ground circuit (``scripts/make_example_subject.py camargo2021_levelground``,
 1534 frames at the default 100 Hz) is cut to its first N frames' worth of time (the TRC's
@@ -12,7 +12,8 @@ about 2,000 frames; the recording is at 200 Hz) for the issue's memory target (u
 and peak resident memory of the child (``os.wait4``), the dynamics' frames (trial.npz),
 CPU milliseconds per frame (flat
 when the cost is linear in the length), and the dynamics fit's own time from subject.json.
-``--fit converged`` runs every process with ``addb process --fit converged``'s options.
+``--fit band`` runs every process with ``addb process --fit band``'s options (the older
+fixed-rounds fit; the default is the converged fit).
 """
 
 from __future__ import annotations

@@ -2,8 +2,10 @@
 
     .venv/bin/python tests/benchmarks/bench_joint_torques.py
 
-Processes rajagopal2016_walk with ``addb process --fit band`` (the default) and ``--fit
-converged`` (in this process) and compares each walk's joint torques with
+Processes rajagopal2016_walk (in this process) with ``addb process``'s default fit (the
+converged fit, :func:`solver.dynamics.fit.converged_fit`), with ``--fit band``, and with the
+converged fit given the band fit's weights (``FitSettings()``'s sigmas in place of
+:data:`solver.dynamics.fit.CONVERGED_WEIGHTS`), and compares each walk's joint torques with
 ``../shared/oracles/opensim_id_walk.sto`` (:mod:`tests.dynamics.opensim_torques`): per leg
 coordinate the RMS difference, our RMS and OpenSim's RMS (N·m), and the RMS difference over
 all of them per kg of the stated mass; with the RMS leg accelerations and the residuals.
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import sys
 import tempfile
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +23,20 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from solver.dynamics.fit import CONVERGED_WEIGHTS, FitSettings, converged_fit
+from solver.dynamics.stage import DynamicsOptions
 from solver.io.subject import load_subject
-from solver.pipeline import options_for_fit, process_subject
+from solver.pipeline import ProcessOptions, options_for_fit, process_subject
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA, writable_copy
 from tests.dynamics.opensim_torques import LEG_COORDINATES, compare_with_opensim_id
+
+BAND_WEIGHTS = {f.name: f.default for f in fields(FitSettings) if f.name in CONVERGED_WEIGHTS}
+FITS = {
+    "default (converged)": options_for_fit("default", ("walk",)),
+    "band": options_for_fit("band", ("walk",)),
+    "converged, band weights": ProcessOptions(trials=("walk",), dynamics=DynamicsOptions(fit=converged_fit(**BAND_WEIGHTS))),
+}
 
 
 def main() -> None:
@@ -33,23 +45,26 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         subject = writable_copy(walk, Path(tmp) / "rajagopal2016_walk")
         mass = load_subject(subject).mass_kg
-        for fit in ("band", "converged"):
-            process_subject(subject, Path(tmp) / fit, options=options_for_fit(fit, ("walk",)))
-            trial = load_processed(Path(tmp) / fit, "walk")
+        for i, (fit, options) in enumerate(FITS.items()):
+            out = Path(tmp) / f"out{i}"
+            process_subject(subject, out, options=options)
+            trial = load_processed(out, "walk")
             legs = [trial.coordinate_names.index(c) for c in LEG_COORDINATES]
             measured = ~trial.unobserved
             rows[fit] = (compare_with_opensim_id(trial, mass), float(np.sqrt(np.mean(trial.qdd[measured][:, legs] ** 2))), trial.metrics)
-    print(f"walk, {rows['band'][0].frames} frames inside OpenSim's ID; RMS difference of the leg joint torques from OpenSim's ID")
-    print("| fit | RMS difference (N·m/kg) | leg accelerations RMS, measured frames (rad/s²) | linear residual RMS (N) | angular residual RMS (N·m) |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    first = next(iter(rows.values()))[0]
+    print(f"walk, {first.frames} frames inside OpenSim's ID; RMS difference of the leg joint torques from OpenSim's ID")
+    print(f"converged weights {CONVERGED_WEIGHTS}; band weights {BAND_WEIGHTS}")
+    print("| fit | RMS difference (N·m/kg) | leg accelerations RMS, measured frames (rad/s²) | marker RMS (cm) | linear residual RMS (N) | angular residual RMS (N·m) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for fit, (cmp, acc, m) in rows.items():
-        print(f"| {fit} | {cmp.rms_difference:.3f} | {acc:.0f} | {m['linear_residual_rms_N']:.1f} | {m['angular_residual_rms_Nm']:.1f} |")
+        print(f"| {fit} | {cmp.rms_difference:.3f} | {acc:.0f} | {100 * m['marker_rms_m']:.2f} | {m['linear_residual_rms_N']:.1f} | {m['angular_residual_rms_Nm']:.1f} |")
     print()
-    print("| coordinate | band: RMS difference / our RMS (N·m) | converged: RMS difference / our RMS (N·m) | OpenSim's RMS (N·m) |")
-    print("| --- | ---: | ---: | ---: |")
+    print("| coordinate | " + " | ".join(f"{fit}: RMS difference / our RMS (N·m)" for fit in rows) + " | OpenSim's RMS (N·m) |")
+    print("| --- |" + " ---: |" * (len(rows) + 1))
     for c in LEG_COORDINATES:
-        b, v = rows["band"][0].per_coordinate[c], rows["converged"][0].per_coordinate[c]
-        print(f"| {c} | {b[0]:.1f} / {b[1]:.1f} | {v[0]:.1f} / {v[1]:.1f} | {b[2]:.1f} |")
+        per = [cmp.per_coordinate[c] for cmp, _, _ in rows.values()]
+        print(f"| {c} | " + " | ".join(f"{p[0]:.1f} / {p[1]:.1f}" for p in per) + f" | {per[0][2]:.1f} |")
 
 
 if __name__ == "__main__":

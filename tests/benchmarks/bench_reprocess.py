@@ -1,6 +1,6 @@
 """Reprocess after a flag edit: time from the button to the updated before/after table.
 
-    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [--fit converged] [walk] [camargo]
+    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [--fit band] [walk] [camargo]
 
 For each subject (the shared rajagopal2016_walk; the Camargo level-ground circuit assembled
 by scripts/make_example_subject.py) in a temporary folder: one full ``process_subject``
@@ -21,10 +21,10 @@ frames plus 20 frames of stance, and ``--repeat`` times each (median and range p
 * ``in process``: ``reprocess_dynamics`` called in this process (no child start and
   imports), without and with the warm start, to show where the time goes.
 
-``--fit converged``: the first full process uses ``addb process --fit converged``'s
-options; every Reprocess then uses the fit recorded in the output (as the app does), which
-for the converged fit is warm-started by default (the job rows), and the ``in process``
-row is asked for no warm start explicitly.
+``--fit NAME``: the first full process uses ``addb process --fit NAME``'s options (default:
+the converged fit); every Reprocess then uses the fit recorded in the output (as the app
+does), which for the converged fit is warm-started by default (the job rows; the band fit is
+not), and the ``in process`` row is asked for no warm start explicitly.
 """
 
 from __future__ import annotations
@@ -45,10 +45,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare  # noqa: E402
-from addb_viewer.app.summary import comparison_markdown, trial_summary  # noqa: E402
-from solver.pipeline import options_for_fit, process_subject, reprocess_dynamics  # noqa: E402
-from solver.results import load_processed  # noqa: E402
+from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare
+from addb_viewer.app.summary import comparison_markdown, trial_summary
+from solver.pipeline import options_for_fit, process_subject, reprocess_dynamics
+from solver.results import load_processed
 
 SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
 
