@@ -34,10 +34,10 @@ def walk(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
 
 def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
     subject, report = walk
-    results = json.loads((subject / "addb_out" / "walk" / "results.json").read_text())
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
-        assert report["baseline"][key] == pytest.approx(results[key])
-    assert report["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "band", "rebuilt": False}
+        assert np.isfinite(report["baseline"][key])
+    # processed with the pipeline's default (converged) fit, judged on the band fit
+    assert report["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "coefficients", "rebuilt": True}
     assert sorted(c["cause"] for c in report["candidates"]) == sorted(CAUSES)
     for c in report["candidates"]:
         assert set(c) >= {"cause", "parameters", "uncertainty", "score", "gain"}
@@ -57,22 +57,28 @@ def _without_times(x: object) -> object:
     return x
 
 
-def test_a_converged_output_is_judged_as_the_default_output_and_left_untouched(walk: tuple[Path, dict], tmp_path: Path) -> None:
-    """The diagnosis judges on the (default) band fit it was calibrated on
-    (solver/diagnose/judged_fit.py): on an output made with ``--fit converged`` it runs that
-    fit again in a scratch folder, and its report equals, value for value, the report on the
-    default output; the converged output keeps its files (only diagnosis.json is added)."""
+def test_a_converged_output_is_judged_as_a_band_output_and_left_untouched(walk: tuple[Path, dict], tmp_path: Path) -> None:
+    """The diagnosis judges on the band fit it was calibrated on (solver/diagnose/judged_fit.py):
+    on an output made with the default converged fit it runs that fit again in a scratch
+    folder, and its report equals, value for value, the report on an output made with
+    ``--fit band``; the user's output keeps its files (only diagnosis.json is added)."""
     subject, report = walk
-    out = tmp_path / "converged"
-    assert cli(["process", str(subject), "--out", str(out), "--fit", "converged"]) == 0
-    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    on_converged = diagnose_json(subject, "walk", "--out", str(out))
+    out = subject / "addb_out"
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
+    again = diagnose_json(subject, "walk")
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     assert after == before
-    assert on_converged["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "coefficients", "rebuilt": True}
-    assert _without_times(on_converged) == _without_times(report)
+    assert _without_times(again) == _without_times(report)
+    band = tmp_path / "band"
+    assert cli(["process", str(subject), "--out", str(band), "--fit", "band"]) == 0
+    on_band = diagnose_json(subject, "walk", "--out", str(band))
+    assert on_band["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "band", "rebuilt": False}
+    assert _without_times(on_band) == _without_times(report)
+    results = json.loads((band / "walk" / "results.json").read_text())
+    for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
+        assert report["baseline"][key] == results[key]
     converged = json.loads((out / "walk" / "results.json").read_text())
-    assert converged["linear_residual_rms_N"] < 0.5 * report["baseline"]["linear_residual_rms_N"]
+    assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
 
 
 def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict]) -> None:
