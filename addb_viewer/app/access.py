@@ -156,6 +156,9 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
     **kwargs
         Passed to ``viser.ViserServer``.
 
+    Connections a browser opens and closes unused are not logged as failed handshakes
+    (:mod:`addb_viewer.app.server_log`).
+
     Returns
     -------
     viser.ViserServer
@@ -172,6 +175,9 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
     import viser
     import websockets.asyncio.server as ws_server
 
+    from addb_viewer.app.server_log import quiet_unused_connections
+
+    quiet_unused_connections()
     if token is None:
         server = viser.ViserServer(host=host, port=port, **kwargs)
         server.addb_access_gate = None
