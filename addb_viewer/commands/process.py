@@ -115,7 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
-        "--fit", choices=("default", "converged", "band"), default="default",
+        "--fit", choices=("default", "converged", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up
         help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps until the cost and the "
              "body mass factors settle) or 'band' (truncated-band steps, a fixed number of rounds: the older "
              "default, which addb diagnose judges on; see tests/benchmarks/RESULTS.md)",

@@ -38,16 +38,12 @@ if TYPE_CHECKING:
 
 Progress = Callable[[str, float], None]
 
-#: The direction of the fit the diagnosis' thresholds were calibrated on.
-JUDGED_DIRECTION = "band"
-
-
 def judged_fit(recorded: FitSettings) -> FitSettings:
     """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
     thresholds were calibrated on, :class:`~solver.dynamics.fit.FitSettings`' defaults
     (``direction="band"``, its weights, rounds stopping on their number only), with the
     recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
-    return replace(FitSettings(), direction=JUDGED_DIRECTION, derivative=recorded.derivative)
+    return FitSettings(derivative=recorded.derivative)
 
 
 def is_judged_fit(recorded: FitSettings) -> bool:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import sys
 import tempfile
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -23,15 +22,14 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from solver.dynamics.fit import CONVERGED_WEIGHTS, FitSettings, converged_fit
+from solver.dynamics.fit import CONVERGED_WEIGHTS, converged_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.io.subject import load_subject
 from solver.pipeline import ProcessOptions, options_for_fit, process_subject
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA, writable_copy
-from tests.dynamics.opensim_torques import LEG_COORDINATES, compare_with_opensim_id
+from tests.dynamics.opensim_torques import BAND_WEIGHTS, LEG_COORDINATES, compare_with_opensim_id
 
-BAND_WEIGHTS = {f.name: f.default for f in fields(FitSettings) if f.name in CONVERGED_WEIGHTS}
 FITS = {
     "default (converged)": options_for_fit("default", ("walk",)),
     "band": options_for_fit("band", ("walk",)),

@@ -47,7 +47,7 @@ sys.path.insert(0, str(REPO))
 
 from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare
 from addb_viewer.app.summary import comparison_markdown, trial_summary
-from solver.pipeline import options_for_fit, process_subject, reprocess_dynamics
+from solver.pipeline import FIT_CHOICES, options_for_fit, process_subject, reprocess_dynamics
 from solver.results import load_processed
 
 SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
@@ -107,7 +107,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("which", nargs="*", default=["walk", "camargo"], choices=["walk", "camargo"])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="the first full process's fit (addb process --fit)")
+    ap.add_argument("--fit", default="default", choices=FIT_CHOICES, help="the first full process's fit (addb process --fit)")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,15 +9,19 @@ interpolated linearly to them), as the RMS difference per kg of the stated body 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
+from solver.dynamics.fit import CONVERGED_WEIGHTS, FitSettings
 from solver.io.mot import read_table
 from solver.results import ProcessedTrial
 
 ORACLE_ID = Path(__file__).resolve().parents[2].parent / "shared" / "oracles" / "opensim_id_walk.sto"
+#: ``FitSettings()``'s values of the weights :func:`solver.dynamics.fit.converged_fit` changes:
+#: the converged fit run with them is the one whose torques are far from OpenSim's.
+BAND_WEIGHTS = {f.name: f.default for f in fields(FitSettings) if f.name in CONVERGED_WEIGHTS}
 LEG_COORDINATES = tuple(
     f"{c}_{side}" for side in ("r", "l") for c in ("hip_flexion", "hip_adduction", "hip_rotation", "knee_angle", "ankle_angle")
 )

@@ -13,25 +13,23 @@ are 0.72 N·m/kg from OpenSim's: that setting is a strict expected failure, the 
 
 from __future__ import annotations
 
-from dataclasses import fields
 from pathlib import Path
 
 import pytest
 
-from solver.dynamics.fit import CONVERGED_WEIGHTS, FitSettings, converged_fit
+from solver.dynamics.fit import converged_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.io.subject import load_subject
 from solver.pipeline import ProcessOptions, options_for_fit, process_subject
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA, writable_copy
-from tests.dynamics.opensim_torques import compare_with_opensim_id
+from tests.dynamics.opensim_torques import BAND_WEIGHTS, compare_with_opensim_id
 
 pytestmark = pytest.mark.slow
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 #: RMS difference of the leg joint torques from OpenSim's ID, N·m/kg.
 TOLERANCE = 0.2
-BAND_WEIGHTS = {f.name: f.default for f in fields(FitSettings) if f.name in CONVERGED_WEIGHTS}
 
 
 @pytest.mark.parametrize(

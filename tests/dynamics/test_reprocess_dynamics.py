@@ -304,6 +304,16 @@ def test_converged_fit_reprocess_is_warm_started_and_equals_a_full_run_to_its_to
     assert abs(a["angular_residual_rms_Nm"] - b["angular_residual_rms_Nm"]) < 1.0
 
 
+def test_the_command_offers_every_named_fit() -> None:
+    """``addb process --fit`` lists its choices literally (the CLI does not import the
+    pipeline at start-up); they must be :data:`solver.pipeline.FIT_CHOICES`."""
+    from addb_viewer.cli import build_parser
+
+    sub = next(a for a in build_parser()._subparsers._group_actions if a.choices)
+    fit = next(a for a in sub.choices["process"]._actions if a.dest == "fit")
+    assert tuple(fit.choices) == pipeline.FIT_CHOICES
+
+
 def test_an_unknown_fit_name_is_refused() -> None:
     with pytest.raises(ValueError, match="unknown dynamics fit 'fast'"):
         pipeline.options_for_fit("fast")
