@@ -14,7 +14,7 @@ and generalized forces are projected back with the coupling Jacobian C = dq_pin/
 tau = C^T tau_pin (principle of virtual work).
 
 Evaluation is vectorized over any leading shape and grouped (identity, linear, cubic
-splines sharing knots, others) so that one frame costs a few numpy calls.
+splines sharing knots, polynomials, others) so that one frame costs a few numpy calls.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.model.functions import Constant, CubicSpline, Function, Linear, Multiplier
+from solver.model.functions import Constant, CubicSpline, Function, Linear, Multiplier, Polynomial
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -52,6 +52,60 @@ def _linear_of(f: Function) -> tuple[float, float] | None:
         if inner is not None:
             return inner[0] * f.scale, inner[1] * f.scale
     return None
+
+
+def _polynomial_of(f: Function) -> tuple[Polynomial, float] | None:
+    """(polynomial, scale) when f is a Polynomial or a MultiplierFunction of one."""
+    if isinstance(f, Polynomial):
+        return f, 1.0
+    if isinstance(f, Multiplier):
+        inner = _polynomial_of(f.inner)
+        if inner is not None:
+            return inner[0], inner[1] * f.scale
+    return None
+
+
+@dataclass
+class _PolynomialGroup:
+    """Polynomials evaluated together by Horner's rule, column by column.
+
+    ``coefficients[d]`` are ``(m + 1 - d, k)``: the d-th derivative's coefficients of every
+    polynomial, highest power first, zero-padded in front to the group's degree m (a leading
+    zero leaves Horner's sum exactly as ``numpy.polyval`` has it, so the values are the same
+    to the bit as those of :meth:`Polynomial.value` and :meth:`Polynomial.derivative`).
+    """
+
+    outputs: IntArray  # (k,) output slots
+    drivers: IntArray  # (k,) input slots
+    scale: FloatArray  # (k,) multiplier of each polynomial
+    coefficients: tuple[FloatArray, FloatArray, FloatArray]
+
+    @staticmethod
+    def of(items: list[tuple[int, int, Polynomial, float]]) -> "_PolynomialGroup":
+        degree = max(len(p.coefficients) for _, _, p, _ in items) - 1
+        derivs: list[FloatArray] = []
+        for order in range(3):
+            table = np.zeros((max(degree + 1 - order, 1), len(items)))
+            for col, (_, _, p, _) in enumerate(items):
+                c = np.polyder(np.asarray(p.coefficients, dtype=float), order)
+                table[table.shape[0] - c.size :, col] = c
+            derivs.append(table)
+        return _PolynomialGroup(
+            outputs=np.array([it[0] for it in items], dtype=np.intp),
+            drivers=np.array([it[1] for it in items], dtype=np.intp),
+            scale=np.array([it[3] for it in items]),
+            coefficients=(derivs[0], derivs[1], derivs[2]),
+        )
+
+    def evaluate(self, xv: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(..., k)`` inputs -> value, first and second derivative, each ``(..., k)``."""
+        out = []
+        for table in self.coefficients:
+            y = np.zeros_like(xv)
+            for row in table:
+                y = y * xv + row
+            out.append(self.scale * y)
+        return out[0], out[1], out[2]
 
 
 @dataclass
@@ -84,10 +138,12 @@ class FunctionBank:
         self.n_out = len(functions)
         lin_k, lin_c, lin_a, lin_b = [], [], [], []
         groups: dict[tuple[float, ...], list[tuple[int, int, CubicSpline, float]]] = {}
+        polynomials: list[tuple[int, int, Polynomial, float]] = []
         self._others: list[tuple[int, int, Function]] = []
         for k, (c, f) in enumerate(zip(drivers, functions)):
             lin = _linear_of(f)
             spl = _spline_of(f)
+            poly = _polynomial_of(f)
             if lin is not None:
                 lin_k.append(k)
                 lin_c.append(c)
@@ -95,6 +151,8 @@ class FunctionBank:
                 lin_b.append(lin[1])
             elif spl is not None:
                 groups.setdefault(tuple(spl[0].x), []).append((k, c, spl[0], spl[1]))
+            elif poly is not None:
+                polynomials.append((k, c, poly[0], poly[1]))
             else:
                 self._others.append((k, c, f))
         self._lin_k = np.array(lin_k, dtype=np.intp)
@@ -102,6 +160,7 @@ class FunctionBank:
         self._lin_a = np.array(lin_a)
         self._lin_b = np.array(lin_b)
         self._groups = [self._make_group(items) for items in groups.values()]
+        self._polynomials = _PolynomialGroup.of(polynomials) if polynomials else None
 
     @staticmethod
     def _make_group(items: list[tuple[int, int, CubicSpline, float]]) -> _SplineGroup:
@@ -153,6 +212,9 @@ class FunctionBank:
             f[..., g.outputs] = coef[..., 1] + t * (b + t * (c + t * d))
             df[..., g.outputs] = b + t * (2 * c + 3 * t * d)
             ddf[..., g.outputs] = 2 * c + 6 * t * d
+        if self._polynomials is not None:
+            pg = self._polynomials
+            f[..., pg.outputs], df[..., pg.outputs], ddf[..., pg.outputs] = pg.evaluate(x[..., pg.drivers])
         for k, c, fn in self._others:
             xv = x[..., c]
             f[..., k] = fn.value(xv)

@@ -51,6 +51,29 @@ def test_multiplier_scales_value_and_derivatives() -> None:
 
 
 @pytest.mark.parametrize("path", MODEL_PATHS, ids=lambda p: p.split("/")[-1])
+def test_function_bank_equals_each_function(path: str) -> None:
+    # the bank evaluates splines sharing knots together (a multiplier folded into their
+    # table: equal to round-off) and every polynomial of the model in one Horner sum (the
+    # same sum as numpy.polyval's: equal to the bit, also inside a MultiplierFunction)
+    from solver.model.coupling import FunctionBank
+
+    sk = skeleton(path)
+    functions = list(sk._dof_func) + [Multiplier(f, 0.93) for f in sk._dof_func]
+    drivers = list(sk._dof_coord) * 2
+    x = RNG.uniform(-1.5, 1.5, (40, sk.n))
+    got = FunctionBank(drivers, functions).evaluate(x)
+    for k, (c, fn) in enumerate(zip(drivers, functions)):
+        inner = fn.inner if isinstance(fn, Multiplier) else fn
+        for order, values in enumerate(got):
+            own = (fn.value(x[:, c]) if order == 0 else fn.derivative(x[:, c], order)) * np.ones(40)
+            if isinstance(inner, Polynomial):
+                np.testing.assert_array_equal(values[:, k], own, err_msg=f"{fn} order {order}")
+            else:
+                np.testing.assert_allclose(values[:, k], own, rtol=1e-13, atol=1e-15, err_msg=f"{fn} order {order}")
+    assert any(isinstance(fn, Polynomial) for fn in sk._dof_func) == path.endswith("LaiUhlrich2022.osim")
+
+
+@pytest.mark.parametrize("path", MODEL_PATHS, ids=lambda p: p.split("/")[-1])
 def test_expanded_velocities_are_the_time_derivative_of_positions(path: str) -> None:
     sk = skeleton(path)
     q, qd, qdd = RNG.uniform(-0.5, 0.5, sk.n), RNG.uniform(-1, 1, sk.n), RNG.uniform(-1, 1, sk.n)
