@@ -81,7 +81,7 @@ class _PolynomialGroup:
     coefficients: tuple[FloatArray, FloatArray, FloatArray]
 
     @staticmethod
-    def of(items: list[tuple[int, int, Polynomial, float]]) -> "_PolynomialGroup":
+    def of(items: list[tuple[int, int, Polynomial, float]]) -> _PolynomialGroup:
         degree = max(len(p.coefficients) for _, _, p, _ in items) - 1
         derivs: list[FloatArray] = []
         for order in range(3):
