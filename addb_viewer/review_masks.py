@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from addb_viewer.locations import annotations_path
+from solver.sampling import frame_interval
 
 if TYPE_CHECKING:
     from annotations import AnnotationStore, Edit
@@ -162,7 +163,7 @@ def unmeasured_force(
             continue
         review = store.review(name)
         n, rate = review.n_frames, review.rate_hz
-        step = float(np.median(np.diff(time))) if time.size > 1 else 1.0 / (rate or 100.0)
+        step = frame_interval(time, default=1.0 / (rate or 100.0))
         if rate is None or abs(rate * step - 1.0) < 1e-6:  # the processed rate
             if n is not None and n != time.size:
                 raise AnnotationError(

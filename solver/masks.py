@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.errors import DynamicsError
+from solver.sampling import frame_interval
 
 BoolArray = NDArray[np.bool_]
 FloatArray = NDArray[np.float64]
@@ -82,9 +83,7 @@ def true_runs(mask: Sequence[bool] | NDArray[np.bool_]) -> list[tuple[int, int]]
 
 
 def _spacing(time: FloatArray, other: FloatArray) -> float:
-    if time.size > 1:
-        return float(np.median(np.diff(time)))
-    return float(np.median(np.diff(other))) if other.size > 1 else 1.0
+    return frame_interval(time, default=frame_interval(other, default=1.0))
 
 
 def resample_mask(mask: Sequence[bool] | BoolArray, src_time: FloatArray, time: FloatArray) -> BoolArray:

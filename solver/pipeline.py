@@ -44,6 +44,7 @@ from solver.model.skeleton import Skeleton
 from solver.outputs import staged_output, write_json
 from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
+from solver.sampling import frame_rate
 
 if TYPE_CHECKING:  # the dynamics stage (scipy.signal) loads only when it runs
     from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics
@@ -190,7 +191,7 @@ def _process_kinematics(
                 continue
             write_trial_kinematics(tmp / trial.name, trial, rotational)
             metrics = kinematics_metrics(trial)
-            metrics["rate_hz"] = float(1.0 / np.median(np.diff(trial.time))) if trial.time.size > 1 else None
+            metrics["rate_hz"] = frame_rate(trial.time) if trial.time.size > 1 else None
             metrics["stage_seconds"] = {
                 "load": sk.load_seconds,
                 "scaling": kin.seconds.get("initial_poses", 0.0) + kin.seconds.get("scale_fit", 0.0),
@@ -541,7 +542,7 @@ def _process_subject(
             td = _trial_dynamics(dyn, trial.name)
             if td is None:
                 write_trial_kinematics(folder, trial, rotational)
-                metrics["rate_hz"] = float(1.0 / np.median(np.diff(trial.time))) if trial.time.size > 1 else None
+                metrics["rate_hz"] = frame_rate(trial.time) if trial.time.size > 1 else None
                 processed = build_processed(sk, trial, model_path=str(model_file), metrics=metrics)
             else:
                 write_dynamics_files(folder, trial.name, td, model, rotational)
@@ -662,7 +663,7 @@ def write_dynamics_files(folder: Path, name: str, td: TrialDynamics, model: Osim
             )
         )
     grf = folder / f"{name}_grf.mot"
-    rate = 1.0 / float(np.median(np.diff(td.time)))
+    rate = frame_rate(td.time, what=f"trial {name}")
     write_forces(grf, ForceRecording(td.time, rate, tuple(plates), str(grf)))
     write_external_loads(folder / f"{name}_external_loads.xml", ExternalLoads(f"{name}_external_loads", tuple(forces), grf.name))
 

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.sampling import frame_rate
+
 FloatArray = NDArray[np.float64]
 
 SCHEMA_VERSION = 1
@@ -142,7 +144,7 @@ class ProcessedTrial:
     @property
     def rate_hz(self) -> float:
         """Frame rate, Hz."""
-        return float(1.0 / np.median(np.diff(self.time))) if self.time.size > 1 else 0.0
+        return frame_rate(self.time, default=0.0)
 
     @property
     def has_dynamics(self) -> bool:

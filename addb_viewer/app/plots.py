@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from addb_viewer.app.scene import FOOT_COLORS, plate_feet
 from addb_viewer.app.summary import G, hicks_thresholds
 from solver.results import ProcessedTrial
+from solver.sampling import frame_interval
 
 FloatArray = NDArray[np.float64]
 
@@ -68,7 +69,7 @@ def _css(rgb: tuple[int, int, int]) -> str:
 def frame_grid(time: FloatArray) -> FloatArray:
     """``(3T,)`` x samples: each frame's left edge, centre and right edge (see module)."""
     t = np.asarray(time, float)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
+    dt = frame_interval(t, default=0.01)
     eps = dt * 1e-3
     return np.stack([t - dt / 2 + eps, t, t + dt / 2 - eps], axis=1).ravel()
 

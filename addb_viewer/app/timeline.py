@@ -29,6 +29,7 @@ from addb_viewer.app.flags import FlagView
 from addb_viewer.app.scene import foot_of_body, plate_feet
 from solver.masks import true_runs
 from solver.results import ProcessedTrial
+from solver.sampling import frame_interval
 
 BoolArray = NDArray[np.bool_]
 
@@ -87,7 +88,7 @@ def kinematic_contact(
     contact on 58-91 % of the frames with measured force, 0.6 m/s on 28-82 %).
     ``(T,)`` masks; all False when the trial has no such bodies."""
     out = {}
-    dt = float(np.median(np.diff(trial.time))) if trial.n_frames > 1 else 0.01
+    dt = frame_interval(trial.time, default=0.01)
     for foot in ("left", "right"):
         idx = [i for i, b in enumerate(trial.body_names)
                if foot_of_body(b) == foot and b.lower().startswith(("calcn", "toes", "talus", "foot"))]  # fmt: skip

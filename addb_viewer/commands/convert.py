@@ -43,6 +43,7 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
     from annotations import AnnotationStore
     from solver.io.subject import load_subject, load_trial
     from solver.masks import resample_mask, true_runs
+    from solver.sampling import frame_rate
 
     subject = load_subject(converted.path)
     path = annotations_path(converted.path, default_output_dir(converted.path))
@@ -53,7 +54,7 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
             time = processed_frames(subject, t.name)
             if time is None:  # no dynamics: the file's own frames
                 time = file_time
-            rate = 1.0 / float(np.median(np.diff(time))) if time.size > 1 else t.rate_hz
+            rate = frame_rate(time, default=t.rate_hz)
             store.set_trial_info(t.name, n_frames=int(time.size), rate_hz=rate)
             missing = resample_mask(reasons != "notMissingGRF", file_time, time)
             store.set_mask(t.name, missing, kind="unmeasured_force", source="imported", overwrite=True)

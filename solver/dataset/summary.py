@@ -28,6 +28,7 @@ import numpy as np
 
 from solver.dynamics.metrics import GRAVITY, HICKS_ANGULAR_BWH, HICKS_LINEAR_BW
 from solver.results import ProcessedTrial, load_processed
+from solver.sampling import frame_rate
 
 #: Vertical force on a foot above which it counts as in contact, N.
 CONTACT_THRESHOLD_N = 20.0
@@ -95,7 +96,7 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
     """
     m = trial.metrics
     n = int(trial.time.size)
-    rate = m.get("rate_hz") or (1.0 / float(np.median(np.diff(trial.time))) if n > 1 else None)
+    rate = m.get("rate_hz") or (frame_rate(trial.time) if n > 1 else None)
     dynamics = "n_observed_frames" in m
     row: dict[str, Any] = {
         "trial": trial.trial,

@@ -63,6 +63,7 @@ from solver.io.subject import Subject, Trial, load_subject, load_trial
 from solver.masks import join_masks, resample_mask, true_runs
 from solver.model.osim import OsimModel, read_osim
 from solver.results import ProcessedTrial, load_processed
+from solver.sampling import frame_interval
 
 if TYPE_CHECKING:
     from solver.diagnose.refit import Refit
@@ -501,7 +502,7 @@ def _same_times(time: FloatArray, other: FloatArray) -> BoolArray:
     if time.size < 2 or other.size < 2:
         return np.isin(time, other)
     idx = nearest_frames(other, time)
-    return np.abs(other[idx] - time) < 0.1 * float(np.median(np.diff(time)))
+    return np.abs(other[idx] - time) < 0.1 * frame_interval(time)
 
 
 def _at_times(values: np.ndarray, time: FloatArray, at: FloatArray) -> np.ndarray:

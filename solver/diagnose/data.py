@@ -37,6 +37,7 @@ from solver.model.mass_groups import BODY_GROUPS, body_group, group_masses  # no
 from solver.model.osim import Body, OsimModel, read_osim
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
+from solver.sampling import frame_interval
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -515,7 +516,7 @@ def prepare(
     contact = _contact(sk, trial, plates, feet, stated_mass, cutoff)
     return DiagnosisData(
         trial=trial,
-        dt=float(np.median(np.diff(trial.time))),
+        dt=frame_interval(trial.time),
         stated_mass=float(stated_mass),
         fitted_mass=float(sk.total_mass),
         gravity=g,
@@ -549,7 +550,7 @@ def _contact(sk: Skeleton, trial: ProcessedTrial, plates: RawPlates, feet: Seque
     for i, name in enumerate(plates.names):
         cop, free = cop_from_wrench(f[i], m_o[i], float(plates.centre[i][1]), LOADED_BW * bw)
         data.append(PlateData(name, f[i], cop, free))
-    return assign_contacts(sk, trial.q, data, feet, mass, float(np.median(np.diff(trial.time))), None)
+    return assign_contacts(sk, trial.q, data, feet, mass, frame_interval(trial.time), None)
 
 
 def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial:
@@ -573,7 +574,7 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
     solver = FrameSolver(sk, idx, np.ones(idx.size), IkSettings())
     q = solve_trajectory_from_best_frame(solver, trial.observed, trial.q)
     settings = trial.settings or {}
-    dt = float(np.median(np.diff(trial.time)))
+    dt = frame_interval(trial.time)
     q = lowpass(q, 1.0 / dt, float(settings.get("cutoff_hz", 30.0)), int(settings.get("filter_order", 3)))
     q = sk.cmap.complete(q)
     qd, qdd = differentiate(q, dt, str(settings.get("derivative", "spline")))

@@ -45,6 +45,7 @@ from solver.masks import join_masks, resample_mask
 from solver.model.osim import Body, OsimModel
 from solver.model.skeleton import ExternalWrench, Skeleton
 from solver.results import PlateData
+from solver.sampling import frame_rate
 
 FloatArray = NDArray[np.float64]
 Progress = Callable[[str, float], None]
@@ -293,7 +294,7 @@ def run_dynamics(
         say(f"preprocessing {name}", 0.02)
         kin: TrialKinematics = kinematics.trial(name)
         time = trial_frames(markers, forces, opts.rate_hz, name)
-        rate_m = 1.0 / float(np.median(np.diff(kin.time)))
+        rate_m = frame_rate(kin.time, what=f"trial {name}")
         q = resample(kin.time, lowpass(kin.q, rate_m, opts.cutoff_hz, opts.filter_order), time)
         obs = resample(kin.time, kin.observed, time)
         plates = _filtered_plates(forces, time, opts, bw, name)

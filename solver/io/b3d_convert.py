@@ -31,6 +31,7 @@ from solver.io.mot import write_forces
 from solver.io.subject import MODEL_FILE, SUBJECT_JSON
 from solver.io.trc import write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
+from solver.sampling import frame_interval
 
 #: The name of the file in a converted subject folder that says where it came from.
 SOURCE_JSON = "b3d_source.json"
@@ -343,7 +344,7 @@ def processed_to_b3d(
     summary = json.loads(subject_json.read_text()) if subject_json.exists() else {}
     for k, tr in enumerate(trials):
         t = tr.n_frames
-        dt = float(np.median(np.diff(tr.time))) if t > 1 else 0.01
+        dt = frame_interval(tr.time, default=0.01)
         cols = [tr.coordinate_names.index(n) for n in dofs]
         q, qd, qdd = tr.q[:, cols], tr.qd[:, cols], tr.qdd[:, cols]
         has_dyn = tr.has_dynamics

@@ -30,6 +30,7 @@ from solver.errors import TrcFormatError
 from solver.io._numbers import format_float, format_shifted, parse_shifted
 from solver.io._text import TokenError, flatten, is_number, parse_floats, read_lines
 from solver.io.types import MarkerTrajectories
+from solver.sampling import frame_interval
 
 #: Power of ten from the TRC ``Units`` value to metres: value_m = value * 10**-shift.
 UNIT_SHIFT = {"mm": 3, "millimeters": 3, "cm": 2, "m": 0, "meters": 0}
@@ -240,7 +241,7 @@ def _check_rate(time: np.ndarray, rate: float, path: str | Path) -> None:
     """Warn when the Time column's median step disagrees with DataRate by more than 1 %."""
     if time.shape[0] < 2:
         return
-    step = float(np.median(np.diff(time)))
+    step = frame_interval(time)
     if abs(step * rate - 1.0) > 0.01:
         warnings.warn(
             f"{path}: DataRate says {rate:g} Hz but the Time column steps {step:g} s "
