@@ -40,6 +40,7 @@ from solver.diagnose.data import (
     DiagnosisData,
     generic_mass_distribution,
     load_offsets,
+    load_scale_response,
     marker_kinematics,
     prepare,
 )
@@ -284,6 +285,8 @@ class TrialInputs:
     known_unmeasured
         ``(T_markers,)`` frames of the saved ``unmeasured_force`` extensions, at the marker
         frames, or None.
+    scale_response
+        Landmark marker -> ``(3, 3)`` scale response of the trial (``OUT/subject.json``).
     """
 
     subject: Subject
@@ -292,6 +295,7 @@ class TrialInputs:
     marker_offsets: dict[str, list[float]]
     reviewed: bool = False
     known_unmeasured: BoolArray | None = None
+    scale_response: dict[str, list[list[float]]] = field(default_factory=dict)
 
 
 def load_inputs(
@@ -306,7 +310,7 @@ def load_inputs(
     flags = None if unmeasured_force is None else np.asarray(unmeasured_force, dtype=bool)
     return TrialInputs(
         extend_subject(subject), raw, flags, load_offsets(out_dir), reviewed=flags is not None,
-        known_unmeasured=extension_masks(subject).get(trial),
+        known_unmeasured=extension_masks(subject).get(trial), scale_response=load_scale_response(out_dir, trial),
     )  # fmt: skip
 
 
@@ -381,6 +385,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             marker_offsets=inputs.marker_offsets,
             feet=subject.foot_body_names,
             model=fitted,
+            scale_response=inputs.scale_response,
         )
 
     data = prep(processed)

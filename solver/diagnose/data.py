@@ -177,6 +177,10 @@ class MarkerData:
         ``(T, M, 3, 3)`` ground frame: the part of a displacement of each landmark
         (``fixed``) marker's model position that stays in that marker's own error once the
         pose is solved again (:func:`retained_displacement`); identity for other markers.
+    scale_response
+        ``(M, 3, 3)`` body frame: how far the kinematics stage's scale fit moved each
+        landmark marker's scaled landmark per metre of misplacement in this trial
+        (:func:`solver.kinematics.fit.landmark_scale_response`); zero when unknown.
     """
 
     names: tuple[str, ...]
@@ -186,6 +190,7 @@ class MarkerData:
     fixed: BoolArray
     fitted_offset: FloatArray
     retained: FloatArray
+    scale_response: FloatArray
 
     @property
     def seen(self) -> BoolArray:
@@ -434,9 +439,11 @@ def marker_data(
     generic: OsimModel | None,
     offsets: Mapping[str, Sequence[float]],
     sk: Skeleton | None = None,
+    scale_response: Mapping[str, Sequence[Sequence[float]]] | None = None,
 ) -> MarkerData:
     """Marker errors, body rotations and placement information of a processed trial
-    (``sk``: the model's skeleton, built when not given)."""
+    (``sk``: the model's skeleton, built when not given; ``scale_response``: marker name ->
+    ``(3, 3)`` L of :func:`load_scale_response`)."""
     mk = {m.name: m for m in model.markers}
     fixed_generic = {m.name: m.fixed for m in generic.markers} if generic is not None else {}
     bodies = tuple(mk[n].body if n in mk else "ground" for n in trial.marker_names)
@@ -447,7 +454,9 @@ def marker_data(
     fixed = np.array([bool(fixed_generic.get(n, mk[n].fixed if n in mk else False)) for n in trial.marker_names])
     fitted = np.array([np.asarray(offsets.get(n, (0.0, 0.0, 0.0)), dtype=float) for n in trial.marker_names]).reshape(-1, 3)
     identity = np.broadcast_to(np.eye(3), (*rot.shape[:2], 3, 3))
-    md = MarkerData(trial.marker_names, trial.modeled - trial.observed, rot, bodies, fixed, fitted, identity)
+    response = scale_response or {}
+    absorbed = np.array([np.asarray(response.get(n, np.zeros((3, 3))), dtype=float) for n in trial.marker_names]).reshape(-1, 3, 3)
+    md = MarkerData(trial.marker_names, trial.modeled - trial.observed, rot, bodies, fixed, fitted, identity, absorbed)
     return replace(md, retained=retained_displacement(sk or Skeleton(model), trial.q, md.names, md.seen, md.landmark))
 
 
@@ -472,6 +481,16 @@ def load_offsets(out_dir: str | Path) -> dict[str, list[float]]:
     return dict(json.loads(path.read_text()).get("marker_offsets_m", {}) or {})
 
 
+def load_scale_response(out_dir: str | Path, trial: str) -> dict[str, list[list[float]]]:
+    """Landmark marker name -> ``(3, 3)`` scale response L of ``trial`` (``OUT/subject.json``,
+    :attr:`solver.kinematics.result.KinematicsResult.landmark_scale_response`); empty for an
+    output written before 2026-11-25, whose misplacements are then reported without it."""
+    path = Path(out_dir) / "subject.json"
+    if not path.is_file():
+        return {}
+    return dict((json.loads(path.read_text()).get("landmark_scale_response") or {}).get(trial, {}) or {})
+
+
 def prepare(
     trial: ProcessedTrial,
     forces: ForceRecording,
@@ -482,6 +501,7 @@ def prepare(
     marker_offsets: Mapping[str, Sequence[float]] | None = None,
     feet: Sequence[str] = ("calcn_r", "calcn_l"),
     model: OsimModel | None = None,
+    scale_response: Mapping[str, Sequence[Sequence[float]]] | None = None,
 ) -> DiagnosisData:
     """Build the :class:`DiagnosisData` of a processed trial.
 
@@ -503,6 +523,8 @@ def prepare(
         Foot body names.
     model
         The trial's (mass-fitted) model; default: read from ``trial.model_path``.
+    scale_response
+        Marker name -> ``(3, 3)`` scale response of the trial (:func:`load_scale_response`).
     """
     model = read_osim(trial.model_path) if model is None else model
     sk = Skeleton(model)
@@ -527,7 +549,7 @@ def prepare(
         group_mass=group_mass,
         plates=plates,
         flagged=np.asarray(flagged, dtype=bool),
-        markers=marker_data(trial, model, generic_model, marker_offsets or {}, sk),
+        markers=marker_data(trial, model, generic_model, marker_offsets or {}, sk, scale_response),
         feet=tuple(feet),
         foot_contact=None if contact is None else contact.foot_in_contact | contact.foot_loaded,
         foot_loaded=None if contact is None else contact.foot_loaded,

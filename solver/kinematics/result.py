@@ -113,6 +113,10 @@ class KinematicsResult:
         RMS marker error of the joint scale fit over its frames, m.
     seconds
         Wall time of the stage, s, by step (``scale_fit``, ``ik``, ...).
+    landmark_scale_response
+        Trial -> landmark (``fixed``) marker name -> ``(3, 3)`` body-frame matrix L: the
+        scaled landmark moves by ``L m`` when the marker is recorded ``m`` off it in that
+        trial (:func:`solver.kinematics.fit.landmark_scale_response`).
     """
 
     model: OsimModel
@@ -122,6 +126,7 @@ class KinematicsResult:
     attached: dict[str, str] = field(default_factory=dict)
     fit_marker_rms: float = float("nan")
     seconds: dict[str, float] = field(default_factory=dict)
+    landmark_scale_response: dict[str, dict[str, tuple[tuple[float, float, float], ...]]] = field(default_factory=dict)
 
     def trial(self, name: str) -> TrialKinematics:
         """The trial called ``name``; raises ``KeyError``."""

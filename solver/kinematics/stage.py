@@ -22,9 +22,9 @@ from numpy.typing import NDArray
 
 from solver.errors import KinematicsError
 from solver.io.types import MarkerTrajectories
-from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model
-from solver.kinematics.ik import FrameSolver, IkSettings, initial_pose, solve_trajectory
 from solver.kinematics.autoplace import place_markers
+from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model, landmark_scale_response
+from solver.kinematics.ik import FrameSolver, IkSettings, initial_pose, solve_trajectory
 from solver.kinematics.observations import MarkerMatch, match_markers, observations
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.scale_groups import make_groups, model_height
@@ -212,6 +212,9 @@ def run_kinematics(
             weights = np.append(weights, np.ones(len(placed)))
             problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
             fit = fit_model(problem, fit.q, fit.scales)
+    landmarks = [m.name for m in generic.markers if m.fixed and m.name in set(union)]
+    fit_trial = np.array(trial_of)
+    response = landmark_scale_response(problem, fit, landmarks, {name: fit_trial == k for k, (name, _) in enumerate(trials)})
     timings["scale_fit"] = time.perf_counter() - t2
 
     # final IK of every trial with the fitted model
@@ -254,4 +257,7 @@ def run_kinematics(
         attached=attached,
         fit_marker_rms=fit.marker_rms,
         seconds=timings,
+        landmark_scale_response={
+            t: {n: tuple(tuple(float(v) for v in row) for row in m) for n, m in r.items()} for t, r in response.items()
+        },
     )
