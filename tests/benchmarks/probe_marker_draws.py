@@ -8,7 +8,10 @@ the refit off (naming does not depend on it): the hidden shift |s| (cm), the cho
 marker, and for the hidden marker on the fitted motion the part of the shift its own error
 shows (``visible_shift_m``, what is judged worth naming against 0.5 cm) and its share of |s|,
 the shift beyond the fitted offset (``residual_shift_m``), the fraction of held-out folds it
-improves, its significance (jackknife standard errors) and whether it contends.
+improves, its significance (jackknife standard errors) and whether it contends; when the
+hidden marker is named, the error of its misplacement estimate against the hidden shift
+(relative to the base's own estimate, :func:`tests.diagnose.effects.error`; tolerance 0.5 cm)
+and the part of the estimate the scale fit had taken up (``landmark_shift_m``).
 
     .venv/bin/python tests/benchmarks/probe_marker_draws.py [--draws 20] [--first 0] [--work DIR]
 """
@@ -28,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from solver.diagnose.core import DiagnoseOptions, diagnose_trial  # noqa: E402
 from solver.diagnose.selection import ChoiceRule, contends, significance  # noqa: E402
-from tests.diagnose.effects import copy_subject, hide  # noqa: E402
+from tests.diagnose.effects import check, copy_subject, hide  # noqa: E402
 from tests.diagnose.harness import diagnose_json, draw, neutral_base  # noqa: E402
 
 
@@ -42,8 +45,11 @@ def main() -> int:
     with contextlib.redirect_stderr(io.StringIO()):
         base = neutral_base("walk", work / "base")
     rule = ChoiceRule()
-    print("| draw | hidden marker | hidden |s| (cm) | chosen | visible (cm) | visible share | beyond fitted offset (cm) | folds improved | standard errors | contends |")
-    print("|---:|---|---:|---|---:|---:|---:|---:|---:|---|")
+    print(
+        "| draw | hidden marker | hidden |s| (cm) | chosen | visible (cm) | visible share | beyond fitted offset (cm) "
+        "| folds improved | standard errors | contends | estimate error (cm) | taken up by scaling (cm) |"
+    )
+    print("|---:|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|")
     for index in range(args.first, args.first + args.draws):
         key, seed = draw("marker_offset", index)
         dst = work / f"draw-{seed}"
@@ -57,15 +63,19 @@ def main() -> int:
             chosen += f" {report['chosen_parameters']['marker']}"
         size = float(np.linalg.norm(hidden.truth["shift_m"]))
         ev = next((e for e in diag.evaluations if e.cause == "marker_offset" and e.choice == hidden.choice), None)
+        res = check(hidden, report, base.report)
+        named = res["detected"] and res.get("error") is not None
+        err = f"{100 * res['error']:.2f}" if named else ""
+        scaled = f"{100 * np.linalg.norm(report['chosen_parameters'].get('landmark_shift_m', [0.0] * 3)):.2f}" if named else ""
         if ev is None:
-            print(f"| {seed} | {hidden.choice} | {100 * size:.2f} | {chosen} | (not evaluated) | | | | | |")
+            print(f"| {seed} | {hidden.choice} | {100 * size:.2f} | {chosen} | (not evaluated) | | | | | | {err} | {scaled} |")
             continue
         visible = float(np.linalg.norm(ev.parameters["visible_shift_m"]))
         residual = float(np.linalg.norm(ev.parameters["residual_shift_m"]))
         folds = float(np.mean(np.asarray(ev.fold_gains) > 0))
         print(
             f"| {seed} | {hidden.choice} | {100 * size:.2f} | {chosen} | {100 * visible:.2f} | {visible / size:.0%} | "
-            f"{100 * residual:.2f} | {folds:.0%} | {significance(ev):.1f} | {'yes' if contends(ev, rule) else 'no'} |",
+            f"{100 * residual:.2f} | {folds:.0%} | {significance(ev):.1f} | {'yes' if contends(ev, rule) else 'no'} | {err} | {scaled} |",
             flush=True,
         )
     return 0
