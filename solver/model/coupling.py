@@ -20,6 +20,7 @@ splines sharing knots, polynomials, others) so that one frame costs a few numpy 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,14 +29,15 @@ from solver.model.functions import Constant, CubicSpline, Function, Linear, Mult
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+F = TypeVar("F", bound=Function)
 
 
-def _spline_of(f: Function) -> tuple[CubicSpline, float] | None:
-    """(spline, scale) when f is a CubicSpline or a MultiplierFunction of one."""
-    if isinstance(f, CubicSpline):
+def _scaled(f: Function, kind: type[F]) -> tuple[F, float] | None:
+    """(inner, scale) when f is a ``kind`` or a MultiplierFunction of one (scales multiplied)."""
+    if isinstance(f, kind):
         return f, 1.0
     if isinstance(f, Multiplier):
-        inner = _spline_of(f.inner)
+        inner = _scaled(f.inner, kind)
         if inner is not None:
             return inner[0], inner[1] * f.scale
     return None
@@ -51,17 +53,6 @@ def _linear_of(f: Function) -> tuple[float, float] | None:
         inner = _linear_of(f.inner)
         if inner is not None:
             return inner[0] * f.scale, inner[1] * f.scale
-    return None
-
-
-def _polynomial_of(f: Function) -> tuple[Polynomial, float] | None:
-    """(polynomial, scale) when f is a Polynomial or a MultiplierFunction of one."""
-    if isinstance(f, Polynomial):
-        return f, 1.0
-    if isinstance(f, Multiplier):
-        inner = _polynomial_of(f.inner)
-        if inner is not None:
-            return inner[0], inner[1] * f.scale
     return None
 
 
@@ -142,8 +133,8 @@ class FunctionBank:
         self._others: list[tuple[int, int, Function]] = []
         for k, (c, f) in enumerate(zip(drivers, functions)):
             lin = _linear_of(f)
-            spl = _spline_of(f)
-            poly = _polynomial_of(f)
+            spl = _scaled(f, CubicSpline)
+            poly = _scaled(f, Polynomial)
             if lin is not None:
                 lin_k.append(k)
                 lin_c.append(c)

@@ -83,16 +83,20 @@ class MarkerOffset(Cause):
                 absorbed: FloatArray = absorbed,
             ) -> dict[str, Any]:
                 # the model marker sits fitted + theta from the scaled landmark, which the
-                # scale fit moved by L m toward the marker: (I - L) m = fitted + theta
-                total = np.linalg.solve(np.eye(3) - absorbed, fitted + theta)
+                # scale fit moved by L m toward the marker: (I - L) m = fitted + theta. The
+                # value (whose jackknife error the t value divides theta by) stays
+                # fitted + theta: a constant away from theta, so its error is theta's
+                placed = fitted + theta
+                total = np.linalg.solve(np.eye(3) - absorbed, placed)
                 return {
-                    "value": [float(v) for v in total],
+                    "value": [float(v) for v in placed],
                     "marker": name,
                     "body": body,
                     "shift_m": [float(v) for v in total],
                     "residual_shift_m": [float(v) for v in theta],
                     "fitted_offset_m": [float(v) for v in fitted],
                     "landmark_shift_m": [float(v) for v in absorbed @ total],
+                    "landmark_scale_response": [[float(v) for v in row] for row in absorbed],
                     "visible_shift_m": [float(v) for v in shown @ theta],
                 }
 
@@ -113,6 +117,16 @@ class MarkerOffset(Cause):
         every other marker.
         """
         return np.atleast_1d(np.asarray(parameters["residual_shift_m"], dtype=float))
+
+    def uncertainty_json(self, uncertainty: Any, parameters: dict[str, Any]) -> dict[str, Any]:
+        """The jackknife standard error of ``shift_m``, m: that of the placed offset
+        (``value``) carried through (I - L)⁻¹ with absolute coefficients (an upper bound:
+        the folds' correlations between components are not kept)."""
+        if uncertainty is None:
+            return {self.main_parameter: None}
+        absorbed = np.asarray(parameters.get("landmark_scale_response", np.zeros((3, 3))), dtype=float)
+        carried = np.abs(np.linalg.inv(np.eye(3) - absorbed)) @ np.asarray(uncertainty, dtype=float)
+        return {self.main_parameter: [float(v) for v in carried]}
 
     def lab_shift(self, parameters: dict[str, Any], inputs: EntryInputs) -> FloatArray:
         """``(T, 3)`` the residual shift in the lab frame at each frame of the diagnosed trial, m."""
