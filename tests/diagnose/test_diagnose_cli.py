@@ -188,3 +188,32 @@ def test_bad_input_gives_clear_errors(walk: tuple[Path, dict]) -> None:
         assert code == 1 and "addb_extensions.json" in err
     finally:
         (subject / "addb_extensions.json").unlink()
+
+
+def test_the_scale_response_changes_the_misplacement_reported_not_what_is_named(walk, monkeypatch) -> None:
+    # the marker estimate adds back what the scale fit took up (m = (I - L)^-1 (offset +
+    # residual shift)); its t value stays that of the residual shift: when it divided by the
+    # larger error of the whole m, OpenCap DJ1's neutral base named other causes (2026-11-25)
+    import solver.diagnose.core as core
+    from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+    from solver.diagnose.selection import ChoiceRule, contends, significance
+
+    subject, _ = walk
+    with_l = diagnose_trial(subject, "walk", subject / "addb_out", options=DiagnoseOptions(refit=False))
+    monkeypatch.setattr(core, "load_scale_response", lambda out_dir, trial: {})
+    without = diagnose_trial(subject, "walk", subject / "addb_out", options=DiagnoseOptions(refit=False))
+    rule = ChoiceRule()
+    markers = {e.choice: e for e in with_l.evaluations if e.cause == "marker_offset"}
+    plain = {e.choice: e for e in without.evaluations if e.cause == "marker_offset"}
+    assert markers.keys() == plain.keys() and len(markers) >= 10
+    moved = 0
+    for name, ev in markers.items():
+        assert significance(ev) == pytest.approx(significance(plain[name]), rel=1e-9), name
+        assert contends(ev, rule) == contends(plain[name], rule), name
+        np.testing.assert_allclose(ev.parameters["residual_shift_m"], plain[name].parameters["residual_shift_m"], rtol=1e-9, atol=1e-12)
+        gap = np.linalg.norm(np.subtract(ev.parameters["shift_m"], plain[name].parameters["shift_m"]))
+        np.testing.assert_allclose(gap, np.linalg.norm(ev.parameters["landmark_shift_m"]), rtol=1e-6, atol=1e-9)
+        moved += gap > 0.002
+    assert moved >= 3  # several of the walk's landmarks lose more than 2 mm to the scales
+    chosen = [None if d.chosen is None else (d.chosen.cause, d.chosen.choice) for d in (with_l, without)]
+    assert chosen[0] == chosen[1]
