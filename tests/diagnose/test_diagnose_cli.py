@@ -194,7 +194,7 @@ def test_the_scale_response_changes_the_misplacement_reported_not_what_is_named(
     # the marker estimate adds back what the scale fit took up (m = (I - L)^-1 (offset +
     # residual shift)); its t value stays that of the residual shift: when it divided by the
     # larger error of the whole m, OpenCap DJ1's neutral base named other causes (2026-11-25)
-    import solver.diagnose.core as core
+    from solver.diagnose import core
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
     from solver.diagnose.selection import ChoiceRule, contends, significance
 
