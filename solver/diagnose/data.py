@@ -27,6 +27,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -473,22 +474,22 @@ def wxyz_to_matrix(q: FloatArray) -> FloatArray:
     )
 
 
+def _subject_summary(out_dir: str | Path) -> dict[str, Any]:
+    """``OUT/subject.json`` (the kinematics stage's summary), or {} when there is none."""
+    path = Path(out_dir) / "subject.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
 def load_offsets(out_dir: str | Path) -> dict[str, list[float]]:
     """Body-fixed marker offsets the kinematics stage fitted (``OUT/subject.json``), m."""
-    path = Path(out_dir) / "subject.json"
-    if not path.is_file():
-        return {}
-    return dict(json.loads(path.read_text()).get("marker_offsets_m", {}) or {})
+    return dict(_subject_summary(out_dir).get("marker_offsets_m", {}) or {})
 
 
 def load_scale_response(out_dir: str | Path, trial: str) -> dict[str, list[list[float]]]:
     """Landmark marker name -> ``(3, 3)`` scale response L of ``trial`` (``OUT/subject.json``,
     :attr:`solver.kinematics.result.KinematicsResult.landmark_scale_response`); empty for an
     output written before 2026-11-25, whose misplacements are then reported without it."""
-    path = Path(out_dir) / "subject.json"
-    if not path.is_file():
-        return {}
-    return dict((json.loads(path.read_text()).get("landmark_scale_response") or {}).get(trial, {}) or {})
+    return dict((_subject_summary(out_dir).get("landmark_scale_response") or {}).get(trial, {}) or {})
 
 
 def prepare(

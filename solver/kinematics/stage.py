@@ -212,7 +212,8 @@ def run_kinematics(
             weights = np.append(weights, np.ones(len(placed)))
             problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
             fit = fit_model(problem, fit.q, fit.scales)
-    landmarks = [m.name for m in generic.markers if m.fixed and m.name in set(union)]
+    in_fit = set(union)
+    landmarks = [m.name for m in generic.markers if m.fixed and m.name in in_fit]
     fit_trial = np.array(trial_of)
     response = landmark_scale_response(problem, fit, landmarks, {name: fit_trial == k for k, (name, _) in enumerate(trials)})
     timings["scale_fit"] = time.perf_counter() - t2
@@ -220,7 +221,6 @@ def run_kinematics(
     # final IK of every trial with the fitted model
     t3 = time.perf_counter()
     sk = Skeleton(fit.model)
-    in_fit = set(union)
     results = []
     for k, ((name, markers), match) in enumerate(zip(trials, matches)):
         say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))

@@ -70,10 +70,10 @@ def cases(key: str) -> list:
     return out
 
 
-def assert_named_and_recovered(cause: str, seed: int, base: Base, tmp_path: Path) -> None:
+def assert_named_and_recovered(cause: str, seed: int, base: Base, tmp_path: Path) -> dict:
     """Hide ``cause`` (seed ``seed``) in a copy of ``base``, run ``addb diagnose`` and check
     the choice, the parameter (:data:`tests.diagnose.effects.TOLERANCE`) and the held-out
-    gain."""
+    gain; returns the report."""
     hidden, report = hidden_run(base, cause, seed, tmp_path / "subject")
     result = check(hidden, report, base.report)
     assert report["chosen"] == cause, report["reason"]
@@ -89,6 +89,7 @@ def assert_named_and_recovered(cause: str, seed: int, base: Base, tmp_path: Path
         assert after["linear_residual_rms_N"] ** 2 + after["angular_residual_rms_Nm"] ** 2 < (
             before["linear_residual_rms_N"] ** 2 + before["angular_residual_rms_Nm"] ** 2
         )
+    return report
 
 
 #: The shift of :func:`assert_one_or_every_plate`, m (ground frame, in the floor plane).

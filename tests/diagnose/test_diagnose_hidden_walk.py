@@ -6,9 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.diagnose.effects import TOLERANCE, check
-from tests.diagnose.harness import Base, draw, hidden_run
-from tests.diagnose.hidden import trial_tests
+from tests.diagnose.harness import Base, draw
+from tests.diagnose.hidden import assert_named_and_recovered, trial_tests
 
 base, test_hidden_cause_is_named_and_recovered, test_shift_of_one_plate_or_of_every_plate = trial_tests("walk")
 
@@ -20,8 +19,5 @@ def test_a_misplacement_the_scale_fit_took_up_in_part_is_recovered(index: int, b
     # (lengthening the humerus, deepening the pelvis); without that part added back
     # (solver.kinematics.fit.landmark_scale_response) the estimates were 0.54 and 0.70 cm off
     _, seed = draw("marker_offset", index)
-    hidden, report = hidden_run(base, "marker_offset", seed, tmp_path / "subject")
-    result = check(hidden, report, base.report)
-    assert result["detected"], report["reason"]
-    assert result["error"] <= TOLERANCE["marker_offset"], (hidden.truth, report["chosen_parameters"])
+    report = assert_named_and_recovered("marker_offset", seed, base, tmp_path)
     assert np.linalg.norm(report["chosen_parameters"]["landmark_shift_m"]) > 0.002
