@@ -139,6 +139,8 @@ FIGURES: tuple[Figure, ...] = (
            fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
+    Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
+           f"{PY} tests/benchmarks/probe_marker_folds.py --draws 20", "accuracy", 5.0),
     Figure("diagnose-marker-offset-opencap-DJ1", "docs/diagnose/RESULTS.md",
            f"{DIAG} --trials DJ1 --causes marker_offset --draws 10 --synthetic 0 --json docs/diagnose/results_marker_offset_opencap_DJ1.json",
            "accuracy", 1.5),

@@ -1,0 +1,163 @@
+"""Why foot-marker draws of ``marker_offset`` fail the held-out folds: the walk's foot markers
+carry an error that repeats with every stride, and the folds sample one phase of the stride each.
+
+The diagnosis cuts a trial into 0.2 s blocks dealt to 5 folds in turn
+(:func:`solver.diagnose.selection.make_folds`), so a fold's blocks sit 1.0 s apart, about one
+stride of the walk: each fold holds nearly the same phase of the gait cycle, and a marker
+offset is named only if the shift fitted on the other folds improves at least 80 % of them.
+
+Part 1 (the walk's neutral base, :func:`tests.diagnose.harness.neutral_base`, nothing
+hidden): the stride period (autocorrelation of the right heel marker's height), and for each
+foot landmark marker, per fold, the mean of its error (marker sigmas, ``ctx.sigmas.marker``)
+along the shift fitted on the whole trial, and its held-out gain (cost units).
+
+Part 2 (``--draws N``): the first N ``marker_offset`` draws of the benchmark
+(:func:`tests.diagnose.harness.draw`, as ``probe_marker_draws.py``), each diagnosed with the
+refit off twice: with the folds as they are and with the blocks dealt so that each fold
+mixes the phases (block b to fold (b + b // 5) mod 5; a variant in this script only). The
+counts at the end: hidden marker named, another marker named, nothing named.
+
+    .venv/bin/python tests/benchmarks/probe_marker_folds.py [--draws 20] [--work DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+import solver.diagnose.core as core  # noqa: E402
+from solver.diagnose.core import DiagnoseOptions, diagnose_trial  # noqa: E402
+from solver.diagnose.selection import make_blocks  # noqa: E402
+from solver.io.trc import read_trc  # noqa: E402
+from tests.diagnose.effects import check, copy_subject, hide  # noqa: E402
+from tests.diagnose.harness import diagnose_json, draw, neutral_base  # noqa: E402
+
+FOOT = ("Toe", "MT5", "Heel", "Ankle")
+
+
+def mixed_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 0.2) -> np.ndarray:
+    """The variant: blocks dealt so that consecutive rounds of ``folds`` blocks rotate by one."""
+    blocks = make_blocks(n_frames, dt, block_seconds)
+    n_blocks = int(blocks[-1]) + 1 if n_frames else 0
+    k = int(max(2, min(folds, n_blocks // 2)))
+    return ((blocks + blocks // k) % k).astype(np.intp)
+
+
+@contextlib.contextmanager
+def captured(mixed: bool) -> Iterator[dict[str, Any]]:
+    """Diagnose with the folds as they are (or mixed), recording the first evaluation of
+    each marker alternative: ``{marker: (alternative, folds)}``."""
+    seen: dict[str, Any] = {}
+    original_cv, original_folds = core.cross_validate, core.make_folds
+
+    def cv(alt: Any, folds: np.ndarray) -> Any:
+        if alt.cause == "marker_offset" and alt.choice not in seen:
+            seen[alt.choice] = (alt, folds)
+        return original_cv(alt, folds)
+
+    core.cross_validate = cv
+    if mixed:
+        core.make_folds = mixed_folds
+    try:
+        yield seen
+    finally:
+        core.cross_validate, core.make_folds = original_cv, original_folds
+
+
+def stride_period(trc: Path, marker: str = "R.Heel") -> float:
+    """Period (s) of the marker's height: the lag of the largest autocorrelation in 0.6-1.8 s."""
+    rec = read_trc(trc)
+    y = rec.positions[:, rec.names.index(marker), 1]
+    ok = np.isfinite(y)
+    y = np.where(ok, y - np.nanmean(y), 0.0)
+    dt = float(np.median(np.diff(rec.time)))
+    lags = np.arange(int(0.6 / dt), min(int(1.8 / dt), y.size - 10))
+    ac = [np.dot(y[:-lag], y[lag:]) / max(np.dot(ok[:-lag], ok[lag:]), 1) for lag in lags]
+    return float(lags[int(np.argmax(ac))] * dt)
+
+
+def part_one(base_subject: Path, trial: str) -> None:
+    with captured(False) as seen, contextlib.redirect_stderr(io.StringIO()):
+        diagnose_trial(base_subject, trial, base_subject / "addb_out", options=DiagnoseOptions(refit=False))
+    period = stride_period(base_subject / "trials" / trial / "markers.trc")
+    print(f"stride period of the walk (R.Heel height): {period:.2f} s; a fold's blocks repeat every 5 x 0.2 s = 1.00 s\n")
+    print("| marker | mean error along the fitted shift, per fold (sigmas) | held-out gain per fold | folds improved |")
+    print("|---|---|---|---:|")
+    for name, (alt, folds) in seen.items():
+        if not any(name.endswith(f) for f in FOOT):
+            continue
+        theta = alt.solve(np.ones(folds.size, dtype=bool))
+        shown = -np.einsum("trk,k->tr", alt.g, theta)  # the error the fitted shift accounts for
+        unit = shown / np.maximum(np.linalg.norm(shown, axis=1, keepdims=True), 1e-12)
+        along = np.einsum("tr,tr->t", alt.rho0, unit)
+        k = int(folds.max()) + 1
+        means = [float(along[folds == f].mean()) for f in range(k)]
+        gains = []
+        for f in range(k):
+            test = folds == f
+            costs = alt.frame_costs(alt.solve(~test))
+            gains.append(float(np.sum(alt.ref_costs[test] - costs[test])))
+        improved = np.mean([g > 0 for g in gains if g != 0]) if any(gains) else 0.0
+        print(
+            f"| {name} | {', '.join(f'{m:+.2f}' for m in means)} | {', '.join(f'{g:+.0f}' for g in gains)} | {improved:.0%} |"
+        )
+
+
+def named(report: dict[str, Any]) -> str:
+    if report["chosen"] == "marker_offset":
+        return f"marker_offset {report['chosen_parameters']['marker']}"
+    return report["chosen"] or "none"
+
+
+def part_two(base: Any, work: Path, n_draws: int) -> None:
+    print("\n| draw | hidden marker | hidden |s| (cm) | named, folds as they are | named, folds mixing the phases |")
+    print("|---:|---|---:|---|---|")
+    counts = {False: [0, 0, 0], True: [0, 0, 0]}
+    for index in range(n_draws):
+        _, seed = draw("marker_offset", index)
+        dst = work / f"draw-{seed}"
+        subject = copy_subject(base.subject, dst)
+        hidden = hide("marker_offset", subject, base.trial, seed, base.processed)
+        cells = []
+        for mixed in (False, True):
+            with captured(mixed), contextlib.redirect_stderr(io.StringIO()):
+                report = diagnose_json(subject, base.trial, "--no-refit")  # processes the copy once
+            res = check(hidden, report, base.report)
+            slot = 0 if res["detected"] else 1 if report["chosen"] == "marker_offset" else 2
+            counts[mixed][slot] += 1
+            cells.append(named(report))
+        size = 100 * float(np.linalg.norm(hidden.truth["shift_m"]))
+        print(f"| {seed} | {hidden.choice} | {size:.2f} | {cells[0]} | {cells[1]} |", flush=True)
+    for mixed in (False, True):
+        c = counts[mixed]
+        label = "folds mixing the phases" if mixed else "folds as they are"
+        print(f"\n{label}: hidden marker named {c[0]}, another marker named {c[1]}, nothing named {c[2]}", end="")
+    print()
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--draws", type=int, default=20)
+    p.add_argument("--work", type=Path, default=None, help="working folder (default: a temporary one)")
+    args = p.parse_args()
+    work = args.work or Path(tempfile.mkdtemp(prefix="addb_probe_folds_"))
+    with contextlib.redirect_stderr(io.StringIO()):
+        base = neutral_base("walk", work / "base")
+    part_one(base.subject, base.trial)
+    if args.draws:
+        part_two(base, work, args.draws)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
