@@ -14,6 +14,10 @@ an export of an earlier commit) with this venv, for before/after figures on one 
 fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/subjects or
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
+``--host-reference`` also times OpenSim's IK tool on the walk as ``bench_kinematics.py`` does
+(a whole process, best of ``--repeat``, before and after the subjects): code that does not
+change between two blocks, so the ratio of two blocks' references says how much faster or
+slower the host ran (timings drift 10-30 % with the host from one day to the next).
 Target (issue): 200 frames per core-second.
 """
 
@@ -31,6 +35,17 @@ import time
 from pathlib import Path
 
 from example_subjects import subject_folder  # this folder: the script's own
+
+
+def _opensim_reference(repeat: int) -> list[float]:
+    """Whole-process times (s) of OpenSim's IK tool on the walk (:func:`bench_kinematics.run_opensim`)."""
+    from bench_kinematics import run_opensim  # this folder; needs ``pip install opensim``
+
+    times = []
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as tmp:
+            times.append(run_opensim(Path(tmp))[0])
+    return times
 
 
 def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, float]:
@@ -57,7 +72,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
     ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="addb process --fit")
+    ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     args = ap.parse_args()
+    reference = _opensim_reference(args.repeat) if args.host_reference else []
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
         "| trial: measured frames, marker RMS (cm), linear residual (N, BW), angular residual (N·m, BW·h) |"
@@ -94,6 +111,13 @@ def main() -> None:
                 f"| {stages['kinematics']:.1f} | {dyn_s} | {'; '.join(trials)} |",
                 flush=True,
             )
+    if args.host_reference:
+        reference += _opensim_reference(args.repeat)
+        print(
+            f"\nhost reference, OpenSim 4.6 IK tool on the walk (whole process, as block `kinematics`): best {min(reference):.2f} s "
+            f"(runs before the subjects {', '.join(f'{t:.2f}' for t in reference[: args.repeat])}; "
+            f"after {', '.join(f'{t:.2f}' for t in reference[args.repeat :])})"
+        )
 
 
 if __name__ == "__main__":
