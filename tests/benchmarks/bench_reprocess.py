@@ -61,7 +61,7 @@ def _subject(which: str, root: Path) -> tuple[Path, str]:
             p.chmod(0o644 if p.is_file() else 0o755)
         return dst, "walk"
     dst = root / "camargo2021_levelground"
-    subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), "camargo2021_levelground", str(dst)], check=True)
+    subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), "camargo2021_levelground", str(dst)], check=True, stdout=subprocess.DEVNULL)
     return dst, "levelground"
 
 
