@@ -35,12 +35,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import solver.diagnose.core as core  # noqa: E402
-from solver.diagnose.core import DiagnoseOptions, diagnose_trial  # noqa: E402
-from solver.diagnose.selection import make_blocks  # noqa: E402
-from solver.io.trc import read_trc  # noqa: E402
-from tests.diagnose.effects import check, copy_subject, hide  # noqa: E402
-from tests.diagnose.harness import diagnose_json, draw, neutral_base  # noqa: E402
+from solver.diagnose import core
+from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+from solver.diagnose.selection import make_blocks
+from solver.io.trc import read_trc
+from tests.diagnose.effects import check, copy_subject, hide
+from tests.diagnose.harness import diagnose_json, draw, neutral_base
 
 FOOT = ("Toe", "MT5", "Heel", "Ankle")
 
