@@ -208,6 +208,11 @@ def save_processed(path: str | Path, trial: ProcessedTrial) -> None:
 def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
     """Read ``folder/<trial>/trial.npz`` and ``results.json`` written by the pipeline.
 
+    The recorded ``model_path`` is where the scaled model was written, which is inside
+    the output folder. When that file is gone and a file of the same name sits in
+    ``folder``, that one is the model: the folder was moved or copied (a dataset subject
+    written in a work folder and renamed into place, the diagnosis' cached judged fit).
+
     Raises
     ------
     FileNotFoundError
@@ -246,7 +251,7 @@ def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
         height_m=header["height_m"],
         proposal_reasons=tuple(header["proposal_reasons"]),
         metrics=metrics,
-        model_path=header["model_path"],
+        model_path=_model_in(Path(folder), header["model_path"]),
         geometry_dir=header["geometry_dir"],
         settings=header["settings"],
         **{k: arrays[k] for k in _ARRAYS},
@@ -261,3 +266,11 @@ def processed_trials(folder: str | Path) -> list[str]:
 def field_names() -> list[str]:
     """Names of the fields of :class:`ProcessedTrial` (for documentation and tests)."""
     return [f.name for f in fields(ProcessedTrial)]
+
+
+def _model_in(folder: Path, recorded: str) -> str:
+    """``recorded``, or the file of that name in ``folder`` when ``recorded`` is gone."""
+    if not recorded or Path(recorded).is_file():
+        return recorded
+    moved = folder / Path(recorded).name
+    return str(moved) if moved.is_file() else recorded

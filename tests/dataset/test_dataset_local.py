@@ -15,6 +15,7 @@ import pytest
 from addb_viewer.cli import main as cli
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.summary import CONTACT_CLASSES
+from solver.results import load_processed, processed_trials
 from tests.dataset.dataset_tree import (
     BROKEN,
     BROKEN_LINE,
@@ -64,6 +65,11 @@ def test_good_subjects_equal_a_serial_one_subject_run(first_run, serial) -> None
         theirs = {p.relative_to(serial[rel]).as_posix() for p in serial[rel].rglob("*")}
         assert mine - theirs == {MANIFEST_NAME, "process.log"}, rel
         assert theirs <= mine
+        # written in a work folder and renamed into place: each trial finds its scaled model
+        # in the subject's output folder (the review app, the diagnosis and the benchmark load it)
+        for trial in processed_trials(out / rel):
+            model = Path(load_processed(out / rel, trial).model_path)
+            assert model.is_file() and model.parent == out / rel, (rel, trial, model)
 
 
 def test_broken_subject_is_listed_with_file_and_line_and_fails_the_run(first_run) -> None:
