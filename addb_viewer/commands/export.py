@@ -65,7 +65,10 @@ def export_b3d(args: argparse.Namespace) -> int:
     src = Path(args.subject)
     output = Path(args.output)
     if (src / "dataset_summary.json").is_file():
-        outs = sorted(p.parent for p in src.rglob("subject.json") if processed_trials(p.parent))
+        found = (p.parent for p in src.rglob("subject.json"))
+        # hidden folders hold caches (OUT/.addb_cache: the diagnosis' judged fit) and a
+        # running batch's work folders, not subjects of the tree
+        outs = sorted(d for d in found if not any(part.startswith(".") for part in d.relative_to(src).parts) and processed_trials(d))
         if not outs:
             raise SubjectFolderError("a dataset output tree without processed subjects (subject.json)", path=src)
         for out_dir in outs:

@@ -16,11 +16,20 @@ another fit, the dynamics stage is run again with ``FitSettings()`` (the recorde
 ``derivative`` kept) into a scratch folder, from the output's
 cached kinematics (:func:`solver.pipeline.reprocess_dynamics`, which equals a full run
 with the same flags bit for bit), and the diagnosis reads that folder. The user's output
-is not touched.
+is not touched, but for one cache: that folder is kept in
+``OUT/.addb_cache/judged_fit/<trial>/`` with the key it was made from (the subject's
+input files, model, options, addb's version and source digest as for the kinematics
+cache, the judged dynamics options, the trial and the reviewer's flags;
+:func:`judged_cache_key`), so a second diagnosis of unchanged inputs (``addb diagnose``,
+then ``addb diagnose --apply``) reads it instead of running the fit again. Any change of
+the key runs the fit again and replaces the entry; a folder that cannot be written keeps
+no cache.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
@@ -37,6 +46,10 @@ if TYPE_CHECKING:
     from solver.dynamics.stage import DynamicsOptions
 
 Progress = Callable[[str, float], None]
+
+#: Folder of ``OUT/.addb_cache`` holding the judged fit's output of each diagnosed trial.
+JUDGED_CACHE = "judged_fit"
+_KEY_FILE = "key.json"
 
 def judged_fit(recorded: FitSettings) -> FitSettings:
     """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
@@ -62,8 +75,10 @@ def judged_output(
     recorded: DynamicsOptions | None = None,
 ) -> Iterator[Path]:
     """The output folder to diagnose ``trial`` in: ``out_dir`` itself when it was made with
-    the judged fit, else a scratch folder with the trial processed again with it (removed
-    on exit).
+    the judged fit; else the trial processed again with it, read from
+    ``OUT/.addb_cache/judged_fit/<trial>/out`` when that entry's key equals
+    :func:`judged_cache_key` now, or run in a scratch folder (removed on exit) and stored
+    there for the next diagnosis.
 
     Parameters
     ----------
@@ -89,6 +104,7 @@ def judged_output(
     """
     from solver.pipeline import (
         CACHE_DIR,
+        KINEMATICS_CACHE,
         ProcessOptions,
         recorded_dynamics_options,
         reprocess_dynamics,
@@ -99,15 +115,83 @@ def judged_output(
     if is_judged_fit(recorded.fit):
         yield Path(out_dir)
         return
+    options = ProcessOptions(dynamics=replace(recorded, fit=judged_fit(recorded.fit)))
+    say = progress or (lambda m, f: None)
+    key = judged_cache_key(subject_dir, trial, options, unmeasured_force)
+    entry = Path(out_dir) / CACHE_DIR / JUDGED_CACHE / trial
+    if _cached_key(entry) == key:
+        say("the diagnosis' fit (band): reused from the cache (same inputs, options and flags)", 1.0)
+        yield entry / "out"
+        return
     with tempfile.TemporaryDirectory(prefix="addb_judged_fit_") as tmp:
         base = Path(tmp) / "out"
         cache = Path(out_dir) / CACHE_DIR
-        if cache.is_dir():
-            shutil.copytree(cache, base / CACHE_DIR)
-        options = ProcessOptions(dynamics=replace(recorded, fit=judged_fit(recorded.fit)))
-        say = progress or (lambda m, f: None)
+        if (cache / KINEMATICS_CACHE).is_file():
+            (base / CACHE_DIR).mkdir(parents=True)
+            shutil.copy2(cache / KINEMATICS_CACHE, base / CACHE_DIR / KINEMATICS_CACHE)
         reprocess_dynamics(
             subject_dir, base, [trial], dict(unmeasured_force or {}) or None,
             lambda m, f: say(f"the diagnosis' fit (band): {m}", f), options=options, warm_start=False,
         )  # fmt: skip
+        shutil.rmtree(base / CACHE_DIR, ignore_errors=True)  # the kinematics cache stays in OUT only
+        _store(base, entry, key)
         yield base
+
+
+def judged_cache_key(
+    subject_dir: str | Path, trial: str, options: object, unmeasured_force: Mapping[str, np.ndarray] | None
+) -> dict[str, object]:
+    """What the judged fit's output of ``trial`` depends on, as a JSON-like dict.
+
+    :func:`solver.pipeline.kinematics_cache_key` of the subject (every input file by size,
+    modification time and digest, the model, the kinematics options, addb's version and
+    source digest: ``addb_extensions.json`` and the stated mass are input files), the
+    judged dynamics options (``options``, a :class:`solver.pipeline.ProcessOptions`), the
+    trial and each trial's flags (length and SHA-256 of the ``(T,)`` booleans).
+
+    Raises
+    ------
+    SubjectFolderError
+        As :func:`solver.io.subject.load_subject`.
+    """
+    from solver.io.subject import load_subject
+    from solver.pipeline import kinematics_cache_key
+
+    flags = {}
+    for name, mask in sorted((unmeasured_force or {}).items()):
+        bits = np.asarray(mask, dtype=bool)
+        flags[name] = [int(bits.size), hashlib.sha256(np.packbits(bits).tobytes()).hexdigest()]
+    return {
+        "schema": "addb.judged_fit_cache/1",
+        "kinematics": kinematics_cache_key(load_subject(subject_dir), options.kinematics),  # type: ignore[attr-defined]
+        "dynamics": repr(options.dynamics),  # type: ignore[attr-defined]
+        "trial": trial,
+        "flags": flags,
+    }
+
+
+def _cached_key(entry: Path) -> object:
+    """The key stored with a cache entry (None when there is none or it is unreadable)."""
+    try:
+        return json.loads((entry / _KEY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _store(base: Path, entry: Path, key: dict[str, object]) -> None:
+    """Copy the judged output ``base`` into ``entry`` with its key, replacing an older entry
+    in two renames (:func:`solver.outputs.replace_folder`); skipped when ``entry``'s
+    folder cannot be written."""
+    from solver.outputs import replace_folder
+
+    try:
+        entry.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{entry.name}-", dir=entry.parent))
+    except OSError:
+        return
+    try:
+        shutil.copytree(base, staging / "out")
+        (staging / _KEY_FILE).write_text(json.dumps(key, sort_keys=True))
+        replace_folder(staging, entry, aside_prefix=f".{entry.name}-old-")
+    except OSError:
+        shutil.rmtree(staging, ignore_errors=True)

@@ -61,7 +61,8 @@ def test_a_converged_output_is_judged_as_a_band_output_and_left_untouched(walk: 
     """The diagnosis judges on the band fit it was calibrated on (solver/diagnose/judged_fit.py):
     on an output made with the default converged fit it runs that fit again in a scratch
     folder, and its report equals, value for value, the report on an output made with
-    ``--fit band``; the user's output keeps its files (only diagnosis.json is added)."""
+    ``--fit band``; the user's output keeps its files (only diagnosis.json and the judged
+    fit's cache entry, ``.addb_cache/judged_fit/walk``, are added by the first diagnosis)."""
     subject, report = walk
     out = subject / "addb_out"
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
@@ -79,6 +80,41 @@ def test_a_converged_output_is_judged_as_a_band_output_and_left_untouched(walk: 
         assert report["baseline"][key] == results[key]
     converged = json.loads((out / "walk" / "results.json").read_text())
     assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
+
+
+def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The judged fit's run is kept in ``OUT/.addb_cache/judged_fit/<trial>`` with its key:
+    a second diagnosis of unchanged inputs runs no dynamics and reports the same values; a
+    flag edit changes the key, runs the fit again with the flags and replaces the entry."""
+    from solver import pipeline
+    from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+
+    subject, report = walk
+    out = subject / "addb_out"
+    entry = out / ".addb_cache" / "judged_fit" / "walk"
+    key = json.loads((entry / "key.json").read_text())
+    assert key["trial"] == "walk" and key["flags"] == {}
+    calls: list[object] = []
+    real = pipeline.reprocess_dynamics
+
+    def counting(*args: object, **kwargs: object) -> object:
+        calls.append(args)
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pipeline, "reprocess_dynamics", counting)
+    again = diagnose_json(subject, "walk")
+    assert calls == []
+    assert _without_times(again) == _without_times(report)
+    n = load_processed(out, "walk").n_frames
+    flags = np.zeros(n, dtype=bool)
+    flags[100:121] = True
+    diagnose_trial(subject, "walk", out, unmeasured_force=flags, options=DiagnoseOptions(refit=False))
+    assert len(calls) == 1
+    flagged = json.loads((entry / "key.json").read_text())
+    assert flagged["flags"]["walk"][0] == n and flagged["kinematics"] == key["kinematics"]
+    judged = json.loads((entry / "out" / "walk" / "results.json").read_text())
+    assert set(range(100, 121)) <= set(judged["unobserved_frames"])
+    assert not (entry / "out" / ".addb_cache").exists()  # the kinematics cache stays in OUT only
 
 
 def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict]) -> None:

@@ -118,6 +118,8 @@ def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path) -> N
     (tree / "lab_a").mkdir(parents=True)
     shutil.copytree(processed, tree / "lab_a" / "s01")
     shutil.copytree(processed, tree / "s02")
+    # a processed output inside a hidden cache (the diagnosis' judged fit) is not a subject
+    shutil.copytree(processed, tree / "s02" / ".addb_cache" / "judged_fit" / "walk" / "out")
     (tree / "dataset_summary.json").write_text(json.dumps({"subjects": 2}))
     dest = tmp_path / "b3d_out"
     assert main(["export", str(tree), "--format", "b3d", "-o", str(dest)]) == 0
