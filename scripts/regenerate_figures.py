@@ -120,7 +120,7 @@ FIGURES: tuple[Figure, ...] = (
         ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s --fit band >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 4.0),
-    Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py", "timing", 3.0),
+    Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults", "timing", 4.0),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 1.5, fence=False),
     Figure("reprocess-band", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit band walk camargo",
            "timing", 5.0, fence=False),

@@ -6,6 +6,14 @@ limit per worker (default: the machine's memory divided among the workers), and 
 numeric libraries limited to one thread inside each worker (Dask's
 ``distributed.nanny.pre-spawn-environ`` sets ``OMP_NUM_THREADS`` and friends to 1, and the
 pipeline limits BLAS with threadpoolctl), so N workers do not oversubscribe the cores.
+One of Dask's pre-spawn variables is removed: ``MALLOC_TRIM_THRESHOLD_`` (Dask sets it
+to 65536 so that workers hand freed memory back to the system). Setting it at all turns off
+glibc's adaptive mmap threshold (mallopt(3)), so every numpy temporary over 128 kB is
+mapped and unmapped afresh; the pipeline makes many, and the same subject ran 25-35 %
+slower in a worker than in a plain process (walk 2.5 s against 1.9 s, run 3.4 s against
+2.5 s, warm, 2026-11-25; tests/benchmarks/RESULTS.md, block ``dataset``, gives the
+throughput and each worker's peak memory). Workers started by hand need the same
+setting in their Dask configuration (README, "On a lab's machines").
 With ``scheduler`` it submits to a running cluster instead (``tcp://HOST:PORT``): any
 machine with addb installed that can read the dataset and write the output folder.
 
@@ -124,7 +132,9 @@ def _local_cluster(options: DatasetOptions) -> Any:
     from distributed import LocalCluster
 
     n = options.workers or os.cpu_count() or 1
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+    # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold)
+    settings = {"distributed.scheduler.allowed-failures": 0, "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+    with dask.config.set(settings):
         return LocalCluster(
             n_workers=n,
             threads_per_worker=1,

@@ -1,7 +1,7 @@
 """Dataset processing on this machine: the six shared and example subjects, serial (one
 Dask worker) against two workers, as whole ``addb process DATASET_DIR`` runs (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_dataset.py [--workers 1 2]
+    .venv/bin/python tests/benchmarks/bench_dataset.py [--workers 1 2] [--dask-defaults]
 
 Builds a dataset tree in a temporary folder: the three shared subjects under ``shared/``
 and the three examples of scripts/make_example_subject.py (Camargo circuit, stair descent,
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -42,11 +43,12 @@ def build(root: Path) -> Path:
     return root
 
 
-def run(tree: Path, out: Path, workers: int) -> dict:
+def run(tree: Path, out: Path, workers: int, scheduler: str | None = None) -> dict:
     addb = Path(sys.executable).parent / "addb"
+    where = ["--scheduler", scheduler] if scheduler else ["--workers", str(workers)]
     t0 = time.perf_counter()
-    proc = subprocess.run([str(addb), "process", str(tree), "--out", str(out), "--workers", str(workers), "--force"],
-                          capture_output=True, text=True)  # fmt: skip
+    proc = subprocess.run([str(addb), "process", str(tree), "--out", str(out), *where, "--force"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
     wall = time.perf_counter() - t0
     summary = json.loads((out / "dataset_summary.json").read_text())
     if proc.returncode != 0:
@@ -60,25 +62,56 @@ def run(tree: Path, out: Path, workers: int) -> dict:
         "workers": workers, "wall": wall, "frames": frames, "subjects": summary["totals"]["subjects"],
         "fps": frames / wall, "fpcs": frames / wall / workers, "peaks": sorted(peaks.values()),
         "per_subject": {s["rel"]: s.get("seconds") for s in summary["subjects"]},
+        "label": f"{workers}" if scheduler is None else f"{workers}, `dask worker` with Dask's defaults",
     }  # fmt: skip
+
+
+def run_on_dask_defaults(tree: Path, out: Path, tmp: Path) -> dict:
+    """:func:`run` on one hand-started worker with Dask's default configuration."""
+    bindir = Path(sys.executable).parent
+    env = dict(os.environ, DASK_CONFIG=str(tmp / "no_dask_config"))  # no user configuration
+    file = tmp / "scheduler.json"
+    scheduler = subprocess.Popen([str(bindir / "dask"), "scheduler", "--scheduler-file", str(file), "--port", "0",
+                                  "--dashboard-address", ":0"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    worker = None
+    try:
+        for _ in range(300):
+            if file.is_file() and file.stat().st_size:
+                break
+            time.sleep(0.1)
+        address = json.loads(file.read_text())["address"]
+        worker = subprocess.Popen([str(bindir / "dask"), "worker", address, "--nworkers", "1", "--nthreads", "1"],
+                                  env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+        return run(tree, out, 1, scheduler=address)
+    finally:
+        for p in (worker, scheduler):
+            if p is not None:
+                p.terminate()
+                p.wait(timeout=60)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--dask-defaults", action="store_true", help="add a run on one hand-started worker with Dask's defaults")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tree = build(Path(tmp) / "dataset")
         rows = [run(tree, Path(tmp) / f"out{w}", w) for w in args.workers]
+        own = len(rows)
+        if args.dask_defaults:
+            rows.append(run_on_dask_defaults(tree, Path(tmp) / "out_dask_defaults", Path(tmp)))
     base = rows[0]["wall"]
     print(f"dataset: {len(SHARED_SUBJECTS) + len(EXAMPLES)} subjects, {rows[0]['frames']} frames; {time.strftime('%Y-%m-%d')}")
     print("| workers | wall (s) | speed-up | frames/s | frames per core-second | peak memory per worker (MB) | subjects |")
     print("| ---: | ---: | ---: | ---: | ---: | --- | --- |")
     for r in rows:
-        print(f"| {r['workers']} | {r['wall']:.1f} | {base / r['wall']:.2f} | {r['fps']:.1f} | {r['fpcs']:.1f} | "
+        print(f"| {r['label']} | {r['wall']:.1f} | {base / r['wall']:.2f} | {r['fps']:.1f} | {r['fpcs']:.1f} | "
               f"{', '.join(f'{p:.0f}' for p in r['peaks'])} | {r['subjects']} |")  # fmt: skip
     print("\nper subject (s):", json.dumps({k: round(v, 1) if v else v for k, v in rows[0]["per_subject"].items()}))
-    best = max(r["fpcs"] for r in rows)
+    if args.dask_defaults:
+        print("per subject (s), Dask's defaults:", json.dumps({k: round(v, 1) if v else v for k, v in rows[-1]["per_subject"].items()}))
+    best = max(r["fpcs"] for r in rows[:own])
     print(f"\nprojection for {DATASET_FRAMES / 1e6:.0f} million frames at {best:.1f} frames per core-second:")
     print("| cores | hours | days |")
     print("| ---: | ---: | ---: |")
