@@ -9,11 +9,10 @@ pipeline limits BLAS with threadpoolctl), so N workers do not oversubscribe the 
 One of Dask's pre-spawn variables is removed: ``MALLOC_TRIM_THRESHOLD_`` (Dask sets it
 to 65536 so that workers hand freed memory back to the system). Setting it at all turns off
 glibc's adaptive mmap threshold (mallopt(3)), so every numpy temporary over 128 kB is
-mapped and unmapped afresh; the pipeline makes many, and the same subject ran 25-35 %
-slower in a worker than in a plain process (walk 2.5 s against 1.9 s, run 3.4 s against
-2.5 s, warm, 2026-11-25; tests/benchmarks/RESULTS.md, block ``dataset``, gives the
-throughput and each worker's peak memory). Workers started by hand need the same
-setting in their Dask configuration (README, "On a lab's machines").
+mapped and unmapped afresh; the pipeline makes many, and each subject took 23-39 % longer
+in a worker started with Dask's defaults (tests/benchmarks/RESULTS.md, block ``dataset``:
+per-subject times, throughput and each worker's peak memory, both ways). Workers started
+by hand need the same setting in their Dask configuration (README, "On a lab's machines").
 With ``scheduler`` it submits to a running cluster instead (``tcp://HOST:PORT``): any
 machine with addb installed that can read the dataset and write the output folder.
 

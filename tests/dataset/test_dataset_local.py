@@ -162,7 +162,7 @@ def _worker_environment() -> dict[str, str | None]:
 
 def test_local_workers_keep_glibcs_adaptive_mmap_threshold() -> None:
     """Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_`` in its workers, which turns off glibc's
-    adaptive mmap threshold (the pipeline ran 25-35 % slower in such a worker,
+    adaptive mmap threshold (each subject took 23-39 % longer in such a worker,
     solver/dataset/runner.py); the local cluster's workers start without it and keep Dask's
     one-thread setting for the numeric libraries."""
     from distributed import Client
