@@ -144,6 +144,26 @@ def _local_cluster(options: DatasetOptions) -> Any:
         )
 
 
+def _malloc_trim_threshold() -> str | None:
+    """This process's ``MALLOC_TRIM_THRESHOLD_`` (run on each worker)."""
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+def _check_worker_environment(client: Any, tell: Callable[[str], None]) -> None:
+    """Tell the user when workers of a cluster started by hand run with
+    ``MALLOC_TRIM_THRESHOLD_`` set (Dask's default; module docstring): the run works, slower."""
+    try:
+        values = client.run(_malloc_trim_threshold)
+    except Exception:  # noqa: BLE001 - a worker that cannot answer: nothing to say about it
+        return
+    slow = sorted(w for w, v in values.items() if v is not None)
+    if slow:
+        tell(
+            f"{len(slow)} of {len(values)} Dask workers run with MALLOC_TRIM_THRESHOLD_ set (Dask's default), "
+            "which makes each subject take 23-39 % longer; README, \"On a lab's machines\", says how to start them without it"
+        )
+
+
 def _failure(entry: DatasetSubject, kind: str, message: str, **extra: Any) -> dict[str, Any]:
     return {
         "rel": entry.rel,
@@ -298,6 +318,8 @@ def _run_jobs(
             else:
                 tell(f"Dask dashboard: {dashboard} (its plots need `pip install bokeh`)")
         tell(f"{len(info.get('workers', {}))} Dask workers, scheduler {client.scheduler.address}")
+        if opts.scheduler:
+            _check_worker_environment(client, tell)
         run_id = uuid.uuid4().hex[:8]
         attempts: dict[str, int] = {}
         by_key: dict[str, SubjectJob] = {}

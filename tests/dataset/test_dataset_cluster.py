@@ -92,10 +92,12 @@ def serial_walk(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def test_scheduler_run_equals_a_serial_run(scheduler, tree, serial_walk, tmp_path: Path) -> None:
+def test_scheduler_run_equals_a_serial_run(scheduler, tree, serial_walk, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     address, _ = scheduler
     out = tmp_path / "out"
     assert cli(["process", str(tree), "--out", str(out), "--scheduler", address]) == 0
+    # workers started with Dask's defaults carry MALLOC_TRIM_THRESHOLD_: the user is told
+    assert "2 of 2 Dask workers run with MALLOC_TRIM_THRESHOLD_ set" in capsys.readouterr().err
     summary = json.loads((out / "dataset_summary.json").read_text())
     assert {s["rel"]: s["status"] for s in summary["subjects"]} == {WALK: "ok", KINEMATICS_ONLY: "kinematics_only"}
     assert summary["scheduler"] == address
