@@ -22,17 +22,16 @@ import argparse
 import contextlib
 import io
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from solver.diagnose.core import DiagnoseOptions, diagnose_trial  # noqa: E402
-from solver.diagnose.selection import ChoiceRule, contends, significance  # noqa: E402
-from tests.diagnose.effects import check, copy_subject, hide  # noqa: E402
-from tests.diagnose.harness import diagnose_json, draw, neutral_base  # noqa: E402
+from solver.diagnose.core import DiagnoseOptions, diagnose_trial
+from solver.diagnose.selection import ChoiceRule, contends, significance
+from tests.diagnose.effects import check, copy_subject, hide
+from tests.diagnose.harness import diagnose_json, draw, probe_walk_base
 
 
 def main() -> int:
@@ -41,9 +40,7 @@ def main() -> int:
     p.add_argument("--first", type=int, default=0)
     p.add_argument("--work", type=Path, default=None, help="working folder (default: a temporary one)")
     args = p.parse_args()
-    work = args.work or Path(tempfile.mkdtemp(prefix="addb_probe_markers_"))
-    with contextlib.redirect_stderr(io.StringIO()):
-        base = neutral_base("walk", work / "base")
+    work, base = probe_walk_base(args.work, "addb_probe_markers_")
     rule = ChoiceRule()
     print(
         "| draw | hidden marker | hidden |s| (cm) | chosen | visible (cm) | visible share | beyond fitted offset (cm) "
@@ -51,7 +48,7 @@ def main() -> int:
     )
     print("|---:|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|")
     for index in range(args.first, args.first + args.draws):
-        key, seed = draw("marker_offset", index)
+        _, seed = draw("marker_offset", index)
         dst = work / f"draw-{seed}"
         subject = copy_subject(base.subject, dst)
         hidden = hide("marker_offset", subject, base.trial, seed, base.processed)

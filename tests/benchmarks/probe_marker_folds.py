@@ -26,7 +26,6 @@ import argparse
 import contextlib
 import io
 import sys
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -40,7 +39,7 @@ from solver.diagnose.core import DiagnoseOptions, diagnose_trial
 from solver.diagnose.selection import make_blocks
 from solver.io.trc import read_trc
 from tests.diagnose.effects import check, copy_subject, hide
-from tests.diagnose.harness import diagnose_json, draw, neutral_base
+from tests.diagnose.harness import diagnose_json, draw, probe_walk_base
 
 FOOT = ("Toe", "MT5", "Heel", "Ankle")
 
@@ -150,9 +149,7 @@ def main() -> int:
     p.add_argument("--draws", type=int, default=20)
     p.add_argument("--work", type=Path, default=None, help="working folder (default: a temporary one)")
     args = p.parse_args()
-    work = args.work or Path(tempfile.mkdtemp(prefix="addb_probe_folds_"))
-    with contextlib.redirect_stderr(io.StringIO()):
-        base = neutral_base("walk", work / "base")
+    work, base = probe_walk_base(args.work, "addb_probe_folds_")
     part_one(base.subject, base.trial)
     if args.draws:
         part_two(base, work, args.draws)

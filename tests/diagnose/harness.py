@@ -17,6 +17,7 @@ import contextlib
 import io
 import json
 import shutil
+import tempfile
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -86,6 +87,14 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 8) -> Base:
         _process_band(subject)
         report = diagnose_json(subject, trial)
     return Base(subject, trial, report, applied)
+
+
+def probe_walk_base(work: Path | None, prefix: str) -> tuple[Path, Base]:
+    """For the benchmark probes: the working folder (``work``, or a new temporary one named
+    ``prefix``...) and the walk's neutral base built in it, its progress kept off stderr."""
+    folder = work or Path(tempfile.mkdtemp(prefix=prefix))
+    with contextlib.redirect_stderr(io.StringIO()):
+        return folder, neutral_base("walk", folder / "base")
 
 
 def _process_band(subject: Path) -> None:
