@@ -123,6 +123,10 @@ class DatasetRun:
         return tuple(s for s in self.subjects if s["status"] == "failed")
 
 
+#: The variable Dask's nanny sets in its workers that slows the pipeline (module docstring).
+TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
+
+
 def _local_cluster(options: DatasetOptions) -> Any:
     """A LocalCluster of one-thread worker processes (see the module docstring)."""
     import logging
@@ -132,7 +136,7 @@ def _local_cluster(options: DatasetOptions) -> Any:
 
     n = options.workers or os.cpu_count() or 1
     # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold)
-    settings = {"distributed.scheduler.allowed-failures": 0, "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+    settings = {"distributed.scheduler.allowed-failures": 0, f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}": None}
     with dask.config.set(settings):
         return LocalCluster(
             n_workers=n,
@@ -145,8 +149,8 @@ def _local_cluster(options: DatasetOptions) -> Any:
 
 
 def _malloc_trim_threshold() -> str | None:
-    """This process's ``MALLOC_TRIM_THRESHOLD_`` (run on each worker)."""
-    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+    """This process's :data:`TRIM_VARIABLE` (run on each worker)."""
+    return os.environ.get(TRIM_VARIABLE)
 
 
 def _check_worker_environment(client: Any, tell: Callable[[str], None]) -> None:
@@ -159,7 +163,7 @@ def _check_worker_environment(client: Any, tell: Callable[[str], None]) -> None:
     slow = sorted(w for w, v in values.items() if v is not None)
     if slow:
         tell(
-            f"{len(slow)} of {len(values)} Dask workers run with MALLOC_TRIM_THRESHOLD_ set (Dask's default), "
+            f"{len(slow)} of {len(values)} Dask workers run with {TRIM_VARIABLE} set (Dask's default), "
             "which makes each subject take 23-39 % longer; README, \"On a lab's machines\", says how to start them without it"
         )
 

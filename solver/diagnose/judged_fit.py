@@ -51,6 +51,7 @@ Progress = Callable[[str, float], None]
 JUDGED_CACHE = "judged_fit"
 _KEY_FILE = "key.json"
 
+
 def judged_fit(recorded: FitSettings) -> FitSettings:
     """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
     thresholds were calibrated on, :class:`~solver.dynamics.fit.FitSettings`' defaults

@@ -314,9 +314,7 @@ def processed_to_b3d(
         raise SubjectFolderError("holds no processed trial (<trial>/trial.npz)", path=out)
     info = dict(subject_info or {})
     trials = [load_processed(out, n) for n in names]
-    model_path = Path(trials[0].model_path)
-    if not model_path.is_absolute():
-        model_path = out / model_path
+    model_path = Path(trials[0].model_path)  # load_processed finds a moved folder's model in it
     if not model_path.exists():
         candidates = sorted(out.glob("*_scaled.osim"))
         if not candidates:
