@@ -6,7 +6,7 @@ The Camargo level-ground circuit (``scripts/make_example_subject.py camargo2021_
 1534 frames at the default 100 Hz) is cut to its first N frames' worth of time (the TRC's
 and the MOT's rows up to N / 100 s after the first sample; every cut keeps the static-free,
 one-trial subject as it is) and each cut is processed by ``process_subject`` in a fresh
-Python process. Last, the whole trial is processed at ``--rate-for-memory`` Hz (130.4 Hz:
+Python process (addb's bytecode compiled first, as an install has it: ``user_env.py``). Last, the whole trial is processed at ``--rate-for-memory`` Hz (130.4 Hz:
 about 2,000 frames; the recording is at 200 Hz) for the issue's memory target (under
 500 MB for a 2,000-frame trial). Prints per run: frames, wall time, CPU time (user + sys)
 and peak resident memory of the child (``os.wait4``), the dynamics' frames (trial.npz),
@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from user_env import compile_sources, user_environment  # this folder: the script's own
 
 REPO = Path(__file__).resolve().parents[2]
 NAME = "camargo2021_levelground"
@@ -67,7 +68,7 @@ def _run(subject: Path, out: Path, rate: float, fit: str) -> tuple[float, float,
     """One fresh process: (wall s, CPU s, peak resident MB)."""
     code = CHILD.format(repo=str(REPO), subject=str(subject), out=str(out), rate=rate, fit=fit)
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=user_environment())
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     if status != 0:
@@ -81,6 +82,7 @@ def main() -> None:
     ap.add_argument("--rate-for-memory", type=float, default=130.4)
     ap.add_argument("--fit", default="default", choices=["default", "converged", "band"])
     args = ap.parse_args()
+    compile_sources()
     print("| run | frames | wall (s) | CPU (s) | CPU ms per frame | dynamics fit (s) | peak memory (MB) |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     with tempfile.TemporaryDirectory() as tmp:

@@ -10,7 +10,8 @@ frames per CPU-second (the issue's "frames per core-second"; the machine's other
 does not count in it), the per-stage times of the median run from subject.json / results.json
 and the quality metrics. ``--src DIR`` runs another source tree's ``solver`` package (e.g.
 an export of an earlier commit) with this venv, for before/after figures on one machine.
-``--fit band`` passes ``--fit band`` to ``addb process`` (the older fixed-rounds dynamics
+addb's bytecode is compiled first, outside the timed runs, as an install has it
+(``user_env.py``). ``--fit band`` passes ``--fit band`` to ``addb process`` (the older fixed-rounds dynamics
 fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/subjects or
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
@@ -35,6 +36,7 @@ import time
 from pathlib import Path
 
 from example_subjects import subject_folder  # this folder: the script's own
+from user_env import compile_sources, user_environment  # this folder: the script's own
 
 
 def _opensim_reference(repeat: int) -> list[float]:
@@ -50,7 +52,7 @@ def _opensim_reference(repeat: int) -> list[float]:
 
 def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, float]:
     """One ``addb process`` of ``subject``: (wall s, CPU s user + sys of the child)."""
-    env = dict(os.environ)
+    env = user_environment()
     cmd = [str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out)]
     if fit != "default":  # an older tree (--src) may not know the option
         cmd += ["--fit", fit]
@@ -74,6 +76,9 @@ def main() -> None:
     ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="addb process --fit")
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     args = ap.parse_args()
+    compile_sources()
+    if args.src:
+        compile_sources(args.src)
     reference = _opensim_reference(args.repeat) if args.host_reference else []
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
