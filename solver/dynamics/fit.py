@@ -106,10 +106,10 @@ class FitSettings:
         coordinates are fitted only as far as the next mass solve needs (an inexact
         alternation, as in inexact block-coordinate descent). Once a solve leaves every
         factor within ``mass_tolerance``, or at the last of ``rounds``, one round of steps
-        to ``tolerance`` ends the fit, so the result is converged for the masses it returns.
-        :func:`converged_fit` sets 1e-3 (block ``fit-round-tolerance`` of
-        tests/benchmarks/RESULTS.md: 25-35 % fewer steps on three of four subjects, the
-        same marker RMS and residuals within 0.3 %).
+        to ``tolerance`` ends the fit, so the result is converged for the masses it returns;
+        when the masses stand, each trial's steps go on from where they stopped (its damping
+        kept), as if the round had not been cut. :func:`converged_fit` sets 1e-3 (block
+        ``fit-round-tolerance`` of tests/benchmarks/RESULTS.md).
     derivative
         ``"spline"`` (OpenSim-consistent) or ``"central"``.
     direction
@@ -784,6 +784,8 @@ def fit_dynamics(
     for b, j in zip(sk.body_names, sk.body_joint):
         body_of_joint.setdefault(int(j), []).append(b)
     final = False  # the masses settled: this round of steps, to ``tolerance``, is the last
+    mus = [1e-6] * len(trials)  # each trial's damping where its last round stopped
+    resume = False  # the masses stood: each trial's steps go on from where they stopped
     for rnd in range(st.rounds):
         final = final or rnd == st.rounds - 1
         tol = st.tolerance if final or st.round_tolerance is None else st.round_tolerance
@@ -791,7 +793,7 @@ def fit_dynamics(
         for i, tr in enumerate(trials):
             prob = _TrialProblem(sk, tr, st)
             cost = prob.cost(qs[i])
-            mu = 1e-6
+            mu = mus[i] if resume else 1e-6
             for it in range(st.iterations):
                 if progress:
                     progress(f"dynamics fit: round {rnd + 1}, trial {i + 1}, step {it + 1}", (rnd * st.iterations + it) / (st.rounds * st.iterations))  # type: ignore[operator]
@@ -803,8 +805,11 @@ def fit_dynamics(
             else:
                 settled = False
             history.append(cost)
+            mus[i] = mu
+            del prob  # the next trial's problem is built without this one's buffers in memory
         if final:
             break
+        resume = False
         # mass factors: linear least squares on the root generalized forces of observed frames
         rows_a, rows_b = [], []
         joints: list[int] = []
@@ -832,7 +837,8 @@ def fit_dynamics(
             if settled and tol <= st.tolerance:  # converged: the motion was fitted to the masses the solve returns
                 break
             final = settled  # the steps stopped on round_tolerance: one round to tolerance ends the fit
-            continue  # the masses stand; more coordinate steps
+            resume = True
+            continue  # the masses stand; more coordinate steps, as if the round had gone on
         for j, k in zip(joints, k_new):
             for body in body_of_joint.get(j, []):
                 factors[body] = factors.get(body, 1.0) * float(k)
