@@ -12,7 +12,6 @@ so the conversion is a single copy.
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
 from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
 from scipy.linalg.lapack import dpbtrf, dpbtrs
@@ -24,10 +23,10 @@ class BlockBands:
     """Zeroed upper block bands of a symmetric block-banded matrix, to accumulate into.
 
     ``blocks[i, o]`` (``(T, nb + 1, nf, nf)``, a writable view) is H(i, i + o). The
-    storage is row panels ``(T, nf, (nb + 2) nf)``: row r of block row i holds
-    H(i nf + r, i nf ... (i + nb + 1) nf) followed by nf zeros, so the band storage LAPACK
-    takes is one strided copy of it (:meth:`lower_band_storage`), and the bands of one
-    block row, ``blocks[i, o:o + m]``, are the contiguous columns ``panel[i, :, o nf:(o + m) nf]``.
+    storage is row panels ``(T, nf, (nb + 1) nf)``: row r of block row i holds
+    H(i nf + r, i nf ... (i + nb + 1) nf), so the band storage LAPACK takes is nf strided
+    copies of it (:meth:`lower_band_storage`), and the bands of one block row,
+    ``blocks[i, o:o + m]``, are the contiguous columns ``panel[i, :, o nf:(o + m) nf]``.
 
     Parameters
     ----------
@@ -37,9 +36,8 @@ class BlockBands:
 
     def __init__(self, t: int, nbp1: int, nf: int) -> None:
         self.t, self.nbp1, self.nf = t, nbp1, nf
-        width = nbp1 * nf
-        self.panel = np.zeros((t, nf, width + nf))
-        self.blocks = self.panel[:, :, :width].reshape(t, nf, nbp1, nf).transpose(0, 2, 1, 3)
+        self.panel = np.zeros((t, nf, nbp1 * nf))
+        self.blocks = self.panel.reshape(t, nf, nbp1, nf).transpose(0, 2, 1, 3)
 
     def lower_band_storage(self) -> FloatArray:
         """LAPACK lower band storage of the whole symmetric matrix.
@@ -55,11 +53,13 @@ class BlockBands:
         panel = self.panel
         for o in range(1, nbp1):  # blocks past the last frame
             panel[max(t - o, 0) :, :, o * nf : (o + 1) * nf] = 0.0
-        panel[:, :, width:] = 0.0
-        # skewed view: H[c, c + d] is panel[i, r, r + d] for c = i nf + r
-        s = panel.strides
-        view = as_strided(panel, shape=(t, nf, width), strides=(s[0], s[1] + s[2], s[2]), writeable=False)
-        return np.asfortranarray(view.reshape(t * nf, width).T)
+        # H[c, c + d] is panel[i, r, r + d] for c = i nf + r (zero for r + d past the panel:
+        # past the block band); written row by row of the block, with no temporary the size
+        # of the matrix (the 2,000-frame trial's is 110 MB)
+        ab = np.zeros((width, t * nf), order="F")
+        for r in range(nf):
+            ab[: width - r, r::nf] = panel[:, r, r:].T
+        return ab
 
 
 def lower_band_storage(blocks: FloatArray) -> FloatArray:
