@@ -90,6 +90,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.2),
     Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
+    Figure("imports", RESULTS, f"{PY} tests/benchmarks/bench_imports.py", "timing", 0.5),
     Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --host-reference "
            "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 1.0, fence=False),
     Figure("process-band", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit band "
