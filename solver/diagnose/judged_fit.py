@@ -79,7 +79,9 @@ def judged_output(
     the judged fit; else the trial processed again with it, read from
     ``OUT/.addb_cache/judged_fit/<trial>/out`` when that entry's key equals
     :func:`judged_cache_key` now, or run in a scratch folder (removed on exit) and stored
-    there for the next diagnosis.
+    there for the next diagnosis. A cache entry is read from a copy in the scratch folder,
+    so another diagnosis that replaces the entry meanwhile cannot take files from under
+    this one.
 
     Parameters
     ----------
@@ -120,12 +122,12 @@ def judged_output(
     say = progress or (lambda m, f: None)
     key = judged_cache_key(subject_dir, trial, options, unmeasured_force)
     entry = Path(out_dir) / CACHE_DIR / JUDGED_CACHE / trial
-    if _cached_key(entry) == key:
-        say("the diagnosis' fit (band): reused from the cache (same inputs, options and flags)", 1.0)
-        yield entry / "out"
-        return
     with tempfile.TemporaryDirectory(prefix="addb_judged_fit_") as tmp:
         base = Path(tmp) / "out"
+        if _copy_entry(entry, base, key):
+            say("the diagnosis' fit (band): reused from the cache (same inputs, options and flags)", 1.0)
+            yield base
+            return
         cache = Path(out_dir) / CACHE_DIR
         if (cache / KINEMATICS_CACHE).is_file():
             (base / CACHE_DIR).mkdir(parents=True)
@@ -177,6 +179,23 @@ def _cached_key(entry: Path) -> object:
         return json.loads((entry / _KEY_FILE).read_text())
     except (OSError, ValueError):
         return None
+
+
+def _copy_entry(entry: Path, base: Path, key: dict[str, object]) -> bool:
+    """Copy the cached output of ``entry`` to ``base`` when its key equals ``key`` before
+    and after the copy (another diagnosis may replace the entry meanwhile); False, with
+    ``base`` absent, when there is no such entry or it could not be copied."""
+    if _cached_key(entry) != key:
+        return False
+    try:
+        shutil.copytree(entry / "out", base)
+    except OSError:  # gone or replaced while copying (shutil.Error is an OSError)
+        shutil.rmtree(base, ignore_errors=True)
+        return False
+    if _cached_key(entry) != key:
+        shutil.rmtree(base, ignore_errors=True)
+        return False
+    return True
 
 
 def _store(base: Path, entry: Path, key: dict[str, object]) -> None:

@@ -117,6 +117,29 @@ def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path
     assert not (entry / "out" / ".addb_cache").exists()  # the kinematics cache stays in OUT only
 
 
+def test_a_cache_entry_replaced_during_a_diagnosis_takes_no_files_from_it(walk: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A diagnosis reads the judged fit's cache entry from its own copy: another diagnosis
+    that replaces (or removes) the entry meanwhile leaves the folder being read whole."""
+    import shutil
+
+    from solver import pipeline
+    from solver.diagnose.judged_fit import judged_output
+
+    subject, _ = walk
+    out = subject / "addb_out"
+    entry = out / ".addb_cache" / "judged_fit" / "walk"
+    with judged_output(subject, out, "walk"):  # the entry for these flags (none), run if missing
+        pass
+    cached = load_processed(entry / "out", "walk")
+    monkeypatch.setattr(pipeline, "reprocess_dynamics", lambda *a, **k: pytest.fail("the cache entry was not read"))
+    with judged_output(subject, out, "walk") as folder:
+        assert entry not in folder.parents
+        shutil.rmtree(entry)  # what a concurrent replacement does to the old entry's folder
+        read = load_processed(folder, "walk")
+    np.testing.assert_array_equal(read.q, cached.q)
+    np.testing.assert_array_equal(read.tau, cached.tau)
+
+
 def test_unmodified_walk_names_its_steps_off_the_plates(walk: tuple[Path, dict]) -> None:
     """The walk has no reviewer flags: its real steps off the plates are the finding, and
     they are the frames the pipeline's contact analysis proposed on its own."""
