@@ -91,6 +91,8 @@ FIGURES: tuple[Figure, ...] = (
     Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
     Figure("imports", RESULTS, f"{PY} tests/benchmarks/bench_imports.py", "timing", 0.5),
+    Figure("imports-scipy-1.16", RESULTS, "rm -rf /tmp/addb_scipy_1_16 && .venv/bin/pip install -q --no-deps --target /tmp/addb_scipy_1_16 scipy==1.16.3 "
+           f"&& PYTHONPATH=/tmp/addb_scipy_1_16 {PY} tests/benchmarks/bench_imports.py", "timing", 0.7),
     Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --host-reference "
            "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 1.0, fence=False),
     Figure("process-band", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit band "
@@ -124,7 +126,7 @@ FIGURES: tuple[Figure, ...] = (
         ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s --fit band >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 4.0),
-    Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults", "timing", 4.0),
+    Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 1.5, fence=False),
     Figure("reprocess-band", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit band walk camargo",
            "timing", 5.0, fence=False),

@@ -160,9 +160,11 @@ def main() -> None:
         ]
         rows = [(name, evaluate(sk, q, dt, od, frames), evaluate(sk, q, dt, od, all_measured)) for name, sk, q in methods]
     lines = [
-        f"Trial {SUBJECT.name}/{TRIAL}: {od.time.size} frames at 100 Hz, {len(steps)} right-foot steps, "
-        f"{len(hidden)} hidden (every 3rd), {frames.size} frames evaluated (observed in 'ours'); "
-        f"piecewise: {len(segments)} segments.",
+        (
+            f"Trial {SUBJECT.name}/{TRIAL}: {od.time.size} frames at 100 Hz, {len(steps)} right-foot steps, "
+            f"{len(hidden)} hidden (every 3rd), {frames.size} frames evaluated (observed in 'ours'); "
+            f"piecewise: {len(segments)} segments."
+        ),
         "",
         "Residual with the true plate forces: (a) on the frames observed in 'ours' (hidden steps",
         "excluded); (b) on every frame with measured force in the unmodified trial, hidden steps",
@@ -177,8 +179,10 @@ def main() -> None:
     lines += [
         "",
         f"(a): ours / oracle = {ua['mean_N'] / oa['mean_N']:.2f} (<= 1.5 required), piecewise / ours = {pa['mean_N'] / ua['mean_N']:.1f}.",
-        f"(b): ordering oracle < ours < piecewise: {ob['mean_N'] < ub['mean_N'] < pb['mean_N']}; "
-        f"ours / oracle = {ub['mean_N'] / ob['mean_N']:.2f}.",
+        (
+            f"(b): ordering oracle < ours < piecewise: {ob['mean_N'] < ub['mean_N'] < pb['mean_N']}; "
+            f"ours / oracle = {ub['mean_N'] / ob['mean_N']:.2f}."
+        ),
         "Paper (its own data): 12.9 N / 1.5 cm, 18.0 N / 2.4 cm, 3630 N / 7.7 cm.",
         f"Wall time of the whole study: {time.perf_counter() - t_start:.0f} s.",
     ]

@@ -10,7 +10,9 @@ count with ``--force`` into a fresh output tree. Prints per run the wall time, s
 frames (all trials), frames per second, frames per core-second (frames / wall / workers),
 the peak resident memory of each worker process (from the subjects' outcomes), and the
 projection for the AddBiomechanics Dataset's 24 million frames on 8, 64 and 512 cores at
-the best measured frames per core-second.
+the best measured frames per core-second. ``--host-reference`` also times OpenSim's IK tool
+on the walk before and after the runs, as block ``process`` does (the host's speed drifts
+from one day to the next; two blocks' references say by how much).
 """
 
 from __future__ import annotations
@@ -24,6 +26,11 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from bench_kinematics import (  # this folder; the reference needs ``pip install opensim``
+    host_reference_line,
+    opensim_reference,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared" / "data" / "subjects"
@@ -94,7 +101,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--dask-defaults", action="store_true", help="add a run on one hand-started worker with Dask's defaults")
+    parser.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     args = parser.parse_args()
+    before = opensim_reference(3) if args.host_reference else []
     with tempfile.TemporaryDirectory() as tmp:
         tree = build(Path(tmp) / "dataset")
         rows = [run(tree, Path(tmp) / f"out{w}", w) for w in args.workers]
@@ -118,6 +127,8 @@ def main() -> None:
     for cores in (8, 64, 512):
         hours = DATASET_FRAMES / best / cores / 3600
         print(f"| {cores} | {hours:.1f} | {hours / 24:.2f} |")
+    if args.host_reference:
+        print("\n" + host_reference_line(before, opensim_reference(3), "runs"))
 
 
 if __name__ == "__main__":

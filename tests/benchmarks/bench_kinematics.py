@@ -70,6 +70,25 @@ def rms(model_file: Path, mot: Path, names: set[str]) -> float:
     return float(np.sqrt(np.nanmean(e**2))), len(use)
 
 
+def opensim_reference(repeat: int) -> list[float]:
+    """Whole-process times (s) of OpenSim's IK tool on the walk (:func:`run_opensim`), ``repeat``
+    runs: the host reference of the whole-process timing blocks (code that does not change
+    between two blocks, so two blocks' references say how much faster the host ran)."""
+    times = []
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as tmp:
+            times.append(run_opensim(Path(tmp))[0])
+    return times
+
+
+def host_reference_line(before: list[float], after: list[float], what: str = "subjects") -> str:
+    """The host reference's line of a block: the best of the runs before and after ``what``."""
+    return (
+        f"host reference, OpenSim 4.6 IK tool on the walk (whole process, as block `kinematics`): best {min(before + after):.2f} s "
+        f"(runs before the {what} {', '.join(f'{t:.2f}' for t in before)}; after {', '.join(f'{t:.2f}' for t in after)})"
+    )
+
+
 def run_opensim(work: Path) -> tuple[float, float, Path]:
     """OpenSim's IK of the walk in a fresh process: (whole process s, ``run()`` s, .mot)."""
     setup = ET.parse(ORACLES / "opensim_ik_setup_walk.xml")
@@ -115,7 +134,7 @@ def main() -> None:
     best_os, best_ad = min(os_times), min(ad_times)
     best_run = min(os_run_times)
     print(f"markers evaluated: {n} (OpenSim) / {n2} (addb), all observations of the walk (238 frames)")
-    print("| | wall time (best of %d) | all runs (s) | marker RMS (cm) |" % args.repeats)
+    print(f"| | wall time (best of {args.repeats}) | all runs (s) | marker RMS (cm) |")
     print("| --- | ---: | --- | ---: |")
     print(f"| OpenSim 4.6 IK, whole process (start, import, setup, run, output), walk only, study-scaled model | {best_os:.2f} s | {', '.join(f'{t:.2f}' for t in os_times)} | {os_rms * 100:.2f} |")
     print(f"| of which InverseKinematicsTool.run() | {best_run:.2f} s | {', '.join(f'{t:.2f}' for t in os_run_times)} | |")

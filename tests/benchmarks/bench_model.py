@@ -15,10 +15,10 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from solver.model.osim import read_osim  # noqa: E402
-from solver.model.skeleton import ExternalWrench, Skeleton  # noqa: E402
+from solver.model.osim import read_osim
+from solver.model.skeleton import ExternalWrench, Skeleton
 
 MODEL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "models" / "Rajagopal2016.osim"
 

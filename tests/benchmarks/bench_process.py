@@ -35,19 +35,12 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_kinematics import (  # this folder; the reference needs ``pip install opensim``
+    host_reference_line,
+    opensim_reference,
+)
 from example_subjects import subject_folder  # this folder: the script's own
 from user_env import compile_sources, user_environment  # this folder: the script's own
-
-
-def _opensim_reference(repeat: int) -> list[float]:
-    """Whole-process times (s) of OpenSim's IK tool on the walk (:func:`bench_kinematics.run_opensim`)."""
-    from bench_kinematics import run_opensim  # this folder; needs ``pip install opensim``
-
-    times = []
-    for _ in range(repeat):
-        with tempfile.TemporaryDirectory() as tmp:
-            times.append(run_opensim(Path(tmp))[0])
-    return times
 
 
 def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, float]:
@@ -79,7 +72,7 @@ def main() -> None:
     compile_sources()
     if args.src:
         compile_sources(args.src)
-    reference = _opensim_reference(args.repeat) if args.host_reference else []
+    reference = opensim_reference(args.repeat) if args.host_reference else []
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
         "| trial: measured frames, marker RMS (cm), linear residual (N, BW), angular residual (N·m, BW·h) |"
@@ -117,12 +110,7 @@ def main() -> None:
                 flush=True,
             )
     if args.host_reference:
-        reference += _opensim_reference(args.repeat)
-        print(
-            f"\nhost reference, OpenSim 4.6 IK tool on the walk (whole process, as block `kinematics`): best {min(reference):.2f} s "
-            f"(runs before the subjects {', '.join(f'{t:.2f}' for t in reference[: args.repeat])}; "
-            f"after {', '.join(f'{t:.2f}' for t in reference[args.repeat :])})"
-        )
+        print("\n" + host_reference_line(reference, opensim_reference(args.repeat)))
 
 
 if __name__ == "__main__":
