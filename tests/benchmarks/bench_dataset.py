@@ -128,7 +128,7 @@ def main() -> None:
         hours = DATASET_FRAMES / best / cores / 3600
         print(f"| {cores} | {hours:.1f} | {hours / 24:.2f} |")
     if args.host_reference:
-        print("\n" + host_reference_line(before, opensim_reference(3), "runs"))
+        print("\n" + host_reference_line(before, opensim_reference(3), "dataset runs"))
 
 
 if __name__ == "__main__":
