@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Warnings from the readers are messages for the user: one line, no source excerpt."""
     print(f"addb: warning: {message}", file=sys.stderr)
 
@@ -70,7 +70,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"addb {args.command}: no such file or folder: {exc.filename}", file=sys.stderr)
         return 1
     except Exception as exc:
-        from annotations import AnnotationError  # the review record's own errors (no solver base class)
+        from annotations import (
+            AnnotationError,  # the review record's own errors (no solver base class)
+        )
 
         if isinstance(exc, AnnotationError):
             print(f"addb {args.command}: {exc}", file=sys.stderr)

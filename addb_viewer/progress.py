@@ -24,7 +24,7 @@ class ProgressBar:
         frac = min(max(fraction, 0.0), 1.0)
         elapsed = time.perf_counter() - self.t0
         if self._tty:
-            filled = int(round(frac * self.width))
+            filled = round(frac * self.width)
             bar = "#" * filled + "-" * (self.width - filled)
             self.stream.write(f"\r[{bar}] {frac * 100:5.1f}% {elapsed:6.1f}s {message[:50]:<50}")
             if frac >= 1.0:

@@ -106,9 +106,9 @@ class FrameGeometry:
 def foot_of_body(name: str) -> str:
     """"left", "right" or "" from an OpenSim body name (``calcn_l``, ``toes_r``, ``LeftFoot``)."""
     n = name.lower()
-    if re.search(r"(_l|_left)$", n) or n.startswith("left") or n.startswith("l_"):
+    if re.search(r"(_l|_left)$", n) or n.startswith(("left", "l_")):
         return "left"
-    if re.search(r"(_r|_right)$", n) or n.startswith("right") or n.startswith("r_"):
+    if re.search(r"(_r|_right)$", n) or n.startswith(("right", "r_")):
         return "right"
     return ""
 

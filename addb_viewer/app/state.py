@@ -118,7 +118,7 @@ class Playback:
         if not self.playing:
             return self.frame
         elapsed = max(now - self._anchor_time, 0.0)
-        target = self._anchor_frame + int(math.floor(elapsed * self.rate_hz * self.speed + 1e-9))
+        target = self._anchor_frame + math.floor(elapsed * self.rate_hz * self.speed + 1e-9)
         if target >= self.n_frames:
             if self.loop:
                 target %= self.n_frames

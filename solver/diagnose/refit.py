@@ -19,13 +19,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from solver.model.mass_groups import redistribute  # noqa: F401 (re-exported)
 from solver.dynamics.fit import FitSettings
-from solver.dynamics.stage import DynamicsOptions, DynamicsResult, TrialDynamics, run_dynamics, trial_frames
+from solver.dynamics.stage import (
+    DynamicsOptions,
+    DynamicsResult,
+    TrialDynamics,
+    run_dynamics,
+    trial_frames,
+)
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.masks import resample_mask
-from solver.model.osim import Body, OsimModel
+from solver.model.mass_groups import redistribute  # noqa: F401 (re-exported)
+from solver.model.osim import OsimModel
 from solver.model.skeleton import Skeleton
 from solver.results import ProcessedTrial
 

@@ -307,8 +307,7 @@ def write_trc(path: str | Path, markers: MarkerTrajectories, *, units: str = "mm
     n_frames, n_markers = markers.n_frames, len(markers.names)
     out = [
         f"PathFileType\t4\t(X/Y/Z)\t{Path(path).name}",
-        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\t"
-        "OrigDataStartFrame\tOrigNumFrames",
+        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
         f"{rate}\t{rate}\t{n_frames}\t{n_markers}\t{units}\t{rate}\t1\t{n_frames}",
         "Frame#\tTime\t" + "".join(f"{n}\t\t\t" for n in markers.names).rstrip("\t"),
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),

@@ -107,7 +107,7 @@ def model_height(skeleton: Skeleton) -> float:
     divided by the hip-height ratio.
     """
     q = skeleton.neutral()
-    rot, pos = skeleton.body_poses(q)
+    _, pos = skeleton.body_poses(q)
     up = -np.asarray(skeleton.osim.gravity) / np.linalg.norm(skeleton.osim.gravity)
     heights = pos[0] @ up
     pelvis = heights[skeleton.body_index(skeleton.root_body)]

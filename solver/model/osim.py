@@ -463,9 +463,9 @@ class _FrameResolver:
     def offset_from_elem(self, pof: ET.Element, seen: tuple[str, ...] = ()) -> Offset:
         parent = _strip_path(self.ctx.text(pof, "socket_parent"))
         base = self.resolve(parent, {}, seen + (pof.get("name") or "",))
-        if base.orientation != (0.0, 0.0, 0.0) or base.translation != (0.0, 0.0, 0.0):
-            if parent not in self.body_names:
-                raise self.ctx.error("offset frames on offset frames are not supported", pof)
+        moved = base.orientation != (0.0, 0.0, 0.0) or base.translation != (0.0, 0.0, 0.0)
+        if moved and parent not in self.body_names:
+            raise self.ctx.error("offset frames on offset frames are not supported", pof)
         return Offset(
             body=base.body,
             translation=tuple(self.ctx.floats(pof, "translation", 3, "0 0 0")),

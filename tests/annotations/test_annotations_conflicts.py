@@ -69,7 +69,7 @@ def test_activity_and_reviewed_conflicts(subject: Path, clock) -> None:
 
 def test_undo_leaves_frames_changed_by_another_writer(subject: Path, clock) -> None:
     a, b = _two(subject, clock)
-    a.set_unmeasured("walk", range(0, 4), foot="left")
+    a.set_unmeasured("walk", range(4), foot="left")
     b.refresh()
     b.set_unmeasured("walk", 2, foot="right")
     undo = a.undo()

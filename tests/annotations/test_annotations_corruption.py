@@ -16,7 +16,7 @@ from annotations.schema import encode_line
 
 def _make_subject(folder: Path, clock) -> dict:
     store = AnnotationStore.open(folder, reviewer="ana", clock=clock)
-    store.set_unmeasured("walk", range(0, 24))
+    store.set_unmeasured("walk", range(24))
     store.set_unmeasured("walk", 60, foot="left")
     store.set_excluded("walk", range(100, 104))
     store.add_activity("walk", 0, 136, "overground_walking", note="ok")

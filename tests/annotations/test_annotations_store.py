@@ -39,7 +39,7 @@ def test_flags_are_recorded_with_provenance(subject: Path, clock) -> None:
 
 def test_later_flag_replaces_earlier_and_runs_split_by_provenance(subject: Path, clock) -> None:
     store = AnnotationStore.open(subject, reviewer="ana", clock=clock)
-    first = store.set_unmeasured("walk", range(0, 10), foot="left")
+    first = store.set_unmeasured("walk", range(10), foot="left")
     second = store.set_unmeasured("walk", range(5, 8), foot="right")
     store.set_unmeasured("walk", 9, False)
     runs = store.flag_runs("walk")
@@ -164,7 +164,7 @@ def test_older_subject_file_plus_newer_journal_is_replayed(subject: Path, clock)
 
 def test_close_writes_a_human_readable_versioned_file(subject: Path, clock) -> None:
     with AnnotationStore.open(subject, reviewer="ana", clock=clock) as store:
-        store.set_unmeasured("walking1", range(0, 24))
+        store.set_unmeasured("walking1", range(24))
         second = store.set_unmeasured("walking1", 60, foot="left")
         store.set_excluded("walking1", range(100, 104))
     text = (subject / "annotations.json").read_text()

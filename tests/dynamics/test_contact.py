@@ -42,7 +42,7 @@ def test_a_foot_on_two_plates_receives_both() -> None:
     force, CoPs 6 cm behind and ahead): both go to the right foot."""
     skel, trial, plates = walk()
     r = next(p for p in plates if p.name == "r")
-    rot, pos = skel.body_poses(trial.q)
+    rot, _ = skel.body_poses(trial.q)
     forward = rot[:, skel.body_index("calcn_r"), :, 0]  # the foot's x axis
     forward[:, 1] = 0.0
     forward /= np.linalg.norm(forward, axis=1, keepdims=True)

@@ -88,7 +88,7 @@ def test_synthetic_trial_is_recovered() -> None:
     """Scales within 1% wherever the markers determine them (a 1% change moves the markers
     by 1 mm RMS or more); the few factors along axes no marker resolves (e.g. a femur's
     depth, set only by cluster markers that carry free offsets) stay within 3% by the prior."""
-    generic, groups, truth, body_scales, sk, q_true, markers, height = _synthetic()
+    generic, groups, truth, _, sk, q_true, markers, height = _synthetic()
     res = run_kinematics(generic, [("synthetic", markers)], height_m=height)
     fitted = np.concatenate([res.body_scales[body] for body in (next(b for b, g in groups.body_group.items() if g == k) for k in range(len(groups.names)))])
     sensitivity = _scale_sensitivity(generic, groups, q_true, truth)

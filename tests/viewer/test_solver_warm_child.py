@@ -38,7 +38,7 @@ def processed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, dic
     return subject, out, {"walk": mask}
 
 
-def _run(subject: Path, out: Path, flags: dict, work: Path, monkeypatch, *, warm: bool) -> tuple[jobs.JobResult, int]:  # noqa: ANN001
+def _run(subject: Path, out: Path, flags: dict, work: Path, monkeypatch, *, warm: bool) -> tuple[jobs.JobResult, int]:
     """One dynamics-only Reprocess job; (its result, the pid of the process that ran it)."""
     monkeypatch.setenv("ADDB_WARM_SOLVER", "1" if warm else "0")
     spare_pid = None
