@@ -23,15 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import OsimModelError
-from solver.model.functions import (
-    Constant,
-    CubicSpline,
-    Function,
-    Linear,
-    Multiplier,
-    PiecewiseLinear,
-    Polynomial,
-)
+from solver.model.functions import Constant, CubicSpline, Function, Linear, Multiplier, PiecewiseLinear, Polynomial
 from solver.model.osim import _FUNCTION_TAGS, Joint, OsimModel, is_v3_layout
 
 
