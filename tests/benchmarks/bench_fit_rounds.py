@@ -81,6 +81,7 @@ def main() -> None:
                     fit = converged_fit(rounds=rounds)
                 else:
                     fit = converged_fit(rounds=rounds, round_tolerance=None if rtol == "none" else float(rtol))
+                rt = "-" if fit.round_tolerance is None else f"{fit.round_tolerance:g}"
                 options = ProcessOptions(dynamics=DynamicsOptions(fit=fit))
                 steps[0] = 0
                 t0 = time.perf_counter()
@@ -91,7 +92,6 @@ def main() -> None:
                     r = json.loads(res.read_text())
                     if "linear_residual_rms_N" not in r:
                         continue
-                    rt = "-" if fit.round_tolerance is None else f"{fit.round_tolerance:g}"
                     print(
                         f"| {name} / {res.parent.name} | {direction} | {rounds} | {rt} | {wall:.1f} | {fit_s:.1f} | {steps[0]} "
                         f"| {r['n_observed_frames']} "

@@ -43,7 +43,7 @@ def _top_level_us(stderr: str) -> list[tuple[str, int]]:
 def _import_alone(module: str) -> float:
     """Seconds to import ``module`` (and what it imports) in a fresh interpreter."""
     r = subprocess.run([sys.executable, "-X", "importtime", "-c", f"import {module}"], capture_output=True, text=True, check=True, env=user_environment())
-    return sum(us for name, us in _top_level_us(r.stderr)) / 1e6
+    return sum(us for _, us in _top_level_us(r.stderr)) / 1e6
 
 
 def _whole_process() -> tuple[float, float]:
