@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Callable, Sequence
 
@@ -50,10 +51,26 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"addb: warning: {message}", file=sys.stderr)
 
 
+def _one_blas_thread() -> None:
+    """Make OpenBLAS start with one thread unless the user set ``OPENBLAS_NUM_THREADS``.
+
+    Every stage already runs its linear algebra single-threaded
+    (:func:`solver.single_threaded_blas`), but that limit comes after numpy and scipy have
+    loaded their OpenBLAS libraries, and each library's extra thread spins at load: about
+    0.15 s of CPU per process on this 2-core machine for no gain in wall time (block
+    ``imports`` of tests/benchmarks/RESULTS.md). Only before numpy is imported (as in the
+    console script): in a process that has numpy already (``main`` called from Python) the
+    environment is left as it is, and the threadpoolctl limit still applies.
+    """
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``addb`` console script; returns the process exit code."""
     import warnings
 
+    _one_blas_thread()
     warnings.showwarning = _show_warning
     parser = build_parser()
     args = parser.parse_args(argv)
