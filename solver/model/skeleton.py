@@ -223,8 +223,8 @@ class Skeleton:
         self._place_R = np.array([model.jointPlacements[j].rotation for j in range(nj)])
         self._place_p = np.array([model.jointPlacements[j].translation for j in range(nj)])
         self._idx_v = np.array([model.idx_vs[j] for j in range(nj)], dtype=np.intp)
-        self._identity_r = [bool(np.allclose(r, np.eye(3), atol=0.0, rtol=0.0)) for r in self._place_R]
-        self._zero_p = [not np.any(p) for p in self._place_p]
+        self._identity_r = (self._place_R == np.eye(3)).all(axis=(1, 2)).tolist()  # exactly, per joint
+        self._zero_p = (self._place_p == 0.0).all(axis=1).tolist()
         self._axis_in_parent = [r @ a for r, a in zip(self._place_R, self._jaxis)]
         k = np.array([_skew(a) for a in self._jaxis])
         self._PK = np.einsum("jab,jbc->jac", self._place_R, k)  # placement @ skew(axis)
