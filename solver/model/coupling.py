@@ -112,6 +112,7 @@ class _SplineGroup:
     drivers: IntArray  # (k,) input slots
     knots: FloatArray  # (n,)
     table: FloatArray  # (n + 1, k, 5)
+    columns: IntArray  # (k,) 0..k-1, the table's column of each output
 
 
 class FunctionBank:
@@ -171,46 +172,59 @@ class FunctionBank:
             drivers=np.array([it[1] for it in items], dtype=np.intp),
             knots=knots,
             table=table,
+            columns=np.arange(k, dtype=np.intp),
         )
 
-    def evaluate(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def evaluate(self, x: FloatArray, order: int = 2) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """Values, first and second derivatives.
 
         Parameters
         ----------
         x
             ``(..., N)`` input values.
+        order
+            Highest derivative wanted (0, 1 or 2); the ones above it are not computed.
 
         Returns
         -------
         f, df, ddf
-            ``(..., K)`` each: f_k(x[driver_k]), f_k', f_k''.
+            ``(..., K)`` each: f_k(x[driver_k]), f_k', f_k''; None above ``order``.
         """
         lead = x.shape[:-1]
         f = np.zeros(lead + (self.n_out,))
-        df = np.zeros_like(f)
-        ddf = np.zeros_like(f)
+        df = np.zeros_like(f) if order >= 1 else None
+        ddf = np.zeros_like(f) if order >= 2 else None
         if self._lin_k.size:
             f[..., self._lin_k] = self._lin_a * x[..., self._lin_c] + self._lin_b
-            df[..., self._lin_k] = self._lin_a
+            if df is not None:
+                df[..., self._lin_k] = self._lin_a
         for g in self._groups:
             xv = x[..., g.drivers]  # (..., k)
             n = g.knots.size
             slot = np.minimum(np.searchsorted(g.knots, xv, side="right"), n - 1) + (xv > g.knots[-1])
-            coef = g.table[slot, np.arange(g.outputs.size)]  # (..., k, 5)
+            coef = g.table[slot, g.columns]  # (..., k, 5)
             t = xv - coef[..., 0]
             b, c, d = coef[..., 2], coef[..., 3], coef[..., 4]
             f[..., g.outputs] = coef[..., 1] + t * (b + t * (c + t * d))
-            df[..., g.outputs] = b + t * (2 * c + 3 * t * d)
-            ddf[..., g.outputs] = 2 * c + 6 * t * d
+            if df is not None:
+                df[..., g.outputs] = b + t * (2 * c + 3 * t * d)
+            if ddf is not None:
+                ddf[..., g.outputs] = 2 * c + 6 * t * d
         if self._polynomials is not None:
             pg = self._polynomials
-            f[..., pg.outputs], df[..., pg.outputs], ddf[..., pg.outputs] = pg.evaluate(x[..., pg.drivers])
+            pf, pdf, pddf = pg.evaluate(x[..., pg.drivers])
+            f[..., pg.outputs] = pf
+            if df is not None:
+                df[..., pg.outputs] = pdf
+            if ddf is not None:
+                ddf[..., pg.outputs] = pddf
         for k, c, fn in self._others:
             xv = x[..., c]
             f[..., k] = fn.value(xv)
-            df[..., k] = fn.derivative(xv, 1)
-            ddf[..., k] = fn.derivative(xv, 2)
+            if df is not None:
+                df[..., k] = fn.derivative(xv, 1)
+            if ddf is not None:
+                ddf[..., k] = fn.derivative(xv, 2)
         return f, df, ddf
 
 
@@ -258,7 +272,7 @@ class CoordinateMap:
         """q with every dependent coordinate replaced by its coupler value; (..., n)."""
         x = np.array(q, dtype=float, copy=True)
         if self.dependent.size:
-            g, _, _ = self._couplers.evaluate(q)
+            g, _, _ = self._couplers.evaluate(q, order=0)
             x[..., self.dependent] = g
         return x
 
@@ -271,7 +285,7 @@ class CoordinateMap:
         xdd = None if qdd is None else np.array(qdd, dtype=float, copy=True)
         dxdroot = np.ones(q.shape)
         if constrained and self.dependent.size:
-            g, dg, ddg = self._couplers.evaluate(q)
+            g, dg, ddg = self._couplers.evaluate(q, order=1 if xdd is None else 2)
             x[..., self.dependent] = g
             dxdroot[..., self.dependent] = dg
             if xd is not None:
@@ -307,7 +321,7 @@ class CoordinateMap:
             ``(..., nv)`` each (None where the input was None).
         """
         x, xd, xdd, _ = self._coordinate_derivatives(q, qd, qdd, constrained)
-        f, df, ddf = self._dofs.evaluate(x)
+        f, df, ddf = self._dofs.evaluate(x, order=0 if xd is None else (1 if xdd is None else 2))
         c = self.dof_coordinate
         v = None if xd is None else df * xd[..., c]
         a = None if xdd is None else ddf * xd[..., c] ** 2 + df * xdd[..., c]
@@ -320,7 +334,7 @@ class CoordinateMap:
         effect is carried by the independent coordinate that drives them.
         """
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
-        _, df, _ = self._dofs.evaluate(x)
+        _, df, _ = self._dofs.evaluate(x, order=1)
         cmat = np.zeros((self.nv, self.n))
         cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
         cmat[np.arange(self.nv), cols] = df * dxdroot[self.dof_coordinate]
@@ -329,7 +343,7 @@ class CoordinateMap:
     def expand_with_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Constrained q_pin ``(nv,)`` and coupling Jacobian ``(nv, n)`` of one frame, in one pass."""
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, True)
-        f, df, _ = self._dofs.evaluate(x)
+        f, df, _ = self._dofs.evaluate(x, order=1)
         cmat = np.zeros((self.nv, self.n))
         cmat[np.arange(self.nv), self.root[self.dof_coordinate]] = df * dxdroot[self.dof_coordinate]
         return f, cmat
@@ -345,7 +359,7 @@ class CoordinateMap:
             ``(nv,)`` the coordinate each DoF depends on.
         """
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
-        _, df, _ = self._dofs.evaluate(x)
+        _, df, _ = self._dofs.evaluate(x, order=1)
         cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
         return df * dxdroot[..., self.dof_coordinate], cols
 

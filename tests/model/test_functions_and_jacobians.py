@@ -61,7 +61,15 @@ def test_function_bank_equals_each_function(path: str) -> None:
     functions = list(sk._dof_func) + [Multiplier(f, 0.93) for f in sk._dof_func]
     drivers = list(sk._dof_coord) * 2
     x = RNG.uniform(-1.5, 1.5, (40, sk.n))
-    got = FunctionBank(drivers, functions).evaluate(x)
+    bank = FunctionBank(drivers, functions)
+    got = bank.evaluate(x)
+    for order in (0, 1):  # lower orders: the same arrays to the bit, nothing above
+        fewer = bank.evaluate(x, order=order)
+        for k in range(3):
+            if k <= order:
+                np.testing.assert_array_equal(fewer[k], got[k])
+            else:
+                assert fewer[k] is None
     for k, (c, fn) in enumerate(zip(drivers, functions)):
         inner = fn.inner if isinstance(fn, Multiplier) else fn
         for order, values in enumerate(got):
