@@ -51,7 +51,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"addb: warning: {message}", file=sys.stderr)
 
 
-def _one_blas_thread() -> None:
+def one_blas_thread() -> None:
     """Make OpenBLAS start with one thread unless the user set ``OPENBLAS_NUM_THREADS``.
 
     Every stage already runs its linear algebra single-threaded
@@ -70,7 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``addb`` console script; returns the process exit code."""
     import warnings
 
-    _one_blas_thread()
+    one_blas_thread()
     warnings.showwarning = _show_warning
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -13,8 +13,8 @@ import pytest
 # libraries' imports, as `addb process` has them).
 _PROBE = """
 import json, sys
-from addb_viewer.cli import _one_blas_thread
-_one_blas_thread()
+from addb_viewer.cli import one_blas_thread
+one_blas_thread()
 import numpy, scipy.linalg
 from threadpoolctl import threadpool_info
 print(json.dumps([p["num_threads"] for p in threadpool_info() if p["internal_api"] == "openblas"]))
@@ -45,5 +45,5 @@ def test_main_called_from_python_leaves_the_environment_alone(monkeypatch: pytes
     from addb_viewer import cli
 
     monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
-    cli._one_blas_thread()
+    cli.one_blas_thread()
     assert "OPENBLAS_NUM_THREADS" not in os.environ
