@@ -93,6 +93,9 @@ FIGURES: tuple[Figure, ...] = (
     Figure("imports", RESULTS, f"{PY} tests/benchmarks/bench_imports.py", "timing", 0.5),
     Figure("imports-scipy-1.16", RESULTS, "rm -rf /tmp/addb_scipy_1_16 && .venv/bin/pip install -q --no-deps --target /tmp/addb_scipy_1_16 scipy==1.16.3 "
            f"&& PYTHONPATH=/tmp/addb_scipy_1_16 {PY} tests/benchmarks/bench_imports.py", "timing", 0.7),
+    Figure("process-scipy-1.16", RESULTS, "rm -rf /tmp/addb_scipy_1_16 && .venv/bin/pip install -q --no-deps --target /tmp/addb_scipy_1_16 scipy==1.16.3 "
+           f"&& PYTHONPATH=/tmp/addb_scipy_1_16 {PY} tests/benchmarks/bench_process.py --repeat 3 --host-reference "
+           "rajagopal2016_walk opencap_uhlrich2023", "timing", 1.0, fence=False),
     Figure("process", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --host-reference "
            "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground", "timing", 1.0, fence=False),
     Figure("process-band", RESULTS, f"{PY} tests/benchmarks/bench_process.py --repeat 3 --fit band "

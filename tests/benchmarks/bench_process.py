@@ -33,6 +33,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from importlib import metadata
 from pathlib import Path
 
 from bench_kinematics import (  # this folder; the reference needs ``pip install opensim``
@@ -73,6 +74,8 @@ def main() -> None:
     if args.src:
         compile_sources(args.src)
     reference = opensim_reference(args.repeat) if args.host_reference else []
+    versions = ", ".join(f"{p} {metadata.version(p)}" for p in ("numpy", "scipy", "pin"))
+    print(f"{versions}; Python {sys.version.split()[0]}\n")
     print(
         "| subject | frames | wall (s): median [min-max] | frames/s | CPU (s) | frames per CPU-s | kinematics (s) | dynamics (s): preprocess / CoM fit / fit / ID "
         "| trial: measured frames, marker RMS (cm), linear residual (N, BW), angular residual (N·m, BW·h) |"
