@@ -448,8 +448,8 @@ def _warm_child() -> int:
     try:  # what a Reprocess / process job imports; a failure is reported by the job itself
         import scipy.signal  # noqa: F401  (the dynamics' filter)
 
-        import solver.dynamics.stage  # noqa: F401
-        import solver.pipeline  # noqa: F401
+        import solver.dynamics.stage
+        import solver.pipeline
         import solver.results  # noqa: F401
     except Exception:  # noqa: BLE001, S110
         pass

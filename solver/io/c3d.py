@@ -114,10 +114,10 @@ def _open(path: Path) -> Any:
 
     try:
         return ezc3d.c3d(str(path), extract_forceplat_data=True)
-    except Exception as exc:  # ezc3d raises plain RuntimeError/ValueError on bad files
+    except Exception as exc:  # noqa: BLE001 (ezc3d raises plain RuntimeError/ValueError on bad files)
         try:
             ezc3d.c3d(str(path))
-        except Exception:
+        except Exception:  # noqa: BLE001 (any failure of the plain read: the file is not a C3D)
             raise C3dFormatError(f"ezc3d cannot read the file: {exc}", path=path) from None
         raise C3dFormatError(
             f"the force platforms cannot be processed: {exc}", path=path, where="FORCE_PLATFORM"

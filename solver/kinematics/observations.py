@@ -63,7 +63,7 @@ def read_marker_settings(path: str | Path) -> MarkerSettings:
             data = yaml.safe_load(text)
         else:
             data = json.loads(text)
-    except Exception as exc:  # yaml/json errors carry their own position
+    except Exception as exc:  # noqa: BLE001 (yaml/json errors carry their own position)
         raise KinematicsError(f"cannot parse marker mapping: {exc}", path=path) from None
     attach = False
     if isinstance(data, dict) and "markers" in data:

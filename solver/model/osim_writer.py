@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import OsimModelError
-from solver.model.functions import Constant, CubicSpline, Function, Linear, Multiplier, PiecewiseLinear, Polynomial
+from solver.model import functions as fn
 from solver.model.osim import _FUNCTION_TAGS, Joint, OsimModel, is_v3_layout
 
 
@@ -38,32 +38,32 @@ def _set(parent: ET.Element, tag: str, text: str) -> None:
     child.text = text
 
 
-def function_element(function: Function, name: str | None = "function") -> ET.Element:
+def function_element(function: fn.Function, name: str | None = "function") -> ET.Element:
     """XML element of an OpenSim function (``name`` attribute as the 4.x layout uses)."""
     attrs = {"name": name} if name else {}
-    if isinstance(function, Multiplier):
+    if isinstance(function, fn.Multiplier):
         el = ET.Element("MultiplierFunction", attrs)
         ET.SubElement(el, "function").append(function_element(function.inner, "function"))
         ET.SubElement(el, "scale").text = repr(float(function.scale))
         return el
-    if isinstance(function, Constant):
+    if isinstance(function, fn.Constant):
         el = ET.Element("Constant", attrs)
         ET.SubElement(el, "value").text = repr(float(function.c))
         return el
-    if isinstance(function, Linear):
+    if isinstance(function, fn.Linear):
         el = ET.Element("LinearFunction", attrs)
         ET.SubElement(el, "coefficients").text = _fmt([function.slope, function.intercept])
         return el
-    if isinstance(function, Polynomial):
+    if isinstance(function, fn.Polynomial):
         el = ET.Element("PolynomialFunction", attrs)
         ET.SubElement(el, "coefficients").text = _fmt(function.coefficients)
         return el
-    if isinstance(function, CubicSpline):
+    if isinstance(function, fn.CubicSpline):
         el = ET.Element("SimmSpline" if function.kind == "fmm" else "NaturalCubicSpline", attrs)
         ET.SubElement(el, "x").text = _fmt(function.x)
         ET.SubElement(el, "y").text = _fmt(function.y)
         return el
-    if isinstance(function, PiecewiseLinear):
+    if isinstance(function, fn.PiecewiseLinear):
         el = ET.Element("PiecewiseLinearFunction", attrs)
         ET.SubElement(el, "x").text = _fmt(function.x)
         ET.SubElement(el, "y").text = _fmt(function.y)
@@ -71,7 +71,7 @@ def function_element(function: Function, name: str | None = "function") -> ET.El
     raise OsimModelError(f"cannot write function of type {type(function).__name__}")
 
 
-def _replace_function(ta: ET.Element, function: Function, v3: bool) -> None:
+def _replace_function(ta: ET.Element, function: fn.Function, v3: bool) -> None:
     """Replace the function of a TransformAxis element, keeping the file's layout."""
     holder = ta.find("function") if v3 else ta
     if holder is None:

@@ -92,7 +92,7 @@ def test_threads_sharing_a_store_and_a_second_store_lose_nothing(subject: Path) 
         try:
             for i in range(60):
                 store.set_unmeasured("t", base + i, foot="left" if base % 2 else "right")
-        except BaseException as exc:  # pragma: no cover - reported below
+        except BaseException as exc:  # noqa: BLE001  # pragma: no cover - a thread's error, reported below
             errors.append(exc)
 
     threads = [threading.Thread(target=work, args=(shared, 1000 * k)) for k in range(3)]

@@ -165,20 +165,20 @@ def test_triangle_strips(tmp_path: Path) -> None:
         ('<VTKFile type="UnstructuredGrid"/>', "PolyData"),
         ('<VTKFile type="PolyData"><PolyData/></VTKFile>', "Piece"),
         (
-            '<VTKFile type="PolyData"><PolyData><Piece NumberOfPoints="1"><Points>'
+            ('<VTKFile type="PolyData"><PolyData><Piece NumberOfPoints="1"><Points>'
             '<DataArray type="Float32" format="ascii">0 0 0</DataArray></Points><Polys>'
             '<DataArray type="Int64" Name="connectivity" format="ascii">0 1 2</DataArray>'
-            '<DataArray type="Int64" Name="offsets" format="ascii">3</DataArray></Polys></Piece></PolyData></VTKFile>',
+            '<DataArray type="Int64" Name="offsets" format="ascii">3</DataArray></Polys></Piece></PolyData></VTKFile>'),
             "outside",
         ),
         (
-            '<VTKFile type="PolyData"><PolyData><Piece><Points>'
-            '<DataArray type="Float32" format="appended" offset="0"/></Points></Piece></PolyData></VTKFile>',
+            ('<VTKFile type="PolyData"><PolyData><Piece><Points>'
+            '<DataArray type="Float32" format="appended" offset="0"/></Points></Piece></PolyData></VTKFile>'),
             "appended",
         ),
         (
-            '<VTKFile type="PolyData"><PolyData><Piece><Points>'
-            '<DataArray type="Float32" format="binary">@@@@</DataArray></Points></Piece></PolyData></VTKFile>',
+            ('<VTKFile type="PolyData"><PolyData><Piece><Points>'
+            '<DataArray type="Float32" format="binary">@@@@</DataArray></Points></Piece></PolyData></VTKFile>'),
             "bad binary",
         ),
     ],
