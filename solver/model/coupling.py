@@ -340,13 +340,13 @@ class CoordinateMap:
         cmat[np.arange(self.nv), cols] = df * dxdroot[self.dof_coordinate]
         return cmat
 
-    def expand_with_jacobian(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Constrained q_pin ``(nv,)`` and coupling Jacobian ``(nv, n)`` of one frame, in one pass."""
+    def expand_with_derivatives(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Constrained q_pin ``(nv,)`` of one frame and the nonzero entry of each row of the
+        coupling Jacobian, ``(nv,)``: ``C[k, root[dof_coordinate[k]]]`` (the DoF's one
+        coordinate after the couplers), in one pass."""
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, True)
         f, df, _ = self._dofs.evaluate(x, order=1)
-        cmat = np.zeros((self.nv, self.n))
-        cmat[np.arange(self.nv), self.root[self.dof_coordinate]] = df * dxdroot[self.dof_coordinate]
-        return f, cmat
+        return f, df * dxdroot[self.dof_coordinate]
 
     def jacobian_batch(self, q: FloatArray, *, constrained: bool = True) -> tuple[FloatArray, IntArray]:
         """Sparse form of :meth:`jacobian` for many frames.

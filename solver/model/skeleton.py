@@ -256,6 +256,14 @@ class Skeleton:
         uniq, inv = np.unique(self.marker_joint, return_inverse=True)
         self._marker_joints_uniq = [int(j) for j in uniq]
         self._marker_slot = inv.astype(np.intp).reshape(-1)
+        # (nv, U * n) 0/1: DoF k moves the joint of slot u and drives coordinate root(k); with
+        # the coupling Jacobian's nonzeros w (nv,), (J_world * w) @ it gives every marker
+        # joint's world Jacobian in the coordinates at once (see marker_jacobian)
+        cols = self.cmap.root[self.cmap.dof_coordinate]
+        selection = np.zeros((self.nv, uniq.size, self.n))
+        for u, j in enumerate(self._marker_joints_uniq):
+            selection[np.arange(self.nv), u, cols] = self._support[j]
+        self._marker_selection = selection.reshape(self.nv, -1)
 
     # ------------------------------------------------------------------ lookups
 
@@ -408,28 +416,24 @@ class Skeleton:
             ``(M, 3, n)`` d position / d q; columns of dependent (coupled) coordinates are
             zero, their effect is included in the independent coordinate's column.
         """
-        qp, cmat = self.cmap.expand_with_jacobian(np.asarray(q, dtype=float))
+        qp, w = self.cmap.expand_with_derivatives(np.asarray(q, dtype=float))
         data = self.data
         pin.computeJointJacobians(self.model, data, qp)
-        jw = data.J  # (6, nv): world-frame motion of each DoF axis at the ground origin
+        # data.J (6, nv): world-frame motion of each DoF axis at the ground origin; per marker
+        # joint u (the DoFs that move it, in the coordinates): A_u = J[:, dofs(u)] C[dofs(u)]
+        n_uniq = len(self._marker_joints_uniq)
+        a = ((data.J * w) @ self._marker_selection).reshape(6, n_uniq, self.n)
         slot = self._marker_slot[markers]
         placements = data.oMi.tolist()
         hom = np.array([placements[j].homogeneous for j in self._marker_joints_uniq])[slot]  # (M, 4, 4)
         local = self.marker_in_joint[markers]
         pm = (hom[:, :3, :3] * local[:, None, :]).sum(axis=2) + hom[:, :3, 3]
-        jl, ja = jw[:3], jw[3:]
-        px, py, pz = pm[:, 0:1], pm[:, 1:2], pm[:, 2:3]
-        jm = np.stack(  # point velocity v = v0 + w x p, per DoF column
-            [
-                jl[0] + ja[1] * pz - ja[2] * py,
-                jl[1] + ja[2] * px - ja[0] * pz,
-                jl[2] + ja[0] * py - ja[1] * px,
-            ],
-            axis=1,
-        )
-        jm *= self._support[self.marker_joint[markers]][:, None, :]
-        m = local.shape[0]
-        return pm, (jm.reshape(3 * m, self.nv) @ cmat).reshape(m, 3, self.n)
+        a = a[:, slot].transpose(1, 0, 2)  # (M, 6, n): [linear at the origin; angular]
+        skew = np.zeros((slot.size, 3, 3))  # point velocity v = v0 + w x p = v0 - [p]x w
+        skew[:, 0, 1], skew[:, 0, 2] = -pm[:, 2], pm[:, 1]
+        skew[:, 1, 0], skew[:, 1, 2] = pm[:, 2], -pm[:, 0]
+        skew[:, 2, 0], skew[:, 2, 1] = -pm[:, 1], pm[:, 0]
+        return pm, a[:, :3] - skew @ a[:, 3:]
 
     def marker_jacobians(
         self, q: FloatArray, markers: IntArray, columns: IntArray | None = None
