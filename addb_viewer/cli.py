@@ -56,9 +56,9 @@ def one_blas_thread() -> None:
 
     Every stage already runs its linear algebra single-threaded
     (:func:`solver.single_threaded_blas`), but that limit comes after numpy and scipy have
-    loaded their OpenBLAS libraries, and each library's extra thread spins at load: about
-    0.15 s of CPU per process on this 2-core machine for no gain in wall time (block
-    ``imports`` of tests/benchmarks/RESULTS.md). Only before numpy is imported (as in the
+    loaded their OpenBLAS libraries, and each library's extra thread spins at load: CPU
+    time that buys no wall time (tests/test_cli_blas.py checks the thread count, not the
+    time). Only before numpy is imported (as in the
     console script): in a process that has numpy already (``main`` called from Python) the
     environment is left as it is, and the threadpoolctl limit still applies.
     """

@@ -265,6 +265,9 @@ class CoordinateMap:
         # root[c]: the independent coordinate that finally drives coordinate c
         self.root = np.arange(self.n)
         self.root[self.dependent] = self.independent_of
+        #: (nv,) the independent coordinate each DoF depends on (the couplers applied): the
+        #: column of row k's one nonzero in the constrained coupling Jacobian
+        self.dof_root = self.root[self.dof_coordinate]
         if np.any(~mask[self.independent_of]):
             raise ValueError("chained coupler constraints (a dependent driving another) are not supported")
 
@@ -336,14 +339,13 @@ class CoordinateMap:
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
         _, df, _ = self._dofs.evaluate(x, order=1)
         cmat = np.zeros((self.nv, self.n))
-        cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
+        cols = self.dof_root if constrained else self.dof_coordinate
         cmat[np.arange(self.nv), cols] = df * dxdroot[self.dof_coordinate]
         return cmat
 
     def expand_with_derivatives(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Constrained q_pin ``(nv,)`` of one frame and the nonzero entry of each row of the
-        coupling Jacobian, ``(nv,)``: ``C[k, root[dof_coordinate[k]]]`` (the DoF's one
-        coordinate after the couplers), in one pass."""
+        coupling Jacobian, ``(nv,)``: ``C[k, dof_root[k]]``, in one pass."""
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, True)
         f, df, _ = self._dofs.evaluate(x, order=1)
         return f, df * dxdroot[self.dof_coordinate]
@@ -360,7 +362,7 @@ class CoordinateMap:
         """
         x, _, _, dxdroot = self._coordinate_derivatives(q, None, None, constrained)
         _, df, _ = self._dofs.evaluate(x, order=1)
-        cols = self.root[self.dof_coordinate] if constrained else self.dof_coordinate
+        cols = self.dof_root if constrained else self.dof_coordinate
         return df * dxdroot[..., self.dof_coordinate], cols
 
     def project(self, q: FloatArray, tau_pin: FloatArray, *, constrained: bool = True) -> FloatArray:

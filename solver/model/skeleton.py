@@ -259,10 +259,9 @@ class Skeleton:
         # (nv, U * n) 0/1: DoF k moves the joint of slot u and drives coordinate root(k); with
         # the coupling Jacobian's nonzeros w (nv,), (J_world * w) @ it gives every marker
         # joint's world Jacobian in the coordinates at once (see marker_jacobian)
-        cols = self.cmap.root[self.cmap.dof_coordinate]
         selection = np.zeros((self.nv, uniq.size, self.n))
         for u, j in enumerate(self._marker_joints_uniq):
-            selection[np.arange(self.nv), u, cols] = self._support[j]
+            selection[np.arange(self.nv), u, self.cmap.dof_root] = self._support[j]
         self._marker_selection = selection.reshape(self.nv, -1)
 
     # ------------------------------------------------------------------ lookups
