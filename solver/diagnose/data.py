@@ -586,9 +586,9 @@ def marker_kinematics(trial: ProcessedTrial, model: OsimModel) -> ProcessedTrial
     that sees the most markers (a subject walking into the capture volume would otherwise
     leave the poses of its first, barely observed frames in every later one). No frame of
     this motion came from the dynamic fit, so none is marked ``unobserved`` (left out of it).
-    Every frame is solved in time order (``keyframe_stride=1``), the solve every rule and
-    threshold of the diagnosis was calibrated on: with the kinematics stage's keyframes the
-    directions no marker pins move otherwise, and two of the run's hidden mass
+    Every frame is solved in time order (``keyframe_stride=1``, whatever the default), the
+    solve every rule and threshold of the diagnosis was calibrated on: with keyframes every
+    4 frames the directions no marker pins move otherwise, and two of the run's hidden mass
     redistributions (draws 7001, 7003) were no longer named.
     """
     from solver.dynamics.preprocess import lowpass

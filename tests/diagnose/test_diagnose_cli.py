@@ -79,7 +79,7 @@ def test_a_converged_output_is_judged_as_a_band_output_and_left_untouched(walk: 
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
         assert report["baseline"][key] == results[key]
     converged = json.loads((out / "walk" / "results.json").read_text())
-    assert converged["linear_residual_rms_N"] < results["linear_residual_rms_N"]  # two different fits
+    assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
 
 
 def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch) -> None:
