@@ -170,20 +170,23 @@ class FrameSolver:
         lo, hi = self.lo[self.free], self.hi[self.free]
         for _ in range(max_iterations or s.max_iterations):
             h = j.T @ j
-            h[np.diag_indices_from(h)] += lam
+            h.flat[:: h.shape[0] + 1] += lam  # the diagonal (h is a fresh C-contiguous square)
             g = j.T @ r + lam * (q[self.free] - anchor)
             if mu is None:
                 mu = s.damping * max(float(np.mean(np.diag(h))), 1e-12)
             # coordinates held at a bound by the gradient stay there (projected Gauss-Newton)
             x = q[self.free]
             keep = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-            h_k, g_k = h[np.ix_(keep, keep)], g[keep]
+            if keep.all():  # the usual case: no copy of the system
+                h_k, g_k, moved = h, g, self.free
+            else:
+                h_k, g_k, moved = h[np.ix_(keep, keep)], g[keep], self.free[keep]
             accepted = False
             for _ in range(8):
                 hd = h_k.copy()
-                hd[np.diag_indices_from(hd)] += mu
+                hd.flat[:: hd.shape[0] + 1] += mu
                 q_new = q.copy()
-                q_new[self.free[keep]] -= np.linalg.solve(hd, g_k)
+                q_new[moved] -= np.linalg.solve(hd, g_k)
                 q_new = self._clip(q_new)
                 r_new, j_new = self.residual(q_new, y, seen)
                 cost_new = r_new @ r_new + lam * np.sum((q_new[self.free] - anchor) ** 2)
