@@ -66,8 +66,8 @@ class IkSettings:
     between_weight
         Weight of the pull of a frame between two keyframes toward the straight line
         between their solutions (m² per rad²): a 0.1 rad departure costs as much as one
-        marker 3 mm off. It keeps a direction that no marker pins (a forearm's rotation with
-        one marker on it) on that line, where the pull of ``temporal_weight`` alone left it
+        marker 3 mm off. It keeps a direction that the markers barely pin (the walk's arm
+        and forearm rotations) on that line, where the pull of ``temporal_weight`` alone left it
         to follow the markers' noise and the motion rougher than the frame-by-frame solve's
         (mean absolute second difference of the walk's coordinates 2.3e-3 rad against
         1.9e-3; 1.7e-3 with this weight).
