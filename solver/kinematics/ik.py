@@ -130,8 +130,10 @@ class FrameSolver:
         self.calls = 0
 
     def _clip(self, q: FloatArray) -> FloatArray:
+        """``(..., n)`` coordinates within the solver's bounds, locked ones at their
+        default, couplers applied."""
         q = np.clip(q, self.lo, self.hi)
-        q[self.sk.locked] = self.sk.defaults[self.sk.locked]
+        q[..., self.sk.locked] = self.sk.defaults[self.sk.locked]
         return self.sk.cmap.complete(q)
 
     def residual(self, q: FloatArray, y: FloatArray, seen: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
@@ -205,12 +207,6 @@ class FrameSolver:
                 break
         return q, float(r @ r)
 
-    def _clip_many(self, q: FloatArray) -> FloatArray:
-        """:meth:`_clip` of ``(B, n)`` coordinates."""
-        q = np.clip(q, self.lo, self.hi)
-        q[:, self.sk.locked] = self.sk.defaults[self.sk.locked]
-        return self.sk.cmap.complete(q)
-
     def solve_many(
         self,
         q0: FloatArray,
@@ -247,7 +243,7 @@ class FrameSolver:
         """
         s, sk, free = self.settings, self.sk, self.free
         lam, k = s.temporal_weight if pull_weight is None else pull_weight, self.free.size
-        q = self._clip_many(np.array(q0, dtype=float))
+        q = self._clip(np.array(q0, dtype=float))
         seen = np.isfinite(y).all(axis=2)
         y0 = np.where(seen[..., None], y, 0.0)
         w = self.sqrt_w[None, :, None] * seen[..., None]  # (B, M, 1), zero for a missing marker
@@ -294,7 +290,7 @@ class FrameSolver:
                 hd[:, diag, diag] += mu[trying, None]
                 qt = q[active[trying]]
                 qt[:, free] -= np.linalg.solve(hd, g[trying][..., None])[..., 0]
-                qt = self._clip_many(qt)
+                qt = self._clip(qt)
                 rt = (w[active[trying]] * (sk.marker_positions(qt, self.markers) - y0[active[trying]])).reshape(trying.size, -1)
                 mt = np.einsum("ij,ij->i", rt, rt)
                 ct = mt + pull(qt, active[trying])
@@ -345,7 +341,8 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
     """
     stride = solver.settings.keyframe_stride
     t = obs.shape[0]
-    solvable = np.flatnonzero(np.isfinite(obs).all(axis=2).any(axis=1))
+    sees = np.isfinite(obs).all(axis=2).any(axis=1)  # (T,) the frame sees a marker
+    solvable = np.flatnonzero(sees)
     out = np.empty((t, solver.sk.n))
     out[:] = q_start
     if solvable.size == 0:
@@ -372,8 +369,8 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
         guess = solver.sk.cmap.complete((1.0 - f) * out[lo_key] + f * out[hi_key])
         out[between] = solver.solve_many(guess, obs[between], guess, pull_weight=solver.settings.between_weight)[0]
     # frames that see no marker hold the last solved pose
-    last = np.maximum.accumulate(np.where(np.isin(np.arange(t), solvable), np.arange(t), -1))
-    hold = (last >= 0) & (last != np.arange(t))
+    last = np.maximum.accumulate(np.where(sees, np.arange(t), -1))
+    hold = ~sees & (last >= 0)
     out[hold] = out[last[hold]]
     return out
 
