@@ -48,6 +48,7 @@ from solver.diagnose.profile import Profile, Sigmas, own_noise_sigmas
 from solver.diagnose.selection import (
     ChoiceRule,
     Evaluation,
+    Folds,
     JointGains,
     KeptShare,
     also_standing_out,
@@ -56,7 +57,6 @@ from solver.diagnose.selection import (
     choose,
     cross_validate,
     make_blocks,
-    make_folds,
 )
 from solver.dynamics.preprocess import nearest_frames
 from solver.errors import DiagnosisError
@@ -81,7 +81,7 @@ class DiagnoseOptions:
     Attributes
     ----------
     folds
-        Cross-validation folds K.
+        Cross-validation folds K (dealt per cause: :class:`solver.diagnose.selection.Folds`).
     block_seconds
         Length of the contiguous blocks dealt to the folds, s.
     rule
@@ -202,15 +202,16 @@ def evaluate(
     unmeasured: tuple[BoolArray, list[str]] | None = None,
     sigmas: Sigmas | None = None,
 ) -> tuple[C.Context, list[C.Alternative], list[Evaluation], np.ndarray]:
-    """Cross-validate every alternative; returns the context, alternatives, evaluations, folds.
+    """Cross-validate every alternative, each on its cause's folds (:class:`Folds`); returns
+    the context, alternatives, evaluations and folds.
 
     ``unmeasured``: the frames U and their reasons (default: found on ``data``); ``sigmas``:
     the channels' standard deviations (default: :meth:`Sigmas.of` ``data``, the fit's).
     """
     ctx, full = build_context(data, sigmas, unmeasured=unmeasured)
     alts = alternatives(ctx, full, options.causes)
-    folds = make_folds(data.n_frames, data.dt, options.folds, options.block_seconds)
-    return ctx, alts, [cross_validate(a, folds) for a in alts], folds
+    folds = Folds.of_trial(data.n_frames, data.dt, options.folds, options.block_seconds)
+    return ctx, alts, [cross_validate(a, folds.of(a.cause)) for a in alts], folds
 
 
 def _alt_of(alts: list[C.Alternative], ev: Evaluation) -> C.Alternative:
@@ -449,7 +450,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         settings={
             "sigmas": vars(ctx.sigmas),
             "sigmas_own_noise": vars(own_sigmas[0]) if own_sigmas else None,
-            "folds": int(folds.max()) + 1,
+            "folds": folds.count,
             "block_seconds": options.block_seconds,
             "rule": {k: getattr(options.rule, k) for k in options.rule.__dataclass_fields__},
             "stated_mass_kg": data.stated_mass,
@@ -463,7 +464,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     result.seconds = {"prepare": t1 - t0, "candidates": t2 - t1}
     result.also_standing_out = [(e, extension_entry(e, data, marker_time)) for e in also_standing_out(evaluations, chosen, options.rule)]
     if chosen is not None:
-        result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), folds)
+        result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), folds.of(chosen.cause))
         result.held_out["motion"] = chosen.motion
         result.parameters = dict(chosen.parameters)
         result.extension = extension_entry(chosen, data, marker_time)
@@ -491,8 +492,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 both_p, both_r = np.zeros_like(in_r), np.zeros_like(in_p)
                 both_p[in_r], both_r[in_p] = shared, shared
                 result.held_out.update(
-                    before=held_out_figures(ctx_p, alt_p, _at_times(folds, data.time, ctx_p.data.time), both_p)["before"],
-                    after=held_out_figures(ctx_r, alt_r, _at_times(folds, data.time, ctx_r.data.time), both_r)["after"],
+                    before=held_out_figures(ctx_p, alt_p, _at_times(folds.of(chosen.cause), data.time, ctx_p.data.time), both_p)["before"],
+                    after=held_out_figures(ctx_r, alt_r, _at_times(folds.of(chosen.cause), data.time, ctx_r.data.time), both_r)["after"],
                     motion="refitted",
                     note="translation re-optimized; on the motions refitted without (before) and with (after) the "
                     "extension, each frame corrected with parameters fitted without its fold",

@@ -41,8 +41,16 @@ IntArray = NDArray[np.intp]
 BoolArray = NDArray[np.bool_]
 
 
-def make_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 0.2) -> IntArray:
-    """``(T,)`` fold index of each frame: contiguous blocks dealt to the folds in turn.
+def make_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 0.2, mix_phases: bool = False) -> IntArray:
+    """``(T,)`` fold index of each frame: contiguous blocks dealt to the folds in turn, or so
+    that each fold mixes the phases of a periodic movement.
+
+    In turn, block b goes to fold ``b mod K``: a fold's blocks sit K x ``block_seconds``
+    apart (1.0 s by default), about one stride of a walk, so each fold holds nearly one phase
+    of the gait cycle. With ``mix_phases``, block b goes to fold ``(b + b // K) mod K``: the
+    first K blocks as in turn, the next K rotated by one, and so on, so each fold holds
+    blocks from different phases. Both keep every block contiguous and the folds' sizes
+    within one block of each other. Which causes use which: :class:`Folds`.
 
     Parameters
     ----------
@@ -54,11 +62,49 @@ def make_folds(n_frames: int, dt: float, folds: int = 5, block_seconds: float = 
         K; fewer when the trial has fewer than 2 K blocks.
     block_seconds
         Block length, s.
+    mix_phases
+        Deal so that each fold mixes the phases (above).
     """
     blocks = make_blocks(n_frames, dt, block_seconds)
     n_blocks = int(blocks[-1]) + 1 if n_frames else 0
     k = int(max(2, min(folds, n_blocks // 2)))
-    return (blocks % k).astype(np.intp)
+    return ((blocks + blocks // k) % k if mix_phases else blocks % k).astype(np.intp)
+
+
+@dataclass(frozen=True)
+class Folds:
+    """The cross-validation folds of one trial, in both dealings of :func:`make_folds`;
+    each cause's alternatives use the dealing its
+    :attr:`~solver.diagnose.causes.base.Cause.folds_mix_phases` asks for.
+
+    Attributes
+    ----------
+    in_turn, mixing
+        ``(T,)`` fold of each frame, blocks dealt in turn and mixing the phases.
+    """
+
+    in_turn: IntArray
+    mixing: IntArray
+
+    @classmethod
+    def of_trial(cls, n_frames: int, dt: float, folds: int = 5, block_seconds: float = 0.2) -> Folds:
+        """Both dealings for a trial of ``n_frames`` frames ``dt`` s apart."""
+        return cls(make_folds(n_frames, dt, folds, block_seconds), make_folds(n_frames, dt, folds, block_seconds, mix_phases=True))
+
+    def of(self, cause_name: str) -> IntArray:
+        """``(T,)`` the folds the cause's alternatives are cross-validated on.
+
+        Raises
+        ------
+        solver.diagnose.causes.registry.UnknownCause
+            No registered cause has that name.
+        """
+        return self.mixing if cause(cause_name).folds_mix_phases else self.in_turn
+
+    @property
+    def count(self) -> int:
+        """K, the number of folds."""
+        return int(self.in_turn.max()) + 1
 
 
 @dataclass
@@ -458,10 +504,12 @@ class JointGains:
     evaluations
         Their cross-validated evaluations (same order).
     folds
-        ``(T,)`` fold of each frame.
+        The trial's folds; a pair is fitted on the folds of its first alternative's cause
+        (only alternatives on the same channel combine, :func:`joint_held_out`, and the
+        dealing is one per channel).
     """
 
-    def __init__(self, alternatives: list[Alternative], evaluations: list[Evaluation], folds: IntArray) -> None:
+    def __init__(self, alternatives: list[Alternative], evaluations: list[Evaluation], folds: Folds) -> None:
         self._alt = {id(e): a for a, e in zip(alternatives, evaluations)}
         self._folds = folds
         self._gain: dict[tuple[int, int], float | None] = {}
@@ -471,7 +519,7 @@ class JointGains:
         key = (min(id(a), id(b)), max(id(a), id(b)))
         if key not in self._gain:
             alt_a, alt_b = self._alt.get(id(a)), self._alt.get(id(b))
-            held = None if alt_a is None or alt_b is None else joint_held_out(alt_a, alt_b, self._folds)
+            held = None if alt_a is None or alt_b is None else joint_held_out(alt_a, alt_b, self._folds.of(alt_a.cause))
             self._gain[key] = None if held is None else float(np.sum(alt_a.ref_costs - held))
         return self._gain[key]
 

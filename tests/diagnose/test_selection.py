@@ -19,6 +19,7 @@ from solver.diagnose.candidates import LinearAlternative
 from solver.diagnose.selection import (
     ChoiceRule,
     Evaluation,
+    Folds,
     choose,
     cross_validate,
     make_blocks,
@@ -259,6 +260,29 @@ def _two_effects(shared: float, seed: int = 0) -> tuple[LinearAlternative, Linea
     return _linear("force_time_offset", rho0, ga), _linear("plate_position_offset", rho0, gb, "R"), make_folds(t, DT)
 
 
+def test_folds_mixing_the_phases_hold_every_phase_of_a_stride_long_period() -> None:
+    # a 5 s trial of 0.2 s blocks and 5 folds: a pattern repeating every 1.0 s (about a
+    # walk's stride) has one phase per fold when the blocks are dealt in turn, and the same
+    # mean in every fold when they are dealt mixing the phases
+    t = 500
+    time = np.arange(t) * DT
+    pattern = np.sin(2 * np.pi * time / 1.0)
+    in_turn, mixing = make_folds(t, DT), make_folds(t, DT, mix_phases=True)
+    for folds in (in_turn, mixing):
+        assert np.array_equal(np.bincount(folds), np.full(5, 100))  # equal folds of whole blocks
+        assert np.all(np.diff(folds)[np.diff(make_blocks(t, DT)) == 0] == 0)  # blocks kept whole
+    means_in_turn = [pattern[in_turn == f].mean() for f in range(5)]
+    means_mixing = [pattern[mixing == f].mean() for f in range(5)]
+    assert np.ptp(means_in_turn) > 1.0  # each fold one phase: from -0.6 to +0.6
+    assert np.ptp(means_mixing) < 1e-12
+    # the causes whose rows carry the markers' errors (the feet's repeating with every stride)
+    # use the mixing dealing, the causes judged on the residual wrench the dealing in turn
+    folds = Folds.of_trial(t, DT)
+    assert folds.of("marker_offset") is folds.mixing and folds.of("segment_mass_distribution") is folds.mixing
+    assert folds.of("force_time_offset") is folds.in_turn and folds.of("plate_position_offset") is folds.in_turn
+    assert folds.count == 5
+
+
 def test_a_rival_that_explains_another_part_of_the_residual_does_not_stand_in_the_way() -> None:
     from solver.diagnose.selection import JointGains
 
@@ -269,7 +293,7 @@ def test_a_rival_that_explains_another_part_of_the_residual_does_not_stand_in_th
         ev.parameters["delay_s"], ev.parameters["shift_m"] = 0.03, [0.02, 0.0, 0.0]
     ranked = sorted(evs, key=lambda e: e.score, reverse=True)
     assert ranked[1].score > rule.runner_up_ratio * ranked[0].score  # close scores
-    joint = JointGains([a, b], evs, folds)
+    joint = JointGains([a, b], evs, Folds.of_trial(400, DT))
     # fitted together, each keeps (nearly) all of its held-out gain: both effects are real
     assert joint.kept_share(evs[0], evs[1]) > 0.9 and joint.kept_share(evs[1], evs[0]) > 0.9
     assert choose(ranked, rule, make_blocks(400, DT), evs)[0] is None  # scores alone: ambiguous
@@ -279,7 +303,7 @@ def test_a_rival_that_explains_another_part_of_the_residual_does_not_stand_in_th
     evs = [cross_validate(a, folds), cross_validate(b, folds)]
     for ev in evs:
         ev.parameters["delay_s"], ev.parameters["shift_m"] = 0.03, [0.02, 0.0, 0.0]
-    joint = JointGains([a, b], evs, folds)
+    joint = JointGains([a, b], evs, Folds.of_trial(400, DT))
     assert joint.kept_share(evs[0], evs[1]) < 0.3
     ranked = sorted(evs, key=lambda e: e.score, reverse=True)
     chosen, reason = choose(ranked, rule, make_blocks(400, DT), evs, joint.kept_share)
@@ -297,7 +321,7 @@ def test_a_best_that_fails_its_own_checks_does_not_hide_a_separate_effect() -> N
     delay.parameters["delay_s"], shift.parameters["shift_m"] = 0.006, [0.02, 0.0, 0.0]
     delay.score, shift.score = 1.1 * shift.score, shift.score
     delay.reference = 14 * delay.gain  # 7 %
-    joint = JointGains([a, b], [delay, shift], folds)
+    joint = JointGains([a, b], [delay, shift], Folds.of_trial(400, DT))
     chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(400, DT), [delay, shift])
     assert chosen is None and "force_time_offset" in reason
     chosen, reason = choose([delay, shift], ChoiceRule(), make_blocks(400, DT), [delay, shift], joint.kept_share)

@@ -20,7 +20,9 @@ The parts of a cause (class attributes, then methods):
   :func:`solver.diagnose.core.choice_on_marker_motion`), ``distinct_choice`` (its
   plate must stand out from the same cause on the other plates), ``overlaps`` (the causes
   it is told from by which keeps its gain on top of the other,
-  :func:`solver.diagnose.selection._stands_out`);
+  :func:`solver.diagnose.selection._stands_out`), ``folds_mix_phases`` (its alternatives
+  are cross-validated on folds that each mix the phases of a periodic movement instead of
+  blocks dealt in turn, :class:`solver.diagnose.selection.Folds`);
 * :meth:`Cause.alternatives`: the fitted alternatives (one per plate or marker, or one);
 * :meth:`Cause.effect_size` and :meth:`Cause.deviation`: the size compared with the bounds
   and the vector whose distance from "no effect" is measured in standard errors;
@@ -148,6 +150,7 @@ class Cause(ABC):
     chosen_on_own_noise: ClassVar[bool] = False
     distinct_choice: ClassVar[bool] = False
     overlaps: ClassVar[tuple[Cause, ...]] = ()
+    folds_mix_phases: ClassVar[bool] = False
 
     def __repr__(self) -> str:
         return f"<cause {getattr(self, 'name', type(self).__name__)}>"
@@ -275,6 +278,7 @@ REQUIRED: dict[str, type | tuple[type, ...]] = {
     "chosen_on_marker_motion": bool,
     "chosen_on_own_noise": bool,
     "distinct_choice": bool,
+    "folds_mix_phases": bool,
 }
 
 

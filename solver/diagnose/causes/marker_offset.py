@@ -48,6 +48,12 @@ class MarkerOffset(Cause):
     main_parameter = "shift_m"
     min_effect = 0.005  # m (residual part the marker's error shows)
     max_effect = 0.1  # m
+    # A foot marker's error repeats with every stride (the skin over the foot; the rigid foot
+    # segments cannot follow it). On folds dealt in turn each fold holds about one phase of
+    # the stride, so a misplacement on top of that pattern fails the held-out folds; on folds
+    # mixing the phases the walk's foot draws are named (docs/diagnose/RESULTS.md, "Why the
+    # marker offsets' folds mix the phases").
+    folds_mix_phases = True
 
     def alternatives(self, ctx: Context, full: Any) -> list[Alternative]:
         """One alternative per landmark marker seen on at least 10 frames: the residual

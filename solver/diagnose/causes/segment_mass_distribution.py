@@ -48,6 +48,10 @@ class SegmentMassDistribution(Cause):
     name = "segment_mass_distribution"
     label = "segment mass distribution"
     channel = "motion"
+    # its rows carry every marker's error, the feet's stride-locked error with them: folds
+    # mixing the phases, as the marker offsets' (docs/diagnose/RESULTS.md, "Why the marker
+    # offsets' folds mix the phases")
+    folds_mix_phases = True
     main_parameter = "mass_change_kg"
     min_effect = 1.5  # kg moved to the legs (consistent synthetic trials: up to 0.8 kg, 1.1 kg on the run's of 2026-11-23)
     max_effect = 15.0  # kg moved
