@@ -201,7 +201,7 @@ def evaluate(
     options: DiagnoseOptions,
     unmeasured: tuple[BoolArray, list[str]] | None = None,
     sigmas: Sigmas | None = None,
-) -> tuple[C.Context, list[C.Alternative], list[Evaluation], np.ndarray]:
+) -> tuple[C.Context, list[C.Alternative], list[Evaluation], Folds]:
     """Cross-validate every alternative, each on its cause's folds (:class:`Folds`); returns
     the context, alternatives, evaluations and folds.
 
