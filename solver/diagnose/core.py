@@ -451,6 +451,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             "sigmas": vars(ctx.sigmas),
             "sigmas_own_noise": vars(own_sigmas[0]) if own_sigmas else None,
             "folds": folds.count,
+            "folds_mixing_phases": [c.name for c in CAUSES if c.folds_mix_phases and c.name in options.causes],
             "block_seconds": options.block_seconds,
             "rule": {k: getattr(options.rule, k) for k in options.rule.__dataclass_fields__},
             "stated_mass_kg": data.stated_mass,

@@ -34,7 +34,11 @@ JSON object (schema ``addb.diagnosis`` version 1; every number SI, NaN -> null):
     also_standing_out  marker offsets other than the chosen cause that stand out on their
                   own markers' errors, each {cause, parameters, uncertainty, score,
                   extension}: findings too (markers do not compete), not saved by ``--apply``
-    settings, seconds
+    settings      sigmas, folds (K), folds_mixing_phases (the causes whose folds mix the
+                  phases of the stride; the others' blocks are dealt in turn,
+                  :class:`solver.diagnose.selection.Folds`), block_seconds, the choice rule,
+                  masses and frame counts
+    seconds
 """
 
 from __future__ import annotations

@@ -39,6 +39,9 @@ def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
     # processed with the pipeline's default (converged) fit, judged on the band fit
     assert report["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "coefficients", "rebuilt": True}
     assert sorted(c["cause"] for c in report["candidates"]) == sorted(CAUSES)
+    # the causes whose rows carry the markers' errors are cross-validated on folds mixing the phases
+    assert report["settings"]["folds"] == 5
+    assert sorted(report["settings"]["folds_mixing_phases"]) == ["marker_offset", "segment_mass_distribution"]
     for c in report["candidates"]:
         assert set(c) >= {"cause", "parameters", "uncertainty", "score", "gain"}
     scores = [c["score"] for c in report["candidates"]]
