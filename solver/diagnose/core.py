@@ -465,7 +465,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     result.seconds = {"prepare": t1 - t0, "candidates": t2 - t1}
     result.also_standing_out = [(e, extension_entry(e, data, marker_time)) for e in also_standing_out(evaluations, chosen, options.rule)]
     if chosen is not None:
-        result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), folds.of(chosen.cause))
+        chosen_folds = folds.of(chosen.cause)
+        result.held_out = held_out_figures(held_ctx, _alt_of(held_alts, chosen), chosen_folds)
         result.held_out["motion"] = chosen.motion
         result.parameters = dict(chosen.parameters)
         result.extension = extension_entry(chosen, data, marker_time)
@@ -493,8 +494,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
                 both_p, both_r = np.zeros_like(in_r), np.zeros_like(in_p)
                 both_p[in_r], both_r[in_p] = shared, shared
                 result.held_out.update(
-                    before=held_out_figures(ctx_p, alt_p, _at_times(folds.of(chosen.cause), data.time, ctx_p.data.time), both_p)["before"],
-                    after=held_out_figures(ctx_r, alt_r, _at_times(folds.of(chosen.cause), data.time, ctx_r.data.time), both_r)["after"],
+                    before=held_out_figures(ctx_p, alt_p, _at_times(chosen_folds, data.time, ctx_p.data.time), both_p)["before"],
+                    after=held_out_figures(ctx_r, alt_r, _at_times(chosen_folds, data.time, ctx_r.data.time), both_r)["after"],
                     motion="refitted",
                     note="translation re-optimized; on the motions refitted without (before) and with (after) the "
                     "extension, each frame corrected with parameters fitted without its fold",
