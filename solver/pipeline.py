@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 import pickle
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -36,7 +37,7 @@ from solver.io.subject import Subject, Trial, load_subject, load_trial
 from solver.io.types import ForcePlate, ForceRecording, Table
 from solver.kinematics.observations import find_marker_settings
 from solver.kinematics.result import KinematicsResult, TrialKinematics
-from solver.kinematics.stage import KinematicsOptions, run_kinematics
+from solver.kinematics.stage import KinematicsOptions, run_ik, run_kinematics
 from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
@@ -84,33 +85,55 @@ class SubjectKinematics:
     load_seconds: float
 
 
-def load_trials(subject: Subject) -> tuple[Trial, ...]:
-    """Read every trial of ``subject`` (markers and, when present, forces), with the
-    corrections saved by ``addb diagnose --apply`` (:mod:`solver.corrections`)."""
-    return apply_extensions(subject, tuple(load_trial(t) for t in subject.trials))
+def load_trials(subject: Subject, names: Sequence[str] | None = None) -> tuple[Trial, ...]:
+    """Read the trials of ``subject`` (markers and, when present, forces), with the
+    corrections saved by ``addb diagnose --apply`` (:mod:`solver.corrections`).
+
+    ``names``: only these trials, in file order (None: every trial); an unknown name
+    raises :class:`KinematicsError` naming the subject's trials."""
+    files = subject.trials
+    if names:
+        wanted = _selected(names, [t.name for t in files])
+        files = tuple(t for t in files if t.name in wanted)
+    return apply_extensions(subject, tuple(load_trial(t) for t in files))
 
 
 def subject_kinematics(
-    subject: Subject, options: KinematicsOptions | None = None, progress: Progress | None = None
+    subject: Subject,
+    options: KinematicsOptions | None = None,
+    progress: Progress | None = None,
+    *,
+    scaled_model: str | Path | None = None,
+    trials: Sequence[str] | None = None,
 ) -> SubjectKinematics:
-    """Load a subject's trials and run the kinematics stage on all of them."""
+    """Load a subject's trials and run the kinematics stage on all of them.
+
+    With ``scaled_model`` (an .osim already scaled to the subject) scaling is skipped and
+    only inverse kinematics runs (:func:`solver.kinematics.stage.run_ik`), on the trials
+    named in ``trials`` (None: all); without it every trial is read, as scaling uses all."""
     t0 = time.perf_counter()
-    trials = load_trials(subject)
-    generic = read_osim(subject.model_path)
     markers = find_marker_settings(subject.path)
     opts = options or KinematicsOptions()
+    if scaled_model is not None:
+        loaded = load_trials(subject, trials)
+        model = read_osim(scaled_model)
+        load_seconds = time.perf_counter() - t0
+        kin = run_ik(model, [(t.name, t.markers) for t in loaded], mapping=markers.mapping, options=opts, progress=progress)
+        return SubjectKinematics(subject, loaded, kin, load_seconds)
+    loaded = load_trials(subject)
+    generic = read_osim(subject.model_path)
     if markers.attach_unmatched:
         opts = replace(opts, attach_unmatched=True)
     load_seconds = time.perf_counter() - t0
     kin = run_kinematics(
         generic,
-        [(t.name, t.markers) for t in trials],
+        [(t.name, t.markers) for t in loaded],
         height_m=subject.height_m,
         mapping=markers.mapping,
         options=opts,
         progress=progress,
     )
-    return SubjectKinematics(subject, trials, kin, load_seconds)
+    return SubjectKinematics(subject, loaded, kin, load_seconds)
 
 
 def kinematics_metrics(trial: TrialKinematics) -> dict[str, Any]:
@@ -158,6 +181,7 @@ def process_kinematics(
     *,
     options: ProcessOptions | None = None,
     progress: Progress | None = None,
+    scaled_model: str | Path | None = None,
 ) -> SubjectKinematics:
     """Run the kinematics stage alone and write its outputs.
 
@@ -165,26 +189,39 @@ def process_kinematics(
     ``OUT/<trial>/results.json`` (``n_frames``, ``marker_rms_m``, ``marker_max_m``,
     ``stage_seconds``, ...), replacing ``OUT`` only once everything is written.
 
+    With ``scaled_model`` (an .osim already scaled to the subject, e.g. the
+    ``<subject>_scaled.osim`` of an earlier run) only inverse kinematics runs, as OpenSim's
+    InverseKinematicsTool does, on the trials of ``options.trials`` (None: all): the model
+    file is copied into ``OUT`` as it is and subject.json names it.
+
     Raises
     ------
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError
         Bad input, naming the file or trial.
     """
     with single_threaded_blas(load_scipy=False):  # the kinematics stage uses numpy's BLAS only
-        return _process_kinematics(subject_dir, out_dir, options, progress)
+        return _process_kinematics(subject_dir, out_dir, options, progress, scaled_model)
 
 
 def _process_kinematics(
-    subject_dir: str | Path, out_dir: str | Path, options: ProcessOptions | None, progress: Progress | None
+    subject_dir: str | Path,
+    out_dir: str | Path,
+    options: ProcessOptions | None,
+    progress: Progress | None,
+    scaled_model: str | Path | None,
 ) -> SubjectKinematics:
     opts = options or ProcessOptions()
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
-    sk = subject_kinematics(subject, opts.kinematics, progress)
+    sk = subject_kinematics(subject, opts.kinematics, progress, scaled_model=scaled_model, trials=opts.trials if scaled_model else None)
     kin = sk.kinematics
     wanted = _selected(opts.trials, [t.name for t in kin.trials])
+    model_name = Path(scaled_model).name if scaled_model else f"{subject.name}_scaled.osim"
     with staged_output(out_dir) as tmp:
-        write_osim(kin.model, tmp / f"{subject.name}_scaled.osim", name=f"{subject.name}_scaled", path_point_scales=kin.body_scales)
+        if scaled_model:
+            shutil.copyfile(scaled_model, tmp / model_name)
+        else:
+            write_osim(kin.model, tmp / model_name, name=f"{subject.name}_scaled", path_point_scales=kin.body_scales)
         rotational = [n for n, m in zip(kin.model.coordinate_names, (c.motion_type for c in kin.model.coordinates)) if m == "rotational"]
         total = time.perf_counter() - t0
         for trial in kin.trials:
@@ -200,9 +237,9 @@ def _process_kinematics(
                 "kinematics_total": total,
             }
             write_json(tmp / trial.name / "results.json", metrics)
-            model_file = str(Path(out_dir).resolve() / f"{subject.name}_scaled.osim")
+            model_file = str(Path(out_dir).resolve() / model_name)
             save_processed(tmp / trial.name / "trial.npz", build_processed(sk, trial, model_path=model_file, metrics=metrics))
-        write_subject_summary(tmp, sk)
+        write_subject_summary(tmp, sk, {"scaled_model": str(Path(scaled_model).resolve())} if scaled_model else None)
     return sk
 
 

@@ -1,4 +1,5 @@
-"""``addb kinematics SUBJECT_DIR --out OUT``: scaling and inverse kinematics only."""
+"""``addb kinematics SUBJECT_DIR --out OUT``: scaling and inverse kinematics only
+(``--model SCALED.osim``: inverse kinematics alone, with a model already scaled)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ def run(args: argparse.Namespace) -> int:
     from solver.pipeline import ProcessOptions, process_kinematics
 
     opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
-    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar())
+    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar(), scaled_model=args.model)
     rows = [
         [t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", f"{t.marker_max * 100:.2f}", t.worst_marker]
         for t in result.kinematics.trials
@@ -26,4 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("subject", help="AddBiomechanics subject folder")
     p.add_argument("--out", required=True, help="output folder (replaced atomically)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable); all trials are used for scaling")
+    p.add_argument(
+        "--model",
+        help="an .osim already scaled to the subject (e.g. the <subject>_scaled.osim of an earlier run): "
+        "skip scaling and solve inverse kinematics only, as OpenSim's IK tool does (with --trial, only those trials are read)",
+    )
     p.set_defaults(handler=run)

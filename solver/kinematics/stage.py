@@ -9,6 +9,9 @@ Steps (each timed in :attr:`KinematicsResult.seconds`):
 4. fit body scales, marker offsets and fit-frame coordinates jointly (:mod:`.fit`);
 5. optionally attach unmatched markers to bodies (:mod:`.autoplace`) and refit;
 6. solve every frame of every trial with the fitted model, warm-started along time (:mod:`.ik`).
+
+:func:`run_ik` is step 6 alone, with a model that is already scaled (OpenSim's
+InverseKinematicsTool's job).
 """
 
 from __future__ import annotations
@@ -144,16 +147,7 @@ def run_kinematics(
     if not trials:
         raise KinematicsError("no trials to solve", path=generic.source)
     model_marker_names = [m.name for m in generic.markers]
-    matches: list[MarkerMatch] = []
-    for name, markers in trials:
-        match = match_markers(markers, model_marker_names, mapping, trial_name=name)
-        observations(markers, match, trial_name=name)  # validates: frames, all-NaN markers
-        matches.append(match)
-    # column of each (model or lab) marker name in each trial
-    columns = [
-        {**{lab: i for i, lab in enumerate(m.names)}, **dict(zip(match.model_markers, match.trial_columns))}
-        for (_, m), match in zip(trials, matches)
-    ]
+    matches, columns = _match_trials(model_marker_names, trials, mapping)
     union = sorted({n for m in matches for n in m.model_markers}, key=model_marker_names.index)
     unmatched = sorted({n for m in matches for n in m.unmatched}) if opts.attach_unmatched else []
 
@@ -224,26 +218,10 @@ def run_kinematics(
     results = []
     for k, ((name, markers), match) in enumerate(zip(trials, matches)):
         say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))
-        ts = time.perf_counter()
         names = [n for n in (*match.model_markers, *match.unmatched) if n in in_fit]
-        y = np.array(markers.positions[:, [columns[k][n] for n in names]])
-        solver = FrameSolver(sk, sk.marker_index(names), np.array([weights[union.index(n)] for n in names]), opts.ik)
-        first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
-        q_start = initial_pose(solver, y[first])
-        q = solve_trajectory(solver, y, q_start)
-        results.append(
-            TrialKinematics(
-                name=name,
-                time=markers.time,
-                coordinate_names=sk.coordinate_names,
-                q=q,
-                marker_names=tuple(names),
-                observed=y,
-                modeled=sk.marker_positions(q, sk.marker_index(names)),
-                unmatched=tuple(n for n in match.unmatched if n not in attached),
-                seconds=time.perf_counter() - ts,
-            )
-        )
+        w = np.array([weights[union.index(n)] for n in names])
+        unmatched_k = tuple(n for n in match.unmatched if n not in attached)
+        results.append(_trial_ik(sk, name, markers, names, columns[k], w, unmatched_k, opts.ik))
     timings["ik"] = time.perf_counter() - t3
     timings["total"] = time.perf_counter() - t0
     say("kinematics done", 1.0)
@@ -261,3 +239,109 @@ def run_kinematics(
             t: {n: tuple(tuple(float(v) for v in row) for row in m) for n, m in r.items()} for t, r in response.items()
         },
     )
+
+
+def _trial_ik(
+    sk: Skeleton,
+    name: str,
+    markers: MarkerTrajectories,
+    names: Sequence[str],
+    columns: Mapping[str, int],
+    weights: FloatArray,
+    unmatched: tuple[str, ...],
+    settings: IkSettings,
+) -> TrialKinematics:
+    """Inverse kinematics of one trial with the model ``sk``: the first frame that sees a
+    marker posed from scratch (:func:`initial_pose`), then every frame in time order
+    (:func:`solve_trajectory`). ``names`` are the model markers used, ``columns`` their
+    columns in ``markers``, ``weights`` ``(len(names),)`` their weights."""
+    ts = time.perf_counter()
+    y = np.array(markers.positions[:, [columns[n] for n in names]])
+    solver = FrameSolver(sk, sk.marker_index(list(names)), weights, settings)
+    first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
+    q = solve_trajectory(solver, y, initial_pose(solver, y[first]))
+    return TrialKinematics(
+        name=name,
+        time=markers.time,
+        coordinate_names=sk.coordinate_names,
+        q=q,
+        marker_names=tuple(names),
+        observed=y,
+        modeled=sk.marker_positions(q, sk.marker_index(list(names))),
+        unmatched=unmatched,
+        seconds=time.perf_counter() - ts,
+    )
+
+
+def _match_trials(
+    model_marker_names: list[str], trials: Sequence[tuple[str, MarkerTrajectories]], mapping: Mapping[str, str] | None
+) -> tuple[list[MarkerMatch], list[dict[str, int]]]:
+    """Each trial's marker match (validated: frames, all-NaN markers) and the column of
+    each of its (lab or model) marker names."""
+    matches: list[MarkerMatch] = []
+    for name, markers in trials:
+        match = match_markers(markers, model_marker_names, mapping, trial_name=name)
+        observations(markers, match, trial_name=name)  # validates: frames, all-NaN markers
+        matches.append(match)
+    columns = [
+        {**{lab: i for i, lab in enumerate(m.names)}, **dict(zip(match.model_markers, match.trial_columns))}
+        for (_, m), match in zip(trials, matches)
+    ]
+    return matches, columns
+
+
+def run_ik(
+    model: OsimModel,
+    trials: Sequence[tuple[str, MarkerTrajectories]],
+    *,
+    mapping: Mapping[str, str] | None = None,
+    options: KinematicsOptions | None = None,
+    progress: Progress | None = None,
+) -> KinematicsResult:
+    """Inverse kinematics alone, with ``model`` taken as already scaled: the job of
+    OpenSim's InverseKinematicsTool (no scale fit, no marker placement).
+
+    Every model marker a trial records is used, weighted by ``options.marker_weights``;
+    each trial is solved as by :func:`run_kinematics`'s last step, so the model that
+    :func:`run_kinematics` fitted, written and read back, gives the same coordinates.
+
+    Parameters
+    ----------
+    model
+        The scaled model (e.g. ``<subject>_scaled.osim`` of an earlier ``addb kinematics``).
+    trials
+        ``(name, markers)`` of the trials to solve.
+    mapping
+        Lab marker name -> model marker name.
+    options
+        Stage options (``ik`` and ``marker_weights`` are used).
+    progress
+        Called with (message, fraction done) as the stage advances.
+
+    Returns
+    -------
+    KinematicsResult
+        With ``model`` as given, no body scales and no marker offsets.
+
+    Raises
+    ------
+    KinematicsError, MarkerMismatchError
+        No trials, a trial with zero frames, no marker in common with the model, or every
+        matched marker missing; the message names the trial.
+    """
+    opts = options or KinematicsOptions()
+    say = progress or (lambda msg, frac: None)
+    t0 = time.perf_counter()
+    if not trials:
+        raise KinematicsError("no trials to solve", path=model.source)
+    matches, columns = _match_trials([m.name for m in model.markers], trials, mapping)
+    sk = Skeleton(model)
+    results = []
+    for k, ((name, markers), match) in enumerate(zip(trials, matches)):
+        say(f"inverse kinematics: {name}", 0.1 + 0.9 * k / len(trials))
+        names = list(match.model_markers)
+        w = np.array([float(opts.marker_weights.get(n, 1.0)) for n in names])
+        results.append(_trial_ik(sk, name, markers, names, columns[k], w, tuple(match.unmatched), opts.ik))
+    seconds = time.perf_counter() - t0
+    say("kinematics done", 1.0)
+    return KinematicsResult(model=model, body_scales={}, marker_offsets={}, trials=tuple(results), seconds={"ik": seconds, "total": seconds})
