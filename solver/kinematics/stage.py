@@ -144,10 +144,8 @@ def run_kinematics(
     say = progress or (lambda msg, frac: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if not trials:
-        raise KinematicsError("no trials to solve", path=generic.source)
     model_marker_names = [m.name for m in generic.markers]
-    matches, columns = _match_trials(model_marker_names, trials, mapping)
+    matches, columns = _match_trials(generic, trials, mapping)
     union = sorted({n for m in matches for n in m.model_markers}, key=model_marker_names.index)
     unmatched = sorted({n for m in matches for n in m.unmatched}) if opts.attach_unmatched else []
 
@@ -274,13 +272,17 @@ def _trial_ik(
 
 
 def _match_trials(
-    model_marker_names: list[str], trials: Sequence[tuple[str, MarkerTrajectories]], mapping: Mapping[str, str] | None
+    model: OsimModel, trials: Sequence[tuple[str, MarkerTrajectories]], mapping: Mapping[str, str] | None
 ) -> tuple[list[MarkerMatch], list[dict[str, int]]]:
-    """Each trial's marker match (validated: frames, all-NaN markers) and the column of
-    each of its (lab or model) marker names."""
+    """Each trial's marker match with ``model``'s markers (validated: frames, all-NaN
+    markers) and the column of each of its (lab or model) marker names; raises
+    :class:`KinematicsError` when there is no trial."""
+    if not trials:
+        raise KinematicsError("no trials to solve", path=model.source)
+    names = [m.name for m in model.markers]
     matches: list[MarkerMatch] = []
     for name, markers in trials:
-        match = match_markers(markers, model_marker_names, mapping, trial_name=name)
+        match = match_markers(markers, names, mapping, trial_name=name)
         observations(markers, match, trial_name=name)  # validates: frames, all-NaN markers
         matches.append(match)
     columns = [
@@ -326,15 +328,12 @@ def run_ik(
     Raises
     ------
     KinematicsError, MarkerMismatchError
-        No trials, a trial with zero frames, no marker in common with the model, or every
-        matched marker missing; the message names the trial.
+        As :func:`run_kinematics`: bad trials or markers, named.
     """
+    t0 = time.perf_counter()
     opts = options or KinematicsOptions()
     say = progress or (lambda msg, frac: None)
-    t0 = time.perf_counter()
-    if not trials:
-        raise KinematicsError("no trials to solve", path=model.source)
-    matches, columns = _match_trials([m.name for m in model.markers], trials, mapping)
+    matches, columns = _match_trials(model, trials, mapping)
     sk = Skeleton(model)
     results = []
     for k, ((name, markers), match) in enumerate(zip(trials, matches)):
