@@ -213,7 +213,7 @@ def _process_kinematics(
     opts = options or ProcessOptions()
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
-    sk = subject_kinematics(subject, opts.kinematics, progress, scaled_model=scaled_model, trials=opts.trials if scaled_model else None)
+    sk = subject_kinematics(subject, opts.kinematics, progress, scaled_model=scaled_model, trials=opts.trials)
     kin = sk.kinematics
     wanted = _selected(opts.trials, [t.name for t in kin.trials])
     model_name = Path(scaled_model).name if scaled_model else f"{subject.name}_scaled.osim"

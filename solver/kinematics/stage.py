@@ -255,7 +255,8 @@ def _trial_ik(
     columns in ``markers``, ``weights`` ``(len(names),)`` their weights."""
     ts = time.perf_counter()
     y = np.array(markers.positions[:, [columns[n] for n in names]])
-    solver = FrameSolver(sk, sk.marker_index(list(names)), weights, settings)
+    index = sk.marker_index(list(names))
+    solver = FrameSolver(sk, index, weights, settings)
     first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
     q = solve_trajectory(solver, y, initial_pose(solver, y[first]))
     return TrialKinematics(
@@ -265,7 +266,7 @@ def _trial_ik(
         q=q,
         marker_names=tuple(names),
         observed=y,
-        modeled=sk.marker_positions(q, sk.marker_index(list(names))),
+        modeled=sk.marker_positions(q, index),
         unmatched=unmatched,
         seconds=time.perf_counter() - ts,
     )

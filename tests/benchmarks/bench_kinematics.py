@@ -122,6 +122,12 @@ def run_addb(work: Path, scaled_model: Path | None = None) -> tuple[float, Path]
     return time.perf_counter() - t0, out
 
 
+def row(label: str, times: list[float], rms_m: float) -> None:
+    """Print one table row: the best of the whole-process ``times`` (s), all of them, and the
+    marker RMS (``rms_m``, m, printed in cm)."""
+    print(f"| {label} | {min(times):.2f} s | {', '.join(f'{t:.2f}' for t in times)} | {rms_m * 100:.2f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=3)
@@ -154,11 +160,11 @@ def main() -> None:
     print(f"markers evaluated: {n} (OpenSim) / {n2} (addb), all observations of the walk (238 frames)")
     print(f"| | wall time (best of {args.repeats}) | all runs (s) | marker RMS (cm) |")
     print("| --- | ---: | --- | ---: |")
-    print(f"| OpenSim 4.6 IK, whole process (start, import, setup, run, output), walk only, study-scaled model | {best_os:.2f} s | {', '.join(f'{t:.2f}' for t in os_times)} | {os_rms * 100:.2f} |")
+    row("OpenSim 4.6 IK, whole process (start, import, setup, run, output), walk only, study-scaled model", os_times, os_rms)
     print(f"| of which InverseKinematicsTool.run() | {best_run:.2f} s | {', '.join(f'{t:.2f}' for t in os_run_times)} | |")
-    print(f"| `addb kinematics` command: start-up + scaling + IK of walk and static + files | {best_ad:.2f} s | {', '.join(f'{t:.2f}' for t in ad_times)} | {ad_rms * 100:.2f} |")
-    print(f"| `addb kinematics --model SCALED --trial walk`: start-up + IK of the walk with the model the row above scaled + files | {best_ik:.2f} s | {', '.join(f'{t:.2f}' for t in ik_times)} | {ik_rms * 100:.2f} |")
-    print(f"| `addb kinematics --model opensim_scaled_walk.osim --trial walk`: the same with OpenSim's input model (every marker weight 1) | {best_same:.2f} s | {', '.join(f'{t:.2f}' for t in same_times)} | {same_rms * 100:.2f} |")
+    row("`addb kinematics` command: start-up + scaling + IK of walk and static + files", ad_times, ad_rms)
+    row("`addb kinematics --model SCALED --trial walk`: start-up + IK of the walk with the model the row above scaled + files", ik_times, ik_rms)
+    row("`addb kinematics --model opensim_scaled_walk.osim --trial walk`: the same with OpenSim's input model (every marker weight 1)", same_times, same_rms)
     print(
         f"\nspeed-up, whole process against whole process (issue: at least 10x): IK alone, the same job as OpenSim's tool, {best_os / best_ik:.1f}x; "
         f"on OpenSim's model {best_os / best_same:.1f}x; scaling + IK of both trials {best_os / best_ad:.1f}x; OpenSim's run() alone against IK alone {best_run / best_ik:.1f}x, against scaling + IK {best_run / best_ad:.1f}x"
