@@ -207,7 +207,7 @@ class Skeleton:
         if root_first_dof is None:
             raise OsimModelError("no joint connects a body to ground with moving coordinates", path=osim.source)
         self.model = model
-        self.data = model.createData()
+        self._data: pin.Data | None = None  # created on first use (:attr:`data`): ~3 ms each
         self.root_joint = root_first_dof
         self.nv = model.nv
         self.body_joint = np.array([body_joint[b] for b in self.body_names], dtype=np.intp)
@@ -235,6 +235,7 @@ class Skeleton:
                 if s > 0:
                     support[j, model.idx_vs[s]] = True
         self._support = support
+        self._chains: dict[bytes, list[int]] = {}  # joint subsets -> their chains (:meth:`_chain`)
 
     def set_markers(self, osim: OsimModel) -> None:
         """(Re)load the marker set from ``osim`` (same bodies): names, bodies, locations."""
@@ -263,6 +264,14 @@ class Skeleton:
         for u, j in enumerate(self._marker_joints_uniq):
             selection[np.arange(self.nv), u, self.cmap.dof_root] = self._support[j]
         self._marker_selection = selection.reshape(self.nv, -1)
+
+    @property
+    def data(self) -> pin.Data:
+        """The pinocchio data (work buffers) of :attr:`model`, created on first use: many
+        skeletons (the scale fit's steps, the batched numpy kinematics) never need it."""
+        if self._data is None:
+            self._data = self.model.createData()
+        return self._data
 
     # ------------------------------------------------------------------ lookups
 
@@ -298,11 +307,14 @@ class Skeleton:
 
     # ------------------------------------------------------------------ kinematics (batched)
 
-    def _joint_poses_soa(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _joint_poses_soa(self, q: FloatArray, joints: IntArray | None = None) -> tuple[FloatArray, FloatArray]:
         """Joint placements with frames last: ``(nj, 3, 3, T)`` and ``(nj, 3, T)``.
 
         Frames-last ("structure of arrays") keeps each 3x3 product a handful of long
         vectorized operations, which is what makes batched kinematics cheap in numpy.
+        With ``joints`` (pinocchio joint indices), only those joints and their ancestors
+        are computed (the same arithmetic, so the same values); the other entries are
+        left uninitialized.
         """
         q2 = np.atleast_2d(np.asarray(q, dtype=float))
         qp, _, _ = self.cmap.expand(q2)
@@ -312,7 +324,7 @@ class Skeleton:
         pos = np.empty((nj, 3, t))
         rot[0] = np.eye(3)[:, :, None]
         pos[0] = 0.0
-        for j in range(1, nj):
+        for j in range(1, nj) if joints is None else self._chain(joints):
             x = qp[:, self._idx_v[j]]
             place_r, place_p = self._place_R[j], self._place_p[j]
             if self._jtype[j] == 0:
@@ -327,6 +339,20 @@ class Skeleton:
             rot[j] = r_par if r_loc is None else np.einsum("ijt,jkt->ikt", r_par, r_loc)
             pos[j] = p_par if p_loc is None else p_par + np.einsum("ijt,jt->it", r_par, np.broadcast_to(p_loc, (3, t)))
         return rot, pos
+
+    def _chain(self, joints: IntArray) -> list[int]:
+        """The joints ``joints`` and all their ancestors except the universe, parents first."""
+        key = np.unique(joints).tobytes()
+        chain = self._chains.get(key)
+        if chain is None:
+            need = np.zeros(self._parents.size, dtype=bool)
+            for j in np.unique(joints).tolist():
+                while j > 0 and not need[j]:
+                    need[j] = True
+                    j = int(self._parents[j])
+            chain = np.flatnonzero(need).tolist()  # pinocchio numbers a parent before its children
+            self._chains[key] = chain
+        return chain
 
     def joint_poses(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """World placement of every pinocchio joint frame for many frames.
@@ -379,9 +405,9 @@ class Skeleton:
         -------
         ``(T, M, 3)`` positions, m.
         """
-        rot, pos = self._joint_poses_soa(q)
         idx = np.arange(len(self.marker_names)) if markers is None else np.asarray(markers)
         j = self.marker_joint[idx]
+        rot, pos = self._joint_poses_soa(q, j)
         out = pos[j] + np.einsum("mijt,mj->mit", rot[j], self.marker_in_joint[idx])
         return out.transpose(2, 0, 1)
 
