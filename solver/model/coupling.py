@@ -88,15 +88,20 @@ class _PolynomialGroup:
             coefficients=(derivs[0], derivs[1], derivs[2]),
         )
 
+    def __post_init__(self) -> None:
+        # the three tables zero-padded in front to one length and stacked: (m + 1, 3, k), so
+        # one Horner pass gives all three (leading zeros change no bit, as above)
+        rows = self.coefficients[0].shape[0]
+        self._stacked = np.stack([np.pad(t, ((rows - t.shape[0], 0), (0, 0))) for t in self.coefficients], axis=1)
+
     def evaluate(self, xv: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(..., k)`` inputs -> value, first and second derivative, each ``(..., k)``."""
-        out = []
-        for table in self.coefficients:
-            y = np.zeros_like(xv)
-            for row in table:
-                y = y * xv + row
-            out.append(self.scale * y)
-        return out[0], out[1], out[2]
+        xs = xv[..., None, :]
+        y = np.zeros(xv.shape[:-1] + self._stacked.shape[1:])
+        for row in self._stacked:
+            y = y * xs + row
+        y *= self.scale
+        return y[..., 0, :], y[..., 1, :], y[..., 2, :]
 
 
 @dataclass
@@ -113,6 +118,11 @@ class _SplineGroup:
     knots: FloatArray  # (n,)
     table: FloatArray  # (n + 1, k, 5)
     columns: IntArray  # (k,) 0..k-1, the table's column of each output
+
+    def __post_init__(self) -> None:
+        # searchsorted(bounds, x, "right") is the slot: the knots with the last one nudged up
+        # by one unit in the last place, so x equal to it stays in the last interval
+        self.bounds = np.append(self.knots[:-1], np.nextafter(self.knots[-1], np.inf))
 
 
 class FunctionBank:
@@ -190,18 +200,20 @@ class FunctionBank:
         f, df, ddf
             ``(..., K)`` each: f_k(x[driver_k]), f_k', f_k''; None above ``order``.
         """
-        lead = x.shape[:-1]
-        f = np.zeros(lead + (self.n_out,))
-        df = np.zeros_like(f) if order >= 1 else None
-        ddf = np.zeros_like(f) if order >= 2 else None
+        shape = x.shape[:-1] + (self.n_out,)
+        # every output belongs to exactly one of the groups below, which fill it in
+        f = np.empty(shape)
+        df = np.empty(shape) if order >= 1 else None
+        ddf = np.empty(shape) if order >= 2 else None
         if self._lin_k.size:
             f[..., self._lin_k] = self._lin_a * x[..., self._lin_c] + self._lin_b
             if df is not None:
                 df[..., self._lin_k] = self._lin_a
+            if ddf is not None:
+                ddf[..., self._lin_k] = 0.0
         for g in self._groups:
             xv = x[..., g.drivers]  # (..., k)
-            n = g.knots.size
-            slot = np.minimum(np.searchsorted(g.knots, xv, side="right"), n - 1) + (xv > g.knots[-1])
+            slot = np.searchsorted(g.bounds, xv, side="right")  # 0 below the knots, n above
             coef = g.table[slot, g.columns]  # (..., k, 5)
             t = xv - coef[..., 0]
             b, c, d = coef[..., 2], coef[..., 3], coef[..., 4]
