@@ -85,6 +85,8 @@ class FitResult:
         RMS marker error over all observations of the fit frames, m.
     iterations
         Accepted Levenberg-Marquardt steps.
+    skeleton
+        :attr:`model` built (``ScaleFitProblem.build`` of the scales and offsets), for reuse.
     """
 
     model: OsimModel
@@ -93,6 +95,7 @@ class FitResult:
     q: FloatArray
     marker_rms: float
     iterations: int
+    skeleton: Skeleton
 
 
 class ScaleFitProblem:
@@ -347,6 +350,7 @@ def fit_model(problem: ScaleFitProblem, q_init: FloatArray, scales0: FloatArray)
         q=q,
         marker_rms=float(np.sqrt(np.mean(err**2))),
         iterations=accepted_steps,
+        skeleton=sk,
     )
 
 
@@ -386,7 +390,7 @@ def landmark_scale_response(
     wanted = [problem.names.index(n) for n in markers if n in problem.names]
     if not wanted:
         return {t: {} for t in trials}
-    sk = problem.build(fit.scales, fit.offsets)
+    sk = fit.skeleton  # problem.build(fit.scales, fit.offsets)
     free = np.flatnonzero(sk.is_independent & ~sk.locked)
     lo, hi = solver_bounds(sk)
     midx = sk.marker_index(problem.names)

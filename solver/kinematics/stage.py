@@ -193,7 +193,7 @@ def run_kinematics(
     attached: dict[str, str] = {}
     if unmatched:
         say("attaching unmatched markers", 0.3)
-        placed, _ = place_markers(Skeleton(fit.model), fit.q, gather(unmatched), unmatched)
+        placed, _ = place_markers(fit.skeleton, fit.q, gather(unmatched), unmatched)
         if placed:
             body_scales = groups.body_scales(fit.scales)
             new = tuple(Marker(p.name, p.body, tuple(np.array(p.location) / body_scales[p.body]), False) for p in placed)
@@ -212,7 +212,7 @@ def run_kinematics(
 
     # final IK of every trial with the fitted model
     t3 = time.perf_counter()
-    sk = Skeleton(fit.model)
+    sk = fit.skeleton
     results = []
     for k, ((name, markers), match) in enumerate(zip(trials, matches)):
         say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))
