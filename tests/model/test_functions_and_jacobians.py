@@ -82,6 +82,26 @@ def test_function_bank_equals_each_function(path: str) -> None:
 
 
 @pytest.mark.parametrize("path", MODEL_PATHS, ids=lambda p: p.split("/")[-1])
+def test_function_bank_at_the_knots_and_past_the_ends(path: str) -> None:
+    # the bank finds a spline's interval with one search over the knots, the last one nudged
+    # up one unit in the last place: a value on the last knot is still in the last interval,
+    # one just past it on the linear continuation; each as the spline itself has it
+    sk = skeleton(path)
+    bank = sk.cmap._dofs
+    splines = [(k, c, fn) for k, (c, fn) in enumerate(zip(sk._dof_coord, sk._dof_func)) if isinstance(fn, CubicSpline)]
+    assert splines, "the model's knee is driven by splines"
+    for k, c, fn in splines:
+        knots = fn.x
+        xs = np.concatenate([knots, np.nextafter(knots, -np.inf), np.nextafter(knots, np.inf), [knots[0] - 0.3, knots[-1] + 0.3]])
+        x = np.tile(sk.neutral(), (xs.size, 1))
+        x[:, c] = xs
+        got = bank.evaluate(x)
+        for order, values in enumerate(got):
+            own = fn.value(xs) if order == 0 else fn.derivative(xs, order)
+            np.testing.assert_allclose(values[:, k], own, rtol=1e-13, atol=1e-15, err_msg=f"{fn} order {order}")
+
+
+@pytest.mark.parametrize("path", MODEL_PATHS, ids=lambda p: p.split("/")[-1])
 def test_expanded_velocities_are_the_time_derivative_of_positions(path: str) -> None:
     sk = skeleton(path)
     q, qd, qdd = RNG.uniform(-0.5, 0.5, sk.n), RNG.uniform(-1, 1, sk.n), RNG.uniform(-1, 1, sk.n)
@@ -114,6 +134,19 @@ def test_marker_jacobian_matches_finite_differences(path: str) -> None:
         fd = (sk.marker_positions(sk.cmap.complete(q + e), idx) - sk.marker_positions(sk.cmap.complete(q - e), idx))[0] / (2 * h)
         np.testing.assert_allclose(jac[:, :, c], fd, atol=1e-6, err_msg=sk.coordinate_names[c])
     assert not jac[:, :, ~sk.is_independent].any()
+
+
+@pytest.mark.parametrize("path", MODEL_PATHS, ids=lambda p: p.split("/")[-1])
+def test_positions_of_some_markers_equal_those_of_all(path: str) -> None:
+    # asked for some markers, the batched kinematics computes only their joints' chains
+    sk = skeleton(path)
+    q = sk.cmap.complete(RNG.uniform(-0.5, 0.5, (5, sk.n)))
+    every = sk.marker_positions(q)
+    for body in ("tibia_l", "hand_r", sk.root_body):
+        idx = np.array([i for i, b in enumerate(sk.marker_bodies) if b == body])
+        if idx.size:
+            np.testing.assert_array_equal(sk.marker_positions(q, idx[::-1]), every[:, idx[::-1]])
+    np.testing.assert_array_equal(sk.marker_positions(q[0], [3, 0]), sk.marker_positions(q[0])[:, [3, 0]])
 
 
 @pytest.mark.parametrize("path", MODEL_PATHS)
