@@ -83,6 +83,10 @@ class Figure:
 BEFORE = "e0336e8"
 BEFORE_TREE = f"/tmp/addb_{BEFORE}"
 EXPORT_BEFORE = f"rm -rf {BEFORE_TREE} && mkdir -p {BEFORE_TREE} && git archive {BEFORE} solver addb_viewer annotations | tar -x -C {BEFORE_TREE}"
+# git archive of the commit before the kinematics' exact speed-ups of 2026-11-25 (same section)
+AGAINST = "ef4449a"
+AGAINST_TREE = f"/tmp/addb_{AGAINST}"
+EXPORT_AGAINST = f"rm -rf {AGAINST_TREE} && mkdir -p {AGAINST_TREE} && git archive {AGAINST} solver addb_viewer annotations | tar -x -C {AGAINST_TREE}"
 DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
 
 FIGURES: tuple[Figure, ...] = (
@@ -129,6 +133,17 @@ FIGURES: tuple[Figure, ...] = (
         ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_exact_after/$s --fit band >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 4.0),
+    Figure("process-against", RESULTS, f"{EXPORT_AGAINST} && {PY} tests/benchmarks/bench_process.py --repeat 5 --against {AGAINST_TREE} "
+           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023", "timing", 2.0, fence=False),
+    Figure(
+        "process-against-exactness", RESULTS,
+        f"{EXPORT_AGAINST} && rm -rf /tmp/addb_against_before /tmp/addb_against_after && R=$PWD && "
+        "for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
+        f"(cd /tmp && PYTHONPATH={AGAINST_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_against_before/$s >/dev/null) && "
+        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_against_after/$s >/dev/null; done && "
+        f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_against_before /tmp/addb_against_after && "
+        "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after && echo 'every other file byte-identical'",
+        "accuracy", 1.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 1.5, fence=False),
     Figure("reprocess-band", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit band walk camargo",

@@ -1,6 +1,6 @@
 """End-to-end ``addb process`` timing on the shared subjects (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR] [--fit band] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR | --against DIR] [--fit band] [SUBJECT ...]
 
 Runs the command in a fresh process per subject (as a user would), ``--repeat`` times each
 (default 3; the table shows the median and the range of the wall times), and prints the
@@ -15,6 +15,9 @@ addb's bytecode is compiled first, outside the timed runs, as an install has it
 fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/subjects or
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
+``--against DIR`` times this tree and DIR's (as ``--src``) alternately, run by run, and
+prints their CPU times side by side: on a host whose speed drifts 10-30 % from one hour to
+the next, the way to see a change of a few per cent (both trees meet the same drift).
 ``--host-reference`` also times OpenSim's IK tool on the walk as ``bench_kinematics.py`` does
 (a whole process, best of ``--repeat``, before and after the subjects): code that does not
 change between two blocks, so the ratio of two blocks' references says how much faster or
@@ -62,6 +65,25 @@ def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, fl
     return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
+def _interleaved(args: argparse.Namespace) -> None:
+    """``--against``: this tree and the other alternately, CPU seconds side by side."""
+    print(f"this tree against {args.against}, run by run alternately, {args.repeat} runs each (CPU s: median [min-max])\n")
+    print("| subject | frames | CPU, this tree | CPU, other tree | this / other | frames per CPU-s: this, other |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.subjects:
+            folder = subject_folder(name, Path(tmp))
+            cpus: dict[str | None, list[float]] = {None: [], args.against: []}
+            for i in range(args.repeat):
+                for src, runs in cpus.items():
+                    out = Path(tmp) / f"{name}_{i}_{'other' if src else 'this'}"
+                    runs.append(_run(folder, out, src, args.fit)[1])
+            frames = sum(int(json.loads(r.read_text()).get("n_frames", 0)) for r in out.glob("*/results.json"))
+            this, other = (statistics.median(v) for v in cpus.values())
+            cells = [f"{statistics.median(v):.2f} [{min(v):.2f}-{max(v):.2f}]" for v in cpus.values()]
+            print(f"| {name} | {frames} | {cells[0]} | {cells[1]} | {this / other:.3f} | {frames / this:.0f}, {frames / other:.0f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
@@ -69,10 +91,15 @@ def main() -> None:
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
     ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="addb process --fit")
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
+    ap.add_argument("--against", default=None, help="source tree to time alternately with this one (CPU side by side)")
     args = ap.parse_args()
     compile_sources()
     if args.src:
         compile_sources(args.src)
+    if args.against:
+        compile_sources(args.against)
+        _interleaved(args)
+        return
     reference = opensim_reference(args.repeat) if args.host_reference else []
     versions = ", ".join(f"{p} {metadata.version(p)}" for p in ("numpy", "scipy", "pin"))
     print(f"{versions}; Python {sys.version.split()[0]}\n")
