@@ -15,7 +15,8 @@ addb's bytecode is compiled first, outside the timed runs, as an install has it
 fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/subjects or
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
-``--against DIR`` times this tree and DIR's (as ``--src``) alternately, run by run, and
+``--against DIR`` times this tree and DIR's (as ``--src``) alternately, run by run (which
+runs first alternates too), and
 prints their CPU times side by side: on a host whose speed drifts 10-30 % from one hour to
 the next, the way to see a change of a few per cent (both trees meet the same drift).
 ``--host-reference`` also times OpenSim's IK tool on the walk as ``bench_kinematics.py`` does
@@ -67,7 +68,7 @@ def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, fl
 
 def _interleaved(args: argparse.Namespace) -> None:
     """``--against``: this tree and the other alternately, CPU seconds side by side."""
-    print(f"this tree against {args.against}, run by run alternately, {args.repeat} runs each (CPU s: median [min-max])\n")
+    print(f"this tree against {args.against}, alternately (this first in even runs, the other in odd), {args.repeat} runs each (CPU s: median [min-max])\n")
     print("| subject | frames | CPU, this tree | CPU, other tree | this / other | frames per CPU-s: this, other |")
     print("| --- | ---: | ---: | ---: | ---: | ---: |")
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,9 +76,9 @@ def _interleaved(args: argparse.Namespace) -> None:
             folder = subject_folder(name, Path(tmp))
             cpus: dict[str | None, list[float]] = {None: [], args.against: []}
             for i in range(args.repeat):
-                for src, runs in cpus.items():
+                for src in list(cpus)[:: 1 if i % 2 == 0 else -1]:  # the order alternates too
                     out = Path(tmp) / f"{name}_{i}_{'other' if src else 'this'}"
-                    runs.append(_run(folder, out, src, args.fit)[1])
+                    cpus[src].append(_run(folder, out, src, args.fit)[1])
             frames = sum(int(json.loads(r.read_text()).get("n_frames", 0)) for r in out.glob("*/results.json"))
             this, other = (statistics.median(v) for v in cpus.values())
             cells = [f"{statistics.median(v):.2f} [{min(v):.2f}-{max(v):.2f}]" for v in cpus.values()]
