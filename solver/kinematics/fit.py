@@ -390,7 +390,7 @@ def landmark_scale_response(
     wanted = [problem.names.index(n) for n in markers if n in problem.names]
     if not wanted:
         return {t: {} for t in trials}
-    sk = fit.skeleton  # problem.build(fit.scales, fit.offsets)
+    sk = fit.skeleton  # the model of fit.scales and fit.offsets
     free = np.flatnonzero(sk.is_independent & ~sk.locked)
     lo, hi = solver_bounds(sk)
     midx = sk.marker_index(problem.names)

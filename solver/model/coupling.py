@@ -60,45 +60,38 @@ def _linear_of(f: Function) -> tuple[float, float] | None:
 class _PolynomialGroup:
     """Polynomials evaluated together by Horner's rule, column by column.
 
-    ``coefficients[d]`` are ``(m + 1 - d, k)``: the d-th derivative's coefficients of every
+    ``coefficients[:, d]`` are ``(m + 1, k)``: the d-th derivative's coefficients of every
     polynomial, highest power first, zero-padded in front to the group's degree m (a leading
     zero leaves Horner's sum exactly as ``numpy.polyval`` has it, so the values are the same
-    to the bit as those of :meth:`Polynomial.value` and :meth:`Polynomial.derivative`).
+    to the bit as those of :meth:`Polynomial.value` and :meth:`Polynomial.derivative`); one
+    Horner pass over the ``(m + 1, 3, k)`` table gives the values and both derivatives.
     """
 
     outputs: IntArray  # (k,) output slots
     drivers: IntArray  # (k,) input slots
     scale: FloatArray  # (k,) multiplier of each polynomial
-    coefficients: tuple[FloatArray, FloatArray, FloatArray]
+    coefficients: FloatArray  # (m + 1, 3, k)
 
     @staticmethod
     def of(items: list[tuple[int, int, Polynomial, float]]) -> _PolynomialGroup:
         degree = max(len(p.coefficients) for _, _, p, _ in items) - 1
-        derivs: list[FloatArray] = []
+        table = np.zeros((degree + 1, 3, len(items)))
         for order in range(3):
-            table = np.zeros((max(degree + 1 - order, 1), len(items)))
             for col, (_, _, p, _) in enumerate(items):
                 c = np.polyder(np.asarray(p.coefficients, dtype=float), order)
-                table[table.shape[0] - c.size :, col] = c
-            derivs.append(table)
+                table[degree + 1 - c.size :, order, col] = c
         return _PolynomialGroup(
             outputs=np.array([it[0] for it in items], dtype=np.intp),
             drivers=np.array([it[1] for it in items], dtype=np.intp),
             scale=np.array([it[3] for it in items]),
-            coefficients=(derivs[0], derivs[1], derivs[2]),
+            coefficients=table,
         )
-
-    def __post_init__(self) -> None:
-        # the three tables zero-padded in front to one length and stacked: (m + 1, 3, k), so
-        # one Horner pass gives all three (leading zeros change no bit, as above)
-        rows = self.coefficients[0].shape[0]
-        self._stacked = np.stack([np.pad(t, ((rows - t.shape[0], 0), (0, 0))) for t in self.coefficients], axis=1)
 
     def evaluate(self, xv: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(..., k)`` inputs -> value, first and second derivative, each ``(..., k)``."""
         xs = xv[..., None, :]
-        y = np.zeros(xv.shape[:-1] + self._stacked.shape[1:])
-        for row in self._stacked:
+        y = np.zeros(xv.shape[:-1] + self.coefficients.shape[1:])
+        for row in self.coefficients:
             y = y * xs + row
         y *= self.scale
         return y[..., 0, :], y[..., 1, :], y[..., 2, :]
@@ -110,19 +103,16 @@ class _SplineGroup:
 
     ``table[i, k] = (anchor, y, b, c, d)`` so that f = y + t (b + t (c + t d)) with
     t = x - anchor, for slot i = 0 (below the first knot: the linear continuation),
-    1..n-1 (the spline intervals) and n (above the last knot).
+    1..n-1 (the spline intervals) and n (above the last knot). The slot of x is
+    ``searchsorted(bounds, x, "right")``, ``bounds`` the knots with the last one nudged up
+    by one unit in the last place, so that x equal to it stays in the last interval.
     """
 
     outputs: IntArray  # (k,) output slots
     drivers: IntArray  # (k,) input slots
-    knots: FloatArray  # (n,)
+    bounds: FloatArray  # (n,)
     table: FloatArray  # (n + 1, k, 5)
     columns: IntArray  # (k,) 0..k-1, the table's column of each output
-
-    def __post_init__(self) -> None:
-        # searchsorted(bounds, x, "right") is the slot: the knots with the last one nudged up
-        # by one unit in the last place, so x equal to it stays in the last interval
-        self.bounds = np.append(self.knots[:-1], np.nextafter(self.knots[-1], np.inf))
 
 
 class FunctionBank:
@@ -180,7 +170,7 @@ class FunctionBank:
         return _SplineGroup(
             outputs=np.array([it[0] for it in items], dtype=np.intp),
             drivers=np.array([it[1] for it in items], dtype=np.intp),
-            knots=knots,
+            bounds=np.append(knots[:-1], np.nextafter(knots[-1], np.inf)),
             table=table,
             columns=np.arange(k, dtype=np.intp),
         )

@@ -342,11 +342,12 @@ class Skeleton:
 
     def _chain(self, joints: IntArray) -> list[int]:
         """The joints ``joints`` and all their ancestors except the universe, parents first."""
-        key = np.unique(joints).tobytes()
+        asked = np.unique(joints)
+        key = asked.tobytes()
         chain = self._chains.get(key)
         if chain is None:
             need = np.zeros(self._parents.size, dtype=bool)
-            for j in np.unique(joints).tolist():
+            for j in asked.tolist():
                 while j > 0 and not need[j]:
                     need[j] = True
                     j = int(self._parents[j])
