@@ -16,9 +16,9 @@ fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
 ``--against DIR`` times this tree and DIR's (as ``--src``) alternately, run by run (which
-runs first alternates too), and
-prints their CPU times side by side: on a host whose speed drifts 10-30 % from one hour to
-the next, the way to see a change of a few per cent (both trees meet the same drift).
+runs first alternates too), and prints their CPU times side by side: on a host whose speed
+drifts 10-30 % from one hour to the next, the way to see a change of a few per cent (both
+trees meet the same drift).
 ``--host-reference`` also times OpenSim's IK tool on the walk as ``bench_kinematics.py`` does
 (a whole process, best of ``--repeat``, before and after the subjects): code that does not
 change between two blocks, so the ratio of two blocks' references says how much faster or
@@ -94,6 +94,8 @@ def main() -> None:
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     ap.add_argument("--against", default=None, help="source tree to time alternately with this one (CPU side by side)")
     args = ap.parse_args()
+    if args.src and args.against:
+        ap.error("--src and --against exclude each other (--against times this tree against DIR)")
     compile_sources()
     if args.src:
         compile_sources(args.src)
