@@ -32,6 +32,8 @@ from solver.model.skeleton import Skeleton
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+#: A full turn, rad.
+TURN = 2.0 * np.pi
 
 
 @dataclass(frozen=True)
@@ -314,6 +316,22 @@ class FrameSolver:
         return q, marker_cost
 
 
+def _turn_columns(solver: FrameSolver) -> IntArray:
+    """The coordinates a frame's solve can leave a whole number of full turns away from
+    its neighbours' without any marker seeing it: :attr:`Skeleton.full_turn` and unbounded
+    in the solver (the root rotations, unclamped joint angles)."""
+    lo, hi = solver.lo, solver.hi
+    return np.flatnonzero(solver.sk.full_turn & np.isinf(lo) & np.isinf(hi))
+
+
+def _nearest_turn(q: FloatArray, ref: FloatArray, cols: IntArray) -> None:
+    """Shift ``q[..., cols]`` in place by whole turns (2 pi rad) to the value nearest
+    ``ref[..., cols]``: the same pose (the columns are :func:`_turn_columns`), continuous in
+    time. A shift of zero turns leaves q unchanged to the bit."""
+    if cols.size:
+        q[..., cols] -= TURN * np.round((q[..., cols] - ref[..., cols]) / TURN)
+
+
 def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) -> FloatArray:
     """Solve every frame of a trial.
 
@@ -325,6 +343,12 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
     (``between_weight``), the straight line between its two neighbours' solutions. With
     ``keyframe_stride=1`` every frame is solved in time order. A frame that sees no marker
     holds the pose of the last frame solved before it (``q_start`` before the first).
+    Each solution's full-turn coordinates (:func:`_turn_columns`) are then taken the whole
+    number of turns nearest the frame's reference (the previous solution, the straight
+    line, ``q_start`` for the first): a solve that sees few markers can turn the pelvis by
+    2 pi, the same pose to every marker, and the constant-velocity guess would carry
+    that turn into every later frame (opensim-core's C3D walk walking5 spun the pelvis by
+    one turn a frame, a motion the derivatives and the dynamics fit cannot use).
 
     Parameters
     ----------
@@ -340,6 +364,7 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
     ``(T, n)`` coordinates (couplers applied, locked coordinates at their default).
     """
     stride = solver.settings.keyframe_stride
+    turns = _turn_columns(solver)
     t = obs.shape[0]
     sees = np.isfinite(obs).all(axis=2).any(axis=1)  # (T,) the frame sees a marker
     solvable = np.flatnonzero(sees)
@@ -354,12 +379,14 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
     for i, k in enumerate(keys):
         if i == 0:
             q, _ = solver.solve(q, obs[k], None, max_iterations=40)
+            _nearest_turn(q, np.asarray(q_start, dtype=float), turns)
         else:
             prev = out[keys[i - 1]]
             start = prev
             if i > 1 and k - keys[i - 1] == keys[i - 1] - keys[i - 2] == stride:
                 start = solver.sk.cmap.complete(2 * prev - out[keys[i - 2]])  # constant-velocity guess
             q, _ = solver.solve(start, obs[k], prev)
+            _nearest_turn(q, prev, turns)
         out[k] = q
     between = solvable[~np.isin(solvable, keys)]
     if between.size:
@@ -367,7 +394,9 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
         lo_key, hi_key = keys[right - 1], keys[right]
         f = ((between - lo_key) / (hi_key - lo_key))[:, None]
         guess = solver.sk.cmap.complete((1.0 - f) * out[lo_key] + f * out[hi_key])
-        out[between] = solver.solve_many(guess, obs[between], guess, pull_weight=solver.settings.between_weight)[0]
+        solved = solver.solve_many(guess, obs[between], guess, pull_weight=solver.settings.between_weight)[0]
+        _nearest_turn(solved, guess, turns)
+        out[between] = solved
     # frames that see no marker hold the last solved pose
     last = np.maximum.accumulate(np.where(sees, np.arange(t), -1))
     hold = ~sees & (last >= 0)

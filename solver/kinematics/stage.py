@@ -27,7 +27,13 @@ from solver.errors import KinematicsError
 from solver.io.types import MarkerTrajectories
 from solver.kinematics.autoplace import place_markers
 from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model, landmark_scale_response
-from solver.kinematics.ik import FrameSolver, IkSettings, initial_pose, solve_trajectory
+from solver.kinematics.ik import (
+    FrameSolver,
+    IkSettings,
+    initial_pose,
+    solve_trajectory,
+    solve_trajectory_from_best_frame,
+)
 from solver.kinematics.observations import MarkerMatch, match_markers, observations
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.scale_groups import make_groups, model_height
@@ -251,14 +257,22 @@ def _trial_ik(
 ) -> TrialKinematics:
     """Inverse kinematics of one trial with the model ``sk``: the first frame that sees a
     marker posed from scratch (:func:`initial_pose`), then every frame in time order
-    (:func:`solve_trajectory`). ``names`` are the model markers used, ``columns`` their
-    columns in ``markers``, ``weights`` ``(len(names),)`` their weights."""
+    (:func:`solve_trajectory`). When that frame sees fewer than half the markers of the
+    best-observed frame (a subject walking into the capture volume, as in opensim-core's
+    C3D walks, whose first frames see one marker), the best-observed frame is posed instead
+    and the trial solved forwards and backwards from it
+    (:func:`solve_trajectory_from_best_frame`). ``names`` are the model markers used,
+    ``columns`` their columns in ``markers``, ``weights`` ``(len(names),)`` their weights."""
     ts = time.perf_counter()
     y = np.array(markers.positions[:, [columns[n] for n in names]])
     index = sk.marker_index(list(names))
     solver = FrameSolver(sk, index, weights, settings)
-    first = int(np.argmax(np.isfinite(y).all(axis=2).any(axis=1)))
-    q = solve_trajectory(solver, y, initial_pose(solver, y[first]))
+    n_seen = np.isfinite(y).all(axis=2).sum(axis=1)
+    first, best = int(np.argmax(n_seen > 0)), int(np.argmax(n_seen))
+    if 2 * n_seen[first] < n_seen[best]:
+        q = solve_trajectory_from_best_frame(solver, y, np.broadcast_to(initial_pose(solver, y[best]), (y.shape[0], sk.n)))
+    else:
+        q = solve_trajectory(solver, y, initial_pose(solver, y[first]))
     return TrialKinematics(
         name=name,
         time=markers.time,

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from solver.errors import OsimModelError
 from solver.model.coupling import CoordinateMap
+from solver.model.functions import Linear
 from solver.model.osim import ROTATIONAL, TRANSLATIONAL, OsimModel
 
 FloatArray = NDArray[np.float64]
@@ -133,6 +134,7 @@ class Skeleton:
             [(cidx[c.dependent], cidx[c.independent], c.function, c.scale_factor) for c in osim.couplers],
         )
         self.is_independent = self.cmap.is_independent
+        self.full_turn = self._full_turn_coordinates()
         self.set_markers(osim)
 
     # ------------------------------------------------------------------ building
@@ -236,6 +238,20 @@ class Skeleton:
                     support[j, model.idx_vs[s]] = True
         self._support = support
         self._chains: dict[bytes, list[int]] = {}  # joint subsets -> their chains (:meth:`_chain`)
+
+    def _full_turn_coordinates(self) -> NDArray[np.bool_]:
+        """``(n,)`` True for the coordinates whose change by a full turn (2 pi rad) moves no
+        body: rotational and independent, no coupler's input, and every DoF they drive a
+        rotation by plus or minus the coordinate (a linear function of slope +-1), as a
+        CustomJoint's rotation axes and a PinJoint's angle are. Such a coordinate's value is
+        only defined up to full turns by the markers (see
+        :func:`solver.kinematics.ik.solve_trajectory`)."""
+        out = self.is_rotational & self.is_independent
+        out[self.cmap.independent_of] = False
+        for j, (c, f) in enumerate(zip(self._dof_coord, self._dof_func), start=1):
+            if self._jtype[j] != 0 or not isinstance(f, Linear) or abs(f.slope) != 1.0:
+                out[c] = False
+        return out
 
     def set_markers(self, osim: OsimModel) -> None:
         """(Re)load the marker set from ``osim`` (same bodies): names, bodies, locations."""

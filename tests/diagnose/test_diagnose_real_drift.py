@@ -9,6 +9,14 @@ which the diagnosis never looks at (it sees the loaded frames through the motion
 
 Until 2026-11-22 the second round named nothing: the applied frames were padded a second
 time (3 frames each side), and that small ``unmeasured_force`` candidate stood in the way.
+
+Since 2026-11-25 the trial's kinematics start at its best-observed frame (the subject
+walks into the volume: the first frames see one to a few markers;
+tests/kinematics/test_ik_entry.py). The first round then leaves 21 of those entry frames
+(0.88-1.08 s, seeing 1-5 markers) out of its steps off the plates, and the second names
+them; the third names plate 2's offset, with the same estimate to 1e-9 N as the second
+round did before. So the steps off the plates are applied until another cause is named
+(at most three rounds).
 """
 
 from __future__ import annotations
@@ -50,7 +58,11 @@ def test_second_round_names_the_plates_zero_drift(tmp_path: Path) -> None:
     assert first["chosen"] == "unmeasured_force"
     shutil.rmtree(subject / "addb_out")
 
-    second = diagnose_json(subject, "walking2")
+    for _ in range(2):  # the steps off the plates, until another cause is named
+        second = diagnose_json(subject, "walking2", "--apply")
+        shutil.rmtree(subject / "addb_out")
+        if second["chosen"] != "unmeasured_force":
+            break
     assert second["chosen"] == "plate_force_offset", second["reason"]
     plate = second["chosen_parameters"]["plate"]
     fy = second["chosen_parameters"]["offset_N"][1]
