@@ -375,11 +375,11 @@ def solve_trajectory(solver: FrameSolver, obs: FloatArray, q_start: FloatArray) 
     keys = solvable[::stride]
     if keys[-1] != solvable[-1]:
         keys = np.append(keys, solvable[-1])
-    q = np.asarray(q_start, dtype=float)
+    q_start = np.asarray(q_start, dtype=float)
     for i, k in enumerate(keys):
         if i == 0:
-            q, _ = solver.solve(q, obs[k], None, max_iterations=40)
-            _nearest_turn(q, np.asarray(q_start, dtype=float), turns)
+            q, _ = solver.solve(q_start, obs[k], None, max_iterations=40)
+            _nearest_turn(q, q_start, turns)
         else:
             prev = out[keys[i - 1]]
             start = prev
@@ -436,7 +436,15 @@ def solve_trajectory_from_best_frame(solver: FrameSolver, obs: FloatArray, q_gue
     if not n_seen.any():
         raise ValueError("no observed marker on any frame")
     anchor = int(np.argmax(n_seen))
-    forward = solve_trajectory(solver, obs[anchor:], np.asarray(q_guess[anchor], dtype=float))
+    return solve_trajectory_from(solver, obs, anchor, q_guess[anchor])
+
+
+def solve_trajectory_from(solver: FrameSolver, obs: FloatArray, anchor: int, q_start: FloatArray) -> FloatArray:
+    """:func:`solve_trajectory` of the frames from ``anchor`` on, started at ``q_start``
+    (``(n,)``), then of the frames from ``anchor`` back to the first, started at the
+    anchor's solution; ``(T, n)`` coordinates of every frame of ``obs`` (``(T, M, 3)``)."""
+    obs = np.asarray(obs, dtype=float)
+    forward = solve_trajectory(solver, obs[anchor:], np.asarray(q_start, dtype=float))
     backward = solve_trajectory(solver, obs[anchor::-1], forward[0])[::-1]
     return np.concatenate([backward[:-1], forward])
 

@@ -32,7 +32,7 @@ from solver.kinematics.ik import (
     IkSettings,
     initial_pose,
     solve_trajectory,
-    solve_trajectory_from_best_frame,
+    solve_trajectory_from,
 )
 from solver.kinematics.observations import MarkerMatch, match_markers, observations
 from solver.kinematics.result import KinematicsResult, TrialKinematics
@@ -260,8 +260,8 @@ def _trial_ik(
     (:func:`solve_trajectory`). When that frame sees fewer than half the markers of the
     best-observed frame (a subject walking into the capture volume, as in opensim-core's
     C3D walks, whose first frames see one marker), the best-observed frame is posed instead
-    and the trial solved forwards and backwards from it
-    (:func:`solve_trajectory_from_best_frame`). ``names`` are the model markers used,
+    and the trial solved forwards and backwards from it (:func:`solve_trajectory_from`, as
+    :func:`solve_trajectory_from_best_frame` does). ``names`` are the model markers used,
     ``columns`` their columns in ``markers``, ``weights`` ``(len(names),)`` their weights."""
     ts = time.perf_counter()
     y = np.array(markers.positions[:, [columns[n] for n in names]])
@@ -270,7 +270,7 @@ def _trial_ik(
     n_seen = np.isfinite(y).all(axis=2).sum(axis=1)
     first, best = int(np.argmax(n_seen > 0)), int(np.argmax(n_seen))
     if 2 * n_seen[first] < n_seen[best]:
-        q = solve_trajectory_from_best_frame(solver, y, np.broadcast_to(initial_pose(solver, y[best]), (y.shape[0], sk.n)))
+        q = solve_trajectory_from(solver, y, best, initial_pose(solver, y[best]))
     else:
         q = solve_trajectory(solver, y, initial_pose(solver, y[first]))
     return TrialKinematics(
