@@ -7,6 +7,7 @@ Run from the repository root::
     .venv/bin/python scripts/regenerate_figures.py --only model io kinematics
     .venv/bin/python scripts/regenerate_figures.py --kind timing
     .venv/bin/python scripts/regenerate_figures.py --check      # every figure has its block
+    .venv/bin/python scripts/regenerate_figures.py --stale      # blocks made before the code they measure changed
 
 Every figure is one shell command (run from the repository root with ``bash -c``) and one
 place in a document:
@@ -19,7 +20,8 @@ place in a document:
 
 Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
 when the working tree differs from the commit in the measured code (``solver``,
-``addb_viewer``, ``annotations``, the benchmarks and ``scripts``), the stamp says so. A failed
+``addb_viewer``, ``annotations``, the benchmarks and ``scripts``), the stamp says so. ``--stale`` lists the
+blocks made before a change to the code they measure (:func:`stale`). A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
@@ -250,6 +252,61 @@ def check() -> list[str]:
     return problems
 
 
+STAMP = re.compile(r"^Made by `.*` on (\d{4}-\d{2}-\d{2}), commit ([0-9a-f]{7,40})( plus uncommitted changes to the measured code)? \(", re.MULTILINE)
+#: Code every figure measures, besides the scripts its command names: the packages, and the
+#: benchmarks' helpers and the diagnosis harness that the commands import.
+SHARED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks/[!t]*.py", "tests/diagnose/harness.py",
+               "tests/diagnose/effects.py", "tests/diagnose/synthetic.py")
+
+
+def measured_paths(fig: Figure) -> tuple[str, ...]:
+    """The paths whose change can change ``fig``'s figures: :data:`SHARED_CODE` and the
+    repository scripts its command runs (``scripts/*.py``)."""
+    return SHARED_CODE + tuple(sorted(set(re.findall(r"(scripts/[\w./-]+\.py)", fig.command))))
+
+
+def stamp_of(fig: Figure) -> tuple[str, str, bool] | None:
+    """``(date, commit, uncommitted)`` from the stamp of ``fig``'s block (its document's, or
+    the first document it writes), or None when it has no stamped block (figures that
+    only write data files, whose stamp is the block of the figure that reads them)."""
+    doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
+    if not doc or not (REPO / doc).exists():
+        return None
+    found = _pattern(fig.name).findall((REPO / doc).read_text())
+    match = STAMP.search(found[0]) if found else None
+    return (match.group(1), match.group(2), bool(match.group(3))) if match else None
+
+
+def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
+    """Figures whose block was made before a change to the code it measures.
+
+    Returns
+    -------
+    ``(figure, stamp commit, changed paths)`` for each stamped block whose commit differs
+    from HEAD in :func:`measured_paths` (``git diff --name-only COMMIT HEAD``), or whose
+    stamp says the tree had uncommitted changes then (``["uncommitted changes"]``; those
+    changes cannot be compared). Timing figures are also moved by the host, which this
+    does not see.
+
+    Raises
+    ------
+    subprocess.CalledProcessError
+        A stamp names a commit this clone does not have.
+    """
+    out = []
+    for fig in figures:
+        found = stamp_of(fig)
+        if found is None:
+            continue
+        _, commit, uncommitted = found
+        changed = _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split()
+        if uncommitted:
+            changed = ["uncommitted changes", *changed]
+        if changed:
+            out.append((fig, commit, changed))
+    return out
+
+
 def run(fig: Figure) -> bool:
     """Run one figure's command and write its block(s); False when the command failed."""
     print(f"== {fig.name}: {fig.command}", file=sys.stderr, flush=True)
@@ -277,7 +334,15 @@ def main() -> int:
     ap.add_argument("--kind", choices=("timing", "accuracy"), help="run only figures of this kind")
     ap.add_argument("--skip-diagnose", action="store_true", help="leave out the diagnosis figures (hours)")
     ap.add_argument("--check", action="store_true", help="check that every document has exactly the blocks of the registry")
+    ap.add_argument("--stale", action="store_true", help="list the blocks made before a change to the code they measure")
     args = ap.parse_args()
+    if args.stale:
+        found = stale()
+        for fig, commit, changed in found:
+            shown = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
+            print(f"{fig.name:40s} {fig.kind:8s} made at {commit}; changed since: {shown}")
+        print(f"{len(found)} of {len(FIGURES)} figures made before a change to the code they measure")
+        return 0
     if args.check:
         problems = check()
         print("\n".join(problems) if problems else f"{len(FIGURES)} figures, every block in place")

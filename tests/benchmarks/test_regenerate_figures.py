@@ -57,3 +57,41 @@ def test_a_missing_block_is_an_error_naming_the_document(rf, tmp_path) -> None:
         rf.replace_block(doc, fig, rf.block_text(fig, "stamp", ""))
     rf.replace_block(doc, fig, rf.block_text(fig, "stamp", ""), append=True)
     assert doc.read_text() == "no block here\n\n<!-- begin: fig -->\nstamp\n<!-- end: fig -->\n"
+
+
+
+def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, monkeypatch) -> None:
+    """In a repository of its own: a block stamped at HEAD is current; one stamped at a commit
+    after which the measured code changed is listed with the changed paths (a change outside
+    it is not); an uncommitted stamp is listed as such; an unstamped figure is left out."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t", "PATH": "/usr/bin:/bin"}
+        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True, env=env).stdout.strip()
+
+    git("init", "-q")
+    (tmp_path / "solver").mkdir()
+    (tmp_path / "solver" / "fit.py").write_text("x = 1\n")
+    (tmp_path / "notes.md").write_text("a\n")
+    git("add", "-A")
+    git("commit", "-q", "-m", "one")
+    old = git("rev-parse", "--short", "HEAD")
+    (tmp_path / "solver" / "fit.py").write_text("x = 2\n")
+    git("commit", "-q", "-am", "the measured code changes")
+    mid = git("rev-parse", "--short", "HEAD")
+    (tmp_path / "notes.md").write_text("b\n")
+    git("commit", "-q", "-am", "a change outside it")
+    head = git("rev-parse", "--short", "HEAD")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+
+    def block(name: str, commit: str, note: str = "") -> str:
+        return f"<!-- begin: {name} -->\nMade by `cmd` on 2026-01-01, commit {commit}{note} (1 s).\n\nfigure\n<!-- end: {name} -->\n"
+
+    (tmp_path / "doc.md").write_text(block("now", head) + block("mid", mid) + block("old", old)
+                                      + block("dirty", head, " plus uncommitted changes to the measured code"))
+    figs = [rf.Figure(n, "doc.md", "cmd", "accuracy", 0.0) for n in ("now", "mid", "old", "dirty", "unstamped")]
+    found = {fig.name: (commit, paths) for fig, commit, paths in rf.stale(figs)}
+    assert found == {"old": (old, ["solver/fit.py"]), "dirty": (head, ["uncommitted changes"])}
+    # a script named in the command counts as measured code
+    assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
