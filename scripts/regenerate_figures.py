@@ -252,7 +252,9 @@ def check() -> list[str]:
     return problems
 
 
-STAMP = re.compile(r"^Made by `.*` on (\d{4}-\d{2}-\d{2}), commit ([0-9a-f]{7,40})( plus uncommitted changes to the measured code)? \(", re.MULTILINE)
+#: The stamp :func:`stamp` writes, read back by :func:`stamp_of`: the commit, and whether the
+#: tree had uncommitted changes then.
+STAMP = re.compile(r"^Made by `.*` on \d{4}-\d{2}-\d{2}, commit ([0-9a-f]{7,40})( plus uncommitted changes to the measured code)? \(", re.MULTILINE)
 #: Code every figure measures, besides the scripts its command names: the packages, and the
 #: benchmarks' helpers and the diagnosis harness that the commands import.
 SHARED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks/[!t]*.py", "tests/diagnose/harness.py",
@@ -265,16 +267,26 @@ def measured_paths(fig: Figure) -> tuple[str, ...]:
     return SHARED_CODE + tuple(sorted(set(re.findall(r"(scripts/[\w./-]+\.py)", fig.command))))
 
 
-def stamp_of(fig: Figure) -> tuple[str, str, bool] | None:
-    """``(date, commit, uncommitted)`` from the stamp of ``fig``'s block (its document's, or
-    the first document it writes), or None when it has no stamped block (figures that
-    only write data files, whose stamp is the block of the figure that reads them)."""
+def stamp_of(fig: Figure) -> tuple[str, bool] | None:
+    """``(commit, uncommitted)`` from the stamp of ``fig``'s block (its document's, or the
+    first document it writes), or None when it has no block (figures that only write data
+    files, whose stamp is the block of the figure that reads them).
+
+    Raises
+    ------
+    ValueError
+        The block's first line is not a stamp :data:`STAMP` reads (naming the document).
+    """
     doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
     if not doc or not (REPO / doc).exists():
         return None
     found = _pattern(fig.name).findall((REPO / doc).read_text())
-    match = STAMP.search(found[0]) if found else None
-    return (match.group(1), match.group(2), bool(match.group(3))) if match else None
+    if not found:
+        return None
+    match = STAMP.search(found[0])
+    if match is None:
+        raise ValueError(f"{doc}: block {fig.name!r} has no stamp 'Made by `COMMAND` on DATE, commit HASH (DURATION).'")
+    return match.group(1), bool(match.group(2))
 
 
 def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
@@ -298,7 +310,7 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
         found = stamp_of(fig)
         if found is None:
             continue
-        _, commit, uncommitted = found
+        commit, uncommitted = found
         changed = _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split()
         if uncommitted:
             changed = ["uncommitted changes", *changed]

@@ -93,5 +93,13 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     figs = [rf.Figure(n, "doc.md", "cmd", "accuracy", 0.0) for n in ("now", "mid", "old", "dirty", "unstamped")]
     found = {fig.name: (commit, paths) for fig, commit, paths in rf.stale(figs)}
     assert found == {"old": (old, ["solver/fit.py"]), "dirty": (head, ["uncommitted changes"])}
+    # a block whose stamp cannot be read is an error, not a figure silently left out
+    (tmp_path / "doc.md").write_text("<!-- begin: bad -->\nno stamp\n<!-- end: bad -->\n")
+    with pytest.raises(ValueError, match="doc.md: block 'bad' has no stamp"):
+        rf.stale([rf.Figure("bad", "doc.md", "cmd", "accuracy", 0.0)])
+    # what stamp() writes is what stamp_of() reads (here HEAD of this repository, clean)
+    fig = rf.Figure("fresh", "doc.md", "cmd", "accuracy", 0.0)
+    (tmp_path / "doc.md").write_text(rf.block_text(fig, rf.stamp(fig, 75.0), "figure") + "\n")
+    assert rf.stamp_of(fig) == (head, False)
     # a script named in the command counts as measured code
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
