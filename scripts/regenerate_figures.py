@@ -19,8 +19,9 @@ place in a document:
   marked block appended, holding only the stamp.
 
 Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
-when the working tree differs from the commit in the measured code (``solver``,
-``addb_viewer``, ``annotations``, the benchmarks and ``scripts``), the stamp says so. ``--stale`` lists the
+when the working tree differs from the commit in the code the figure measures
+(:func:`measured_paths`: the packages, the benchmarks' helpers, the diagnosis harness and the
+scripts its command runs), the stamp says so. ``--stale`` lists the
 blocks made before a change to the code they measure (:func:`stale`). A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
@@ -46,7 +47,6 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PY = ".venv/bin/python"
 RESULTS = "tests/benchmarks/RESULTS.md"
-MEASURED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks/*.py", "scripts")
 
 
 @dataclass(frozen=True)
@@ -189,9 +189,11 @@ def _git(*args: str) -> str:
 
 
 def stamp(fig: Figure, seconds: float) -> str:
-    """The first line of a block: command, date, commit and duration."""
+    """The first line of a block: command, date, commit and duration; "plus uncommitted
+    changes to the measured code" when the working tree differs from HEAD in
+    :func:`measured_paths` (the one definition :func:`stale` reads too)."""
     commit = _git("rev-parse", "--short", "HEAD")
-    dirty = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", *MEASURED_CODE], cwd=REPO, check=False).returncode != 0
+    dirty = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", *measured_paths(fig)], cwd=REPO, check=False).returncode != 0
     minutes, secs = divmod(round(seconds), 60)
     took = f"{minutes} min {secs} s" if minutes else f"{secs} s"
     note = " plus uncommitted changes to the measured code" if dirty else ""

@@ -101,5 +101,19 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     fig = rf.Figure("fresh", "doc.md", "cmd", "accuracy", 0.0)
     (tmp_path / "doc.md").write_text(rf.block_text(fig, rf.stamp(fig, 75.0), "figure") + "\n")
     assert rf.stamp_of(fig) == (head, False)
+    # the stamp's "uncommitted" reads the same measured paths as stale(): a change to a
+    # script the command does not run leaves it clean, one to the packages marks it
+    (tmp_path / "scripts").mkdir()
+    (tmp_path / "scripts" / "tool.py").write_text("y = 1\n")
+    git("add", "-A")
+    git("commit", "-q", "-m", "a script")
+    head = git("rev-parse", "--short", "HEAD")
+    (tmp_path / "scripts" / "tool.py").write_text("y = 2\n")
+    (tmp_path / "notes.md").write_text("c\n")
+    assert rf.stamp(fig, 1.0).endswith(f"commit {head} (1 s).")
+    runs_tool = rf.Figure("tool", "doc.md", "python scripts/tool.py", "accuracy", 0.0)
+    assert rf.stamp(runs_tool, 1.0).endswith(f"commit {head} plus uncommitted changes to the measured code (1 s).")
+    (tmp_path / "solver" / "fit.py").write_text("x = 3\n")
+    assert rf.stamp(fig, 1.0).endswith(f"commit {head} plus uncommitted changes to the measured code (1 s).")
     # a script named in the command counts as measured code
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
