@@ -7,6 +7,7 @@ import itertools
 import warnings
 from pathlib import Path
 
+import ezc3d
 import numpy as np
 import pytest
 
@@ -33,9 +34,21 @@ def test_two_c3d_files_are_shared() -> None:
 
 
 def test_markers_in_metres_above_the_floor(trial: Loaded) -> None:
-    _, markers, _ = trial
+    """Every marker value is ezc3d's raw point (lab mm, Z up) mapped by hand to OpenSim's
+    frame, (x, y, z) -> (x, z, -y) / 1000 (both files: X_SCREEN=+X, Y_SCREEN=+Z), in the
+    file's label order, NaN exactly where ezc3d has no point; then the physical checks."""
+    path, markers, _ = trial
+    c3d = ezc3d.c3d(str(path))
+    point = c3d["parameters"]["POINT"]
+    axes = (point["X_SCREEN"]["value"], point["Y_SCREEN"]["value"], point["UNITS"]["value"])
+    assert axes == (["+X"], ["+Z"], ["mm"])
+    assert list(markers.names) == [s.strip() for s in point["LABELS"]["value"]]
+    raw = np.asarray(c3d["data"]["points"][:3]).transpose(2, 1, 0)  # (T, M, 3), lab mm
+    expected = np.stack([raw[..., 0], raw[..., 2], -raw[..., 1]], axis=-1) / 1000.0
+    np.testing.assert_allclose(markers.positions, expected, rtol=0, atol=1e-12)  # NaN where NaN
     assert markers.rate_hz == 250.0
-    np.testing.assert_allclose(np.diff(markers.time), 0.004)
+    first = c3d["header"]["points"]["first_frame"]
+    np.testing.assert_allclose(markers.time, (first + np.arange(raw.shape[0])) * 0.004)
     y = markers.positions[:, :, 1]
     assert np.nanmin(y) > -0.01  # Y up: nothing below the floor
     assert 0.85 < np.nanmedian(markers.marker("RASI")[:, 1]) < 1.15  # pelvis ~1 m
@@ -99,7 +112,6 @@ def test_cop_is_under_a_foot(trial: Loaded) -> None:
 
 
 def test_matches_ezc3d_cop_and_free_moment(trial: Loaded) -> None:
-    ezc3d = pytest.importorskip("ezc3d")
     path, _, forces = trial
     c3d = ezc3d.c3d(str(path), extract_forceplat_data=True)
     rot = rotation_to_opensim(c3d["parameters"])
@@ -112,8 +124,9 @@ def test_matches_ezc3d_cop_and_free_moment(trial: Loaded) -> None:
         # averaging the wrench vs averaging ezc3d's per-sample CoP: equal within 0.1 mm
         np.testing.assert_allclose(plate.cop[frame], cop, atol=1e-4)
         np.testing.assert_allclose(plate.free_moment[frame], tz, atol=1e-2)
+        # signed: the plates report the reaction on the body, so no component is negated
         force = rot @ raw["force"][:, sl].mean(axis=1)
-        np.testing.assert_allclose(np.abs(plate.force[frame]), np.abs(force), rtol=1e-12)
+        np.testing.assert_allclose(plate.force[frame], force, rtol=1e-12)
 
 
 # ----------------------------------------------------------------------------- axes
@@ -190,7 +203,6 @@ def test_missing_c3d(tmp_path: Path) -> None:
 def test_plates_reporting_the_force_on_the_plate_are_negated_with_a_warning(
     tmp_path: Path,
 ) -> None:
-    ezc3d = pytest.importorskip("ezc3d")
     source = C3D_FILES[1]
     c3d = ezc3d.c3d(str(source))
     c3d["data"]["analogs"] = -c3d["data"]["analogs"]  # action on the plate instead of reaction

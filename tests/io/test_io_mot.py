@@ -3,6 +3,7 @@ broken copies, moment conventions, exact round trips, and OpenSim 4.6 reading ou
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -218,21 +219,32 @@ def test_missing_in_degrees_needs_a_decision(tmp_path: Path) -> None:
 
 
 def test_moments_about_plate_origins_are_converted_with_warnings(shared_data: Path) -> None:
+    """Each of the six plates writes its moment about a point (plate 2: the lab origin), not
+    the free moment at the CoP, and its warning names that point. Physics checks both the
+    point and the conversion: on a horizontal plate the free moment at the CoP is vertical,
+    so moving the written moment from the named point (as printed, to the mm) to the CoP,
+    M - (cop - o) x F, must leave no horizontal moment, and so must the reader's result."""
     path = shared_data / "trials/camargo2021_levelground/grf.mot"
     with pytest.warns(UserWarning) as record:
         forces = read_forces(path)
     messages = [str(w.message) for w in record]
     assert len(messages) == 6
     assert "plate 2: the moment columns are moments about the lab origin" in messages[1]
-    assert "(1.120, -0.002, 0.000)" in messages[0]  # plate 1 origin, fitted
     raw = read_forces(path, moment_reference="cop")  # as written, no warning
-    plate = 2
-    loaded = raw.plates[plate].force[:, 1] > 100
-    as_written = raw.plates[plate].free_moment[loaded]
-    converted = forces.plates[plate].free_moment[loaded]
-    assert np.median(np.hypot(as_written[:, 0], as_written[:, 2])) > 20  # not a free moment
-    assert np.median(np.hypot(converted[:, 0], converted[:, 2])) < 0.5
-    assert np.median(np.abs(converted[:, 1])) < 20  # free moments are small
+    for k, (message, plate, written) in enumerate(
+        zip(messages, forces.plates, raw.plates, strict=True)
+    ):
+        assert f"plate {k + 1}: the moment columns are moments about the " in message
+        named = re.search(r"about the point \(([^)]*)\) m", message)
+        origin = np.array([float(v) for v in named.group(1).split(",")]) if named else np.zeros(3)
+        loaded = written.force[:, 1] > 100
+        as_written = written.free_moment[loaded]
+        about_cop = as_written - np.cross(written.cop[loaded] - origin, written.force[loaded])
+        converted = plate.free_moment[loaded]
+        assert np.median(np.hypot(as_written[:, 0], as_written[:, 2])) > 20, k  # not a free moment
+        assert np.median(np.hypot(about_cop[:, 0], about_cop[:, 2])) < 1.0, k  # the named point
+        assert np.median(np.hypot(converted[:, 0], converted[:, 2])) < 0.5, k
+        assert np.median(np.abs(converted[:, 1])) < 20, k  # free moments are small
 
 
 def test_moments_about_lab_origin_treadmill(shared_data: Path) -> None:

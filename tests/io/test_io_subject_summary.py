@@ -4,11 +4,13 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import ezc3d
 import numpy as np
 import pytest
 
@@ -158,16 +160,51 @@ SUMMARY_FILES = sorted(
 )
 
 
+def _read_by_hand(path: Path) -> dict[str, object]:
+    """What a summary must report, read from the file without addb's readers: a TRC's header
+    counts; a MOT/STO's data rows after its 'time' line; a C3D's counts by ezc3d; a review
+    file's entries; an XML document's first element (an ExternalLoads: its forces). The
+    .osim counts are checked against OpenSim below."""
+    text = path.read_text(encoding="latin-1") if path.suffix != ".c3d" else ""
+    if path.suffix == ".trc":
+        lines = text.splitlines()
+        header = dict(zip(lines[1].split(), lines[2].split(), strict=True))
+        return {"kind": "trc", "frames": int(header["NumFrames"]),
+                "markers": int(header["NumMarkers"]), "rate_hz": float(header["DataRate"])}  # fmt: skip
+    if path.suffix in (".mot", ".sto"):
+        lines = text.splitlines()
+        start = next(i for i, line in enumerate(lines) if line.split()[:1] == ["time"])
+        return {"frames": sum(1 for line in lines[start + 1 :] if line.strip())}
+    if path.suffix == ".c3d":
+        c3d = ezc3d.c3d(str(path))
+        points = c3d["header"]["points"]
+        return {"kind": "c3d", "frames": points["last_frame"] - points["first_frame"] + 1,
+                "markers": points["size"], "rate_hz": float(points["frame_rate"])}  # fmt: skip
+    if path.suffix == ".json":
+        entries = json.loads(text)["missing_grf_data"]
+        return {"kind": "review", "review_frames": len(entries), "missing_grf_frames": sum(entries)}
+    if path.suffix == ".xml":
+        body = re.sub(r"<!--.*?-->", "", text, flags=re.DOTALL)
+        element = re.search(r"<OpenSimDocument[^>]*>\s*<(\w+)", body).group(1)
+        if element == "ExternalLoads":
+            return {"kind": "external_loads", "n_forces": text.count("<ExternalForce ")}
+        return {"kind": "opensim_xml", "element": element}
+    return {"kind": "osim"}
+
+
 @pytest.mark.parametrize("path", SUMMARY_FILES, ids=lambda p: str(p.relative_to(DATA)))
 def test_every_shared_file_is_summarized(path: Path) -> None:
     d = summarize(path)
     json.dumps(d)  # JSON-serializable for the UI
     text = format_summary(d)
     assert text.startswith(str(path)) and len(text.splitlines()) >= 2
+    expected = _read_by_hand(path)
+    if "n_forces" in expected:
+        assert len(d["forces"]) == expected.pop("n_forces")
+    assert {k: d[k] for k in expected} == expected
     if path.suffix in (".trc", ".c3d"):
-        assert d["frames"] > 0 and d["rate_hz"] > 0 and d["markers"] > 0
         assert d["duration_s"] == pytest.approx((d["frames"] - 1) / d["rate_hz"], rel=1e-6)
-    if path.suffix == ".osim":
+    if path.suffix == ".osim":  # the exact counts: test_osim_counts_agree_with_opensim
         assert 14 <= d["bodies"] <= 22 and 25 <= d["coordinates"] <= 39 and d["markers"] > 30
     if path.name.startswith("grf") and path.suffix == ".mot":
         assert d["kind"] == "forces" and len(d["plates"]) >= 2
@@ -183,9 +220,12 @@ def test_osim_counts_match_opensim_conventions(shared_data: Path) -> None:
 
 
 @pytest.mark.opensim
-def test_osim_counts_agree_with_opensim(shared_data: Path) -> None:
+@pytest.mark.parametrize(
+    "path", sorted(DATA.rglob("*.osim")), ids=lambda p: str(p.relative_to(DATA))
+)
+def test_osim_counts_agree_with_opensim(path: Path) -> None:
+    """Every shared model (3.x and 4.x layouts, with and without arms): OpenSim's counts."""
     opensim = import_tool("opensim", reason=OPENSIM_REASON)
-    path = shared_data / "models/Rajagopal2015_passiveCal_hipAbdMoved_noArms.osim"
     model = opensim.Model(str(path))
     d = summarize(path)
     assert d["bodies"] == model.getBodySet().getSize()
@@ -194,23 +234,65 @@ def test_osim_counts_agree_with_opensim(shared_data: Path) -> None:
 
 
 def test_subject_summary_in_body_weights(shared_data: Path) -> None:
-    d = summarize(shared_data / "subjects/rajagopal2016_walk")
+    """The peak is the largest sum of the two plates' vertical force columns, read from the
+    file's text (not through the reader), and in body weights of the subject's 85.0668 kg."""
+    folder = shared_data / "subjects/rajagopal2016_walk"
+    d = summarize(folder)
     trials = {t["name"]: t for t in d["trials"]}
     assert trials["static"]["kinematics_only"] is True
     walk = trials["walk"]
-    assert walk["peak_vertical_force_bw"] == pytest.approx(
-        walk["peak_vertical_force_n"] / (85.0668 * G)
+    lines = (folder / "trials/walk/grf.mot").read_text().splitlines()
+    header = lines.index("endheader") + 1
+    names = lines[header].split("\t")
+    rows = np.array(
+        [[float(v) for v in line.split("\t")] for line in lines[header + 1 :] if line.strip()]
     )
+    peak = (
+        rows[:, names.index("ground_force_r_vy")] + rows[:, names.index("ground_force_l_vy")]
+    ).max()
+    assert walk["peak_vertical_force_n"] == pytest.approx(peak, rel=1e-12)
+    assert walk["peak_vertical_force_bw"] == pytest.approx(peak / (85.0668 * G), rel=1e-12)
     assert 1.0 < walk["peak_vertical_force_bw"] < 1.5  # walking
     text = format_summary(d)
     assert "BW" in text and "kinematics only" in text and "85.07 kg" in text
 
 
+def _raw_gaps(path: Path) -> dict[str, object]:
+    """Gaps counted from a TRC's text, independent of the reader: a marker is missing on a
+    row where one of its cells is empty or "nan"; its longest run of such rows; the first
+    marker (file order) with the longest run."""
+    lines = path.read_text().splitlines()
+    names = [n for n in lines[3].split("\t")[2:] if n.strip()]
+    rows = [line.split("\t") for line in lines[5:] if line.strip()[:1].isdigit()]
+    longest, worst, n_with, n_missing = 0, None, 0, 0
+    for j, name in enumerate(names):
+        run = best = 0
+        for row in rows:
+            cells = row[2 + 3 * j : 5 + 3 * j]
+            if any(c.strip().lower() in ("", "nan") for c in cells):
+                run, n_missing = run + 1, n_missing + 1
+                best = max(best, run)
+            else:
+                run = 0
+        n_with += best > 0
+        if best > longest:
+            longest, worst = best, name
+    return {
+        "markers_with_gaps": n_with,
+        "longest_gap_frames": longest,
+        "longest_gap_marker": worst,
+        "missing_fraction": n_missing / (len(rows) * len(names)),
+    }
+
+
 def test_gaps_are_counted(shared_data: Path) -> None:
-    d = summarize(shared_data / "trials/camargo2021_levelground/markers.trc")
-    gaps = d["gaps"]
-    assert gaps["markers_with_gaps"] > 0 and gaps["longest_gap_frames"] > 1
-    assert gaps["longest_gap_marker"] is not None
+    path = shared_data / "trials/camargo2021_levelground/markers.trc"
+    gaps = summarize(path)["gaps"]
+    expected = _raw_gaps(path)
+    assert expected["markers_with_gaps"] > 0 and expected["longest_gap_frames"] > 1
+    for key in ("markers_with_gaps", "longest_gap_frames", "longest_gap_marker"):
+        assert gaps[key] == expected[key], key
+    assert gaps["missing_fraction"] == pytest.approx(expected["missing_fraction"], rel=1e-12)
     none = summarize(shared_data / "trials/rajagopal2016/motion_capture_walk.trc")["gaps"]
     assert none["markers_with_gaps"] == 0 and none["longest_gap_frames"] == 0
 
