@@ -51,7 +51,7 @@ def _set(*keys_and_value):
 CORRUPTIONS = {
     "truncated": (lambda p: p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2]), "truncated"),
     "empty": (lambda p: p.write_bytes(b""), "not valid JSON"),
-    "binary garbage": (lambda p: p.write_bytes(b"\x00\xff\xfe garbage"), "not"),
+    "binary garbage": (lambda p: p.write_bytes(b"\x00\xff\xfe garbage"), "not UTF-8 text"),
     "not an object": (lambda p: p.write_text("[1, 2, 3]"), "expected an object"),
     "other schema": (
         lambda p: _mutate(p, _set("schema", "something.else")),

@@ -181,14 +181,23 @@ def test_close_writes_a_human_readable_versioned_file(subject: Path, clock) -> N
 
 
 def test_store_accepts_a_json_path_and_keeps_files_side_by_side(tmp_path: Path) -> None:
+    """The record goes to the named file (its journal and lock beside it), and reopening
+    that path reads it back."""
     store = AnnotationStore.open(tmp_path / "S01_review.json", reviewer="ana")
     store.set_reviewed("t1")
+    store.set_unmeasured("t1", range(3, 6), foot="left")
     store.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "S01_review.journal",
         "S01_review.json",
         "S01_review.lock",
     ]
+    trial = json.loads((tmp_path / "S01_review.json").read_bytes())["trials"]["t1"]
+    assert trial["reviewed"][0] is True and trial["unmeasured_force"] == [[3, 6, "left", 0]]
+    again = AnnotationStore.open(tmp_path / "S01_review.json", reviewer="bob")
+    assert again.snapshot() == store.snapshot()
+    assert again.is_reviewed("t1") and again.ranges("t1", foot="left") == [(3, 6)]
+    again.close()
 
 
 @pytest.mark.parametrize(

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from addb_viewer.cli import main as cli
-from solver.results import save_processed
+from solver.results import load_processed, save_processed
 from tests.conftest import TORCH_REASON, import_tool
 
 from .conftest import motion, processed_trial
@@ -24,7 +25,21 @@ def out_dirs(tmp_path_factory: pytest.TempPathFactory) -> list:
     return dirs
 
 
+def _true_grm_error(out_dir) -> np.ndarray:
+    """Per frame, the GRM error of a prediction of no moment, N·m/kg, by hand from the saved
+    plates: |(CoP - foot origin) x F + free moment| of each foot, mean over the two feet."""
+    t = load_processed(out_dir, "walk")
+    per_foot = []
+    for plate, foot in zip(t.plates, ("calcn_r", "calcn_l"), strict=True):
+        arm = np.nan_to_num(plate.cop - t.body_position[:, t.body_names.index(foot)])
+        per_foot.append(np.linalg.norm(np.cross(arm, plate.force) + plate.free_moment, axis=1))
+    return np.mean(per_foot, axis=0) / t.mass_kg
+
+
 def test_benchmark_prints_and_writes_the_table(out_dirs, tmp_path, capsys) -> None:
+    """The command's table and files; the rows carry the benchmark's numbers: the analytical
+    baseline predicts no ground moment, so its GRM error (both contact rules) is the true
+    moment, computed here from the plates."""
     out = tmp_path / "report"
     argv = ["benchmark", *map(str, out_dirs), "--contact", "measured", "--contact", "kinematic", "-o", str(out), "--filtering"]
     assert cli(argv) == 0
@@ -35,6 +50,9 @@ def test_benchmark_prints_and_writes_the_table(out_dirs, tmp_path, capsys) -> No
     assert report["command"].startswith("addb benchmark ") and "--filtering" in report["command"]
     assert [r["method"] for r in report["rows"]] == ["analytical (measured contact)", "analytical (kinematic contact)"]
     assert (out / "benchmark.md").is_file() and (out / "filtering_study.md").is_file()
+    true_grm = np.concatenate([_true_grm_error(d) for d in out_dirs]).mean()
+    for row in report["rows"]:
+        assert row["frames"] == 60 and row["grm"] == pytest.approx(true_grm, rel=1e-9), row["method"]
 
 
 def test_benchmark_rejects_a_folder_that_is_not_a_subject(tmp_path, capsys) -> None:

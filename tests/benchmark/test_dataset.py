@@ -84,6 +84,9 @@ def test_input_is_filtered_and_kinematic_input_recovers_the_motion() -> None:
 
 
 def test_resampled_to_100_hz() -> None:
+    """The same samples at 50 Hz put on the 100 Hz grid by linear interpolation: the even
+    frames are the samples themselves and the odd ones the midpoints of their neighbours
+    (coordinates, ground truth and torques), and the booleans come from a neighbour."""
     from dataclasses import replace
 
     t = processed_trial(40)
@@ -91,6 +94,13 @@ def test_resampled_to_100_hz() -> None:
     b = benchmark_trial(slow, inputs="processed")
     assert isinstance(b, BenchmarkTrial)
     assert b.n_frames == 79 and np.allclose(np.diff(b.time), 0.01)
+    samples_100 = benchmark_trial(t, inputs="processed")  # the same samples, not resampled
+    assert isinstance(samples_100, BenchmarkTrial)
+    for name in ("q_unfiltered", "grf", "grm", "tau", "com_acc"):
+        ours, samples = getattr(b, name), getattr(samples_100, name)
+        np.testing.assert_allclose(ours[::2], samples, rtol=0, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(ours[1::2], 0.5 * (samples[:-1] + samples[1:]), rtol=0, atol=1e-9, err_msg=name)
+    np.testing.assert_array_equal(b.contact[::2], samples_100.contact)
 
 
 def test_load_dataset_from_output_folders(tmp_path) -> None:

@@ -13,7 +13,7 @@ from solver.benchmark.filtering import filtering_markdown, filtering_study, plot
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, history_index, torch_available, train_mlp
 from solver.benchmark.report import PAPER, dataset_summary, to_json, to_markdown, write_report
 from solver.benchmark.run import run_benchmark
-from tests.conftest import TORCH_REASON, needs_tool
+from tests.conftest import TORCH_REASON, needs_tool, tool_available
 
 from .conftest import motion, processed_trial
 
@@ -84,11 +84,17 @@ def test_report_layout(three_subjects, tmp_path) -> None:
 
 
 def test_filtering_study_table_and_plot(three_subjects, tmp_path) -> None:
+    """The study's rows and table; the plot is a PNG when matplotlib is installed, and
+    without it (not a dependency) nothing is written and the call says so (False)."""
     rows = filtering_study(three_subjects, cutoffs=(4.0, 30.0, 60.0))
     assert [r["cutoff_hz"] for r in rows] == [4.0, 30.0, 60.0]
     # smooth synthetic motion: heavy filtering distorts it, light filtering hardly
     assert rows[0]["com_acc"] > rows[1]["com_acc"]
     assert "60 (none)" in filtering_markdown(rows)
     png = tmp_path / "f.png"
-    if plot_filtering(rows, png):
-        assert png.stat().st_size > 1000
+    drawn = plot_filtering(rows, png)
+    assert drawn == tool_available("matplotlib")
+    if drawn:
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
+    else:
+        assert not png.exists()

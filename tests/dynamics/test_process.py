@@ -79,10 +79,14 @@ def test_walk_unobserved_frames_are_where_a_foot_is_on_the_floor(walk_out: Path)
     assert trial.unobserved[0] and trial.unobserved[-1]
     assert not trial.unobserved[100:150].any()
     assert all(trial.proposal_reasons[k] for k in unobserved)
-    # each plate's force goes to one foot, and to the foot that is over it
+    # each plate's force goes to one foot, and to the foot that is over it: the file's "r"
+    # and "l" columns are the right and left foot's forces (tests/dynamics/test_contact.py)
+    feet = {"r": trial.body_names.index("calcn_r"), "l": trial.body_names.index("calcn_l")}
+    assert sorted(p.name for p in trial.plates) == sorted(feet)
     for plate in trial.plates:
         loaded = plate.force[:, 1] > 50
-        assert (plate.body[loaded] >= 0).all()
+        assert loaded.sum() > 50, plate.name
+        np.testing.assert_array_equal(plate.body[loaded], feet[plate.name], err_msg=plate.name)
 
 
 @pytest.mark.opensim
