@@ -28,6 +28,31 @@ def test_every_figure_has_exactly_one_block(rf) -> None:
     assert len(names) == len(set(names))
 
 
+def test_check_names_a_missing_a_repeated_and_an_unmade_block(rf, tmp_path, monkeypatch) -> None:
+    """What the test above relies on: in a repository of its own, ``check()`` passes
+    documents in order, and names a figure whose block is missing or repeated and a block
+    no figure makes (in a figure's document or in RESULTS.md), each with its document."""
+    (tmp_path / "tests" / "benchmarks").mkdir(parents=True)
+    doc, results = tmp_path / "doc.md", tmp_path / "tests" / "benchmarks" / "RESULTS.md"
+
+    def block(name: str) -> str:
+        return f"<!-- begin: {name} -->\nfigure\n<!-- end: {name} -->\n"
+
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "FIGURES", (rf.Figure("a", "doc.md", "true", "accuracy", 0.0),
+                                        rf.Figure("w", "", "true", "accuracy", 0.0)))
+    doc.write_text("Prose.\n\n" + block("a"))
+    results.write_text("Prose.\n")
+    assert rf.check() == []
+    doc.write_text("Prose.\n")
+    assert rf.check() == ["doc.md: block 'a' missing or repeated"]
+    doc.write_text(block("a") + "\n" + block("a"))
+    assert rf.check() == ["doc.md: block 'a' missing or repeated"]
+    doc.write_text(block("a") + block("b"))
+    results.write_text(block("c"))
+    assert rf.check() == ["doc.md: block 'b' made by no figure", "tests/benchmarks/RESULTS.md: block 'c' made by no figure"]
+
+
 def test_a_run_replaces_its_block_and_keeps_the_prose(rf, tmp_path, monkeypatch) -> None:
     doc = tmp_path / "doc.md"
     prose_before, prose_after = "# Title\n\nProse 1.5 cm before.\n\n", "\n\nProse after.\n"

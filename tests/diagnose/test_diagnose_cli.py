@@ -48,8 +48,9 @@ def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
     assert scores == sorted(scores, reverse=True)
     assert report["chosen"] in CAUSES
     assert set(report["after"]) >= {"marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm", "hicks_linear_ok"}
+    # the saved file (what the review app reads) is the printed object, value for value
     saved = json.loads((subject / "addb_out" / "walk" / "diagnosis.json").read_text())
-    assert saved["chosen"] == report["chosen"]
+    assert _without_times(saved) == _without_times(report)
 
 
 def _without_times(x: object) -> object:
