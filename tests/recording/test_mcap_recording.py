@@ -190,17 +190,36 @@ def test_file_is_chunked_compressed_and_indexed(mcap_file: tuple[ProcessedTrial,
 
 
 def test_tf_follows_foxglove_conventions(mcap_file: tuple[ProcessedTrial, Path]) -> None:
+    """Every frame's ``/tf`` message: ``z_up`` -> ``world`` turns the lab's Y up onto
+    Foxglove's Z up, each body hangs from ``world`` with the trial's own position and
+    quaternion at that frame (w, x, y, z named x, y, z, w), and every transform is stamped
+    with the MCAP log time of its message (as Foxglove looks transforms up)."""
     trial, path = mcap_file
     with open(path, "rb") as fh:
-        _, _, message = next(make_reader(fh).iter_messages(topics=[TOPIC_TF]))
-    msg = json.loads(message.data)
-    tfs = {t["child_frame_id"]: t for t in msg["transforms"]}
-    assert tfs["world"]["parent_frame_id"] == "z_up"
-    assert {t["parent_frame_id"] for n, t in tfs.items() if n != "world"} == {"world"}
-    pelvis = tfs["pelvis"]
-    assert pelvis["timestamp"] == {"sec": 0, "nsec": 0} if trial.time[0] == 0 else True
-    w, x, y, z = trial.body_wxyz[0, trial.body_names.index("pelvis")]
-    assert pelvis["rotation"] == {"x": x, "y": y, "z": z, "w": w}
+        messages = list(make_reader(fh).iter_messages(topics=[TOPIC_TF]))
+    assert len(messages) == trial.n_frames
+    for k, (_, _, message) in enumerate(messages):
+        assert message.log_time == round(trial.time[k] * 1e9), k  # the frame's time, ns
+        msg = json.loads(message.data)
+        tfs = {t["child_frame_id"]: t for t in msg["transforms"]}
+        assert set(tfs) == {"world", *trial.body_names}
+        sec, nsec = divmod(message.log_time, 1_000_000_000)
+        assert all(t["timestamp"] == {"sec": sec, "nsec": nsec} for t in tfs.values()), k
+        assert tfs["world"]["parent_frame_id"] == "z_up"
+        r = tfs["world"]["rotation"]
+        w, v = r["w"], np.array([r["x"], r["y"], r["z"]])
+        y = np.array([0.0, 1.0, 0.0])
+        up = y + 2 * w * np.cross(v, y) + 2 * np.cross(v, np.cross(v, y))
+        np.testing.assert_allclose(up, [0.0, 0.0, 1.0], atol=1e-12)
+        for j, body in enumerate(trial.body_names):
+            t = tfs[body]
+            assert t["parent_frame_id"] == "world", body
+            got_p = [t["translation"][a] for a in "xyz"]
+            got_q = [t["rotation"][a] for a in "wxyz"]
+            got = np.array([np.nan if c is None else c for c in got_p + got_q], dtype=float)
+            want = np.concatenate([trial.body_position[k, j], trial.body_wxyz[k, j]])
+            np.testing.assert_array_equal(got, want, err_msg=f"frame {k} {body}")
+    assert trial.time[0] == 0.0  # the demo starts at 0 s: no shift of the log times
 
 
 def test_arrow_quaternion_turns_x_onto_the_force() -> None:

@@ -15,6 +15,7 @@ from addb_viewer.locations import annotations_path
 from annotations import AnnotationStore
 from solver.io.mcap_file import open_recording
 from solver.results import load_processed
+from tests.recording.test_rerun_recording import Recording, per_frame_points
 
 
 def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
@@ -27,6 +28,8 @@ def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
 def test_record_writes_a_readable_rrd(
     tmp_path: Path, demo_out: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """``addb record`` writes one recording of the processed walk: read back with rerun's
+    reader, its observed markers are the trial's own (float32), frame by frame."""
     out_file = tmp_path / "walk.rrd"
     assert (
         main(
@@ -46,6 +49,9 @@ def test_record_writes_a_readable_rrd(
     assert f"wrote {out_file}" in capsys.readouterr().out
     reader = RrdReader(out_file)
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+    trial = load_processed(demo_out, "walk")
+    got = per_frame_points(Recording(out_file), "/world/markers/observed", trial)
+    np.testing.assert_array_equal(got, trial.observed.astype(np.float32))
 
 
 def test_export_mcap_round_trips(tmp_path: Path, demo_out: Path) -> None:

@@ -3,6 +3,7 @@ residuals, torques, proposals with reasons, plates assigned to the feet)."""
 
 from __future__ import annotations
 
+from itertools import groupby
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +53,8 @@ def test_mcap_round_trip_of_real_dynamics(tmp_path: Path, full_trial: ProcessedT
 
 
 def test_rerun_recording_of_real_dynamics(tmp_path: Path, full_trial: ProcessedTrial) -> None:
+    """Markers and residual force bit for bit; the solver's reasons logged once per run of
+    proposed frames with one reason, at the run's first frame, with that reason's text."""
     rec = Recording(write_rerun(full_trial, tmp_path / "walk.rrd"))
     got = per_frame_points(rec, "/world/markers/observed", full_trial)
     np.testing.assert_array_equal(got, full_trial.observed.astype(np.float32))
@@ -59,5 +62,14 @@ def test_rerun_recording_of_real_dynamics(tmp_path: Path, full_trial: ProcessedT
     ok = np.isfinite(full_trial.residual_force).all(axis=1)
     np.testing.assert_array_equal(frames, np.flatnonzero(ok))
     np.testing.assert_array_equal(np.array(values), full_trial.residual_force[ok])
-    frames, _ = rec.column("/flags/reasons", "TextLog:text")
-    assert frames.size >= 1 and all(full_trial.proposed[frames])
+    frames, text = rec.column("/flags/reasons", "TextLog:text")
+    runs = []  # (first frame, reason) of each run of proposed frames sharing a reason
+    k = 0
+    for (proposed, reason), run in groupby(
+        zip(full_trial.proposed.tolist(), full_trial.proposal_reasons, strict=True)
+    ):
+        if proposed and reason:
+            runs.append((k, reason))
+        k += len(list(run))
+    assert runs  # the real walk has proposals with reasons
+    assert list(zip(frames.tolist(), [t[0] for t in text], strict=True)) == runs

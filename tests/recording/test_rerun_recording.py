@@ -3,6 +3,7 @@ and compared with the solver's arrays; ``rerun rrd verify``; the default bluepri
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import uuid
@@ -161,13 +162,25 @@ def test_bulk_data_is_columnar(rrd: tuple[ProcessedTrial, Recording, Path]) -> N
 
 
 def test_meshes_logged_once_per_body(rrd: tuple[ProcessedTrial, Recording, Path]) -> None:
+    """Each body's mesh once, static: its files' vertices (read from the .vtp) times the
+    body's scale factors, one file after the other, with each file's triangles shifted by
+    the vertices before it."""
     trial, rec, _ = rrd
     search = trial_search_path(trial)
+    scales = [s for meshes in trial.body_meshes.values() for _, s in meshes]
+    assert not np.allclose(scales, 1.0)  # the demo's model is scaled: a lost scale shows
     for body, meshes in trial.body_meshes.items():
         entity = f"/world/skeleton/{body}/mesh"
         assert rec.n_chunks[entity] == 1 and entity not in rec.temporal
-        n_vertices = sum(len(read_vtp(find_mesh(f, search)).vertices) for f, _ in meshes)
-        assert len(rec.static[entity]["Mesh3D:vertex_positions"]) == n_vertices
+        parts = [(read_vtp(find_mesh(f, search)), s) for f, s in meshes]
+        vertices = np.concatenate([m.vertices * np.asarray(s) for m, s in parts])
+        starts = np.cumsum([0] + [len(m.vertices) for m, _ in parts[:-1]])
+        faces = np.concatenate([m.faces + n for (m, _), n in zip(parts, starts, strict=True)])
+        got = rec.static[entity]
+        np.testing.assert_array_equal(
+            np.array(got["Mesh3D:vertex_positions"]), vertices.astype(np.float32), err_msg=body
+        )
+        np.testing.assert_array_equal(np.array(got["Mesh3D:triangle_indices"]), faces, err_msg=body)
     # Y up, declared once at the root
     assert "/world" in rec.static and "ViewCoordinates:xyz" in rec.static["/world"]
 
@@ -274,10 +287,30 @@ def test_blueprint_declares_views_that_exist(tmp_path: Path, dynamic_trial: Proc
     assert parts["/time_panel"]["TimePanelBlueprint:timeline"] == ["frame"]
 
 
-def test_blueprint_function_is_independent_of_a_trial() -> None:
-    import rerun.blueprint as rrb
+def test_blueprint_function_is_independent_of_a_trial(
+    tmp_path: Path, demo_trial: ProcessedTrial
+) -> None:
+    """Without a trial the layout is the same as with one and plays at 100 frames/s; a
+    trial sets only the playback rate (its own frames per second, here a 50 Hz copy)."""
+    slow = dataclasses.replace(demo_trial, time=2 * demo_trial.time)
 
-    assert isinstance(blueprint(), rrb.Blueprint)
+    def saved(bp: object, name: str) -> tuple[dict[str, tuple], list]:
+        path = tmp_path / name
+        bp.save("addb", path)  # type: ignore[attr-defined]
+        views, parts = _blueprint_views(path)
+        layout = {
+            v["ViewBlueprint:display_name"][0]: (
+                v["ViewBlueprint:class_identifier"][0],
+                v["ViewBlueprint:space_origin"][0],
+            )
+            for v in views.values()
+        }
+        return layout, parts["/time_panel"]["TimePanelBlueprint:fps"]
+
+    alone, fps_alone = saved(blueprint(), "alone.rbl")
+    with_trial, fps_trial = saved(blueprint(slow), "slow.rbl")
+    assert alone == with_trial and len(alone) == 7 and alone["3D"] == ("3D", "/world")
+    assert fps_alone == [100.0] and fps_trial == [pytest.approx(50.0)]
 
 
 def test_missing_mesh_files_are_reported_not_fatal(

@@ -6,7 +6,6 @@ Rerun, and the ``addb view`` command in a subprocess."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import os
 import signal
@@ -150,17 +149,28 @@ def test_reprocess_uses_the_flagged_trials_with_dynamics(demo_paths, make_app) -
 
 
 def test_record_to_rerun(demo_paths, make_app) -> None:
+    """Record to Rerun writes the shown trial with its review record: read back with rerun's
+    reader, the observed markers are the processed trial's own (float32) and the recorded
+    review state and flag series hold exactly the frames flagged in the app."""
+    from solver.results import load_processed
+    from tests.recording.test_rerun_recording import Recording, per_frame_points
+
     app = make_app(demo_paths)
     status = app.panel.record_status
     with pytest.raises(Exception, match="plain file or folder name"):
         app.jobs.record("../outside")
+    app.edit("flag", lambda ed, _k, _f: ed.flag_range(20, 41, "right"))
     app.jobs.record("my walk")
-    if importlib.util.find_spec("addb_viewer.recording.rerun_writer") is None:
-        assert "not available" in status.content
-        return
     wait_for(lambda: "✓ wrote" in status.content or "failed" in status.content, timeout=120, what="recording")
     assert "✓ wrote" in status.content, status.content
-    assert (demo_paths.recordings_dir / "my walk.rrd").is_file()
+    rec = Recording(demo_paths.recordings_dir / "my walk.rrd")
+    trial = load_processed(demo_paths.out_dir, "walk")
+    np.testing.assert_array_equal(per_frame_points(rec, "/world/markers/observed", trial), trial.observed.astype(np.float32))
+    state = json.loads(rec.static["/__properties/addb"]["annotations_json"][0])
+    assert state and [(r["start"], r["stop"], r["foot"]) for r in state["unmeasured_force"]] == [(20, 41, "right")]
+    frames, flags = rec.column("/flags/review_unmeasured", "Scalars:scalars")
+    assert frames.tolist() == list(range(trial.n_frames))
+    assert np.flatnonzero(np.array(flags)[:, 0]).tolist() == list(range(20, 41))
 
 
 def test_cli_refuses_a_missing_folder(tmp_path, capsys) -> None:

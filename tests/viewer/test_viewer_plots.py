@@ -45,8 +45,14 @@ def test_chart_arrays_are_finite_with_shades_and_a_cursor() -> None:
 
 
 def test_frame_grid_edges_do_not_overlap() -> None:
-    x = frame_grid(np.arange(4) / 50.0)
-    assert np.all(np.diff(x) > 0)
+    """At 50 Hz (20 ms frames) each frame spans its centre +-10 ms, the edges pulled in by
+    far less than a frame so that neighbours touch but do not overlap."""
+    t = np.arange(4) / 50.0
+    x = frame_grid(t)
+    assert x.shape == (12,) and np.all(np.diff(x) > 0)
+    np.testing.assert_array_equal(x[1::3], t)
+    np.testing.assert_allclose(x[0::3], t - 0.01, atol=1e-4)
+    np.testing.assert_allclose(x[2::3], t + 0.01, atol=1e-4)
 
 
 def test_grf_lines_per_plate_until_assigned_then_per_foot(walk) -> None:
