@@ -110,8 +110,11 @@ def test_opensim_inverse_dynamics_reproduces_our_id_sto(walk_out: Path, tmp_path
     theirs = read_table(tmp_path / "opensim_id.sto")
     common = [c for c in mine.column_names if c in theirs.column_names]
     assert len(common) >= 37  # every independent coordinate
-    diff = max(float(np.abs(mine.column(c) - theirs.column(c)).max()) for c in common)
-    assert diff < 1.0, diff
+    diff = {c: float(np.abs(mine.column(c) - theirs.column(c)).max()) for c in common}
+    worst = max(diff, key=diff.get)
+    # the README's claim: OpenSim reproduces our generalized forces to 0.1 N·m (the
+    # quintic spline's derivatives are the operator its InverseDynamicsTool applies)
+    assert diff[worst] < 0.1, (worst, diff[worst])
 
 
 def test_opencap_subject_processes_and_meets_the_targets(opencap_out: Path) -> None:

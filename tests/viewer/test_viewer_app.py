@@ -199,7 +199,14 @@ def test_cli_serves_the_demo_and_stops_on_sigterm(demo_out: Path, tmp_path: Path
         if proc.poll() is None:
             proc.kill()
         proc.stdout.close()
-    assert (tmp_path / "out.annotations.json").exists() or (demo_out.parent / "out.annotations.json").exists()
+    # the review record: beside the output folder (the demo's own folder is package data),
+    # opened by the app and left complete (readable JSON) by the clean stop
+    from addb_viewer.demo import DEMO_SUBJECT
+    from addb_viewer.locations import annotations_path
+
+    record = annotations_path(DEMO_SUBJECT, demo_out)
+    assert record == demo_out.parent / "out.annotations.json" and record.is_file(), record
+    json.loads(record.read_text())
 
 
 def _processes_mentioning(text: str) -> list[int]:
