@@ -14,6 +14,7 @@ import importlib
 import importlib.util
 import os
 import shutil
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -32,6 +33,50 @@ SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 def shared_data() -> Path:
     """``../shared/data``: measured TRC/MOT/C3D/.osim files and subject folders."""
     return SHARED_DATA
+
+
+# ---------------------------------------------------------------------------- ../shared
+# The suite reads ../shared and must leave it as it found it, also where it is writable (a
+# developer's copy; root, as on CI, writes through missing write bits): a test that runs
+# the app or a recorder on a shared subject folder in place writes its review record there,
+# and OpenSim appends to an opensim.log in the folder of a model it loads. The controlling
+# process (the only one of a serial run; xdist's controller) lists every file's size and
+# modification time at the start and again at the end, and a difference fails the run.
+_SHARED_STATE = pytest.StashKey[dict[str, tuple[int, int]]]()
+
+
+def file_states(root: Path) -> dict[str, tuple[int, int]]:
+    """``relative path -> (size in bytes, modification time in ns)`` of every file below
+    ``root`` (none when it does not exist)."""
+    return {
+        str(p.relative_to(root)): (st.st_size, st.st_mtime_ns)
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and not p.is_symlink()
+        for st in (p.stat(),)
+    }
+
+
+def changed_files(before: dict[str, tuple[int, int]], after: dict[str, tuple[int, int]]) -> list[str]:
+    """The paths added, removed or modified between two :func:`file_states`, sorted."""
+    return sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    if not hasattr(session.config, "workerinput"):
+        session.config.stash[_SHARED_STATE] = file_states(SHARED_DATA.parent)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    before = session.config.stash.get(_SHARED_STATE, None)
+    if before is None:
+        return
+    changed = changed_files(before, file_states(SHARED_DATA.parent))
+    if changed:
+        shown = ", ".join(changed[:10]) + (f" and {len(changed) - 10} more" if len(changed) > 10 else "")
+        print(f"\nerror: the tests changed files of {SHARED_DATA.parent} (read-only data): {shown}",
+              file=sys.stderr)  # fmt: skip
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
 
 
 def writable_copy(src: Path, dst: Path, **copytree_kw: object) -> Path:

@@ -35,15 +35,20 @@ from addb_viewer.geometry import (
 )
 from solver.io.mcap_file import TOPIC_BONES
 from solver.results import ProcessedTrial, load_processed
+from tests.conftest import writable_copy
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def plain_subject(shared_data: Path) -> Path:
-    """An ordinary AddBiomechanics subject folder: no Geometry folder beside the model."""
-    subject = shared_data / "subjects" / "rajagopal2016_walk"
-    assert not (subject / "Geometry").exists() and not (subject.parent / "Geometry").exists()
+def plain_subject(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An ordinary AddBiomechanics subject folder: no Geometry folder beside the model. A
+    private copy of the shared walk: the app and the recorders open the subject's review
+    record, which on a writable ../shared would otherwise be written into the shared data."""
+    shared = shared_data / "subjects" / "rajagopal2016_walk"
+    assert not (shared / "Geometry").exists() and not (shared.parent / "Geometry").exists()
+    subject = writable_copy(shared, tmp_path_factory.mktemp("plain_subject") / "rajagopal2016_walk")
+    assert not (subject.parent / "Geometry").exists()
     return subject
 
 
