@@ -39,7 +39,9 @@ def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_
     assert report["trial"] == "walk" and report["candidates"]
     shown = app.panel.diagnosis.content
     assert "Not diagnosed yet" not in shown
-    assert (report["chosen"] or "no cause") in shown or "No cause" in shown
+    # the panel states the report's verdict and its reason (not one of either)
+    verdict = f"**Chosen cause: `{report['chosen']}`**" if report["chosen"] else "**No cause stands out.**"
+    assert verdict in shown and report["reason"] and report["reason"] in shown, shown
     # Apply: a correction the diagnosis names (here written into its report: +3 kg of body mass)
     report["extension"] = {"cause": "body_mass", "trial": None, "mass_change_kg": 3.0}
     (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
