@@ -78,7 +78,6 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
-
 def writable_copy(src: Path, dst: Path, **copytree_kw: object) -> Path:
     """Copy ``src`` to ``dst`` and make the copy writable (files 0o644, folders 0o755).
 
