@@ -20,8 +20,8 @@ place in a document:
 
 Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
 when the working tree differs from the commit in the code the figure measures
-(:func:`measured_paths`: the packages, the benchmarks' helpers, the diagnosis harness and the
-scripts its command runs), the stamp says so. ``--stale`` lists the
+(:func:`measured_paths`: the packages, the scripts its command runs and the repository files
+those import or run), the stamp says so. ``--stale`` lists the
 blocks made before a change to the code they measure (:func:`stale`). A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
@@ -257,16 +257,86 @@ def check() -> list[str]:
 #: The stamp :func:`stamp` writes, read back by :func:`stamp_of`: the commit, and whether the
 #: tree had uncommitted changes then.
 STAMP = re.compile(r"^Made by `.*` on \d{4}-\d{2}-\d{2}, commit ([0-9a-f]{7,40})( plus uncommitted changes to the measured code)? \(", re.MULTILINE)
-#: Code every figure measures, besides the scripts its command names: the packages, and the
-#: benchmarks' helpers and the diagnosis harness that the commands import.
-SHARED_CODE = ("solver", "addb_viewer", "annotations", "tests/benchmarks/[!t]*.py", "tests/diagnose/harness.py",
-               "tests/diagnose/effects.py", "tests/diagnose/synthetic.py")
+#: The packages every figure measures: every command imports them, in its own process or
+#: through ``addb``.
+PACKAGES = ("solver", "addb_viewer", "annotations")
+
+#: Folders searched for a script a file names by its file name alone (``"make_example_subject.py"``
+#: joined to ``REPO / "scripts"``, a sibling imported as ``from user_env import ...``).
+_SCRIPT_FOLDERS = ("scripts", "tests/benchmarks")
 
 
 def measured_paths(fig: Figure) -> tuple[str, ...]:
-    """The paths whose change can change ``fig``'s figures: :data:`SHARED_CODE` and the
-    repository scripts its command runs (``scripts/*.py``)."""
-    return SHARED_CODE + tuple(sorted(set(re.findall(r"(scripts/[\w./-]+\.py)", fig.command))))
+    """The paths whose change can change ``fig``'s figures: :data:`PACKAGES`, the repository
+    scripts its command runs (``scripts/*.py``, ``tests/**/*.py``) and the repository files
+    those import or run, followed from file to file (:func:`script_closure`).
+
+    A benchmark's script is measured only by the figures whose commands reach it, so a new
+    benchmark, or a change to one, leaves the other figures current."""
+    named = re.findall(r"((?:scripts|tests)/[\w./-]+\.py)", fig.command)
+    return PACKAGES + tuple(script_closure(named))
+
+
+def script_closure(start: list[str] | tuple[str, ...]) -> list[str]:
+    """Repository files reached from the scripts ``start`` (paths from the repository root).
+
+    Followed: ``import``/``from`` statements anywhere in a file (``tests.diagnose.harness``
+    from the root, a bare ``bench_kinematics`` from the importing file's folder; the
+    ``__init__.py`` of each package on the way), and string constants naming a ``.py`` file
+    (a script run with ``subprocess``) that exists beside the file, in the root or in
+    :data:`_SCRIPT_FOLDERS`. Modules of :data:`PACKAGES` are measured whole and not
+    followed. A file that cannot be read or parsed is kept, and not followed.
+
+    Returns
+    -------
+    Sorted paths from the repository root, ``start``'s included (also one that does not exist:
+    ``git diff`` then lists it if it was there at the stamp's commit).
+    """
+    import ast
+
+    seen: set[str] = set()
+    todo = list(start)
+    while todo:
+        rel = todo.pop()
+        if rel in seen:
+            continue
+        seen.add(rel)
+        path = REPO / rel
+        try:
+            tree = ast.parse(path.read_text(), filename=rel)
+        except (OSError, SyntaxError, UnicodeDecodeError):
+            continue
+        for node in ast.walk(tree):
+            found: list[Path] = []
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    found += _module_files(alias.name, path.parent)
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                found += _module_files(node.module, path.parent)
+                for alias in node.names:  # ``from tests.diagnose import harness``
+                    found += _module_files(f"{node.module}.{alias.name}", path.parent)
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and re.fullmatch(r"[\w./-]+\.py", node.value):
+                name = node.value
+                found += [f for f in (path.parent / name, REPO / name, *(REPO / d / name for d in _SCRIPT_FOLDERS)) if f.is_file()]
+            for f in found:
+                r = f.resolve().relative_to(REPO).as_posix()
+                if r not in seen and not r.startswith(tuple(p + "/" for p in PACKAGES)):
+                    todo.append(r)
+    return sorted(seen)
+
+
+def _module_files(module: str, folder: Path) -> list[Path]:
+    """The repository files an absolute import of ``module`` from a file in ``folder`` runs:
+    each package's ``__init__.py`` and the module's file, looked up from the root, or (for
+    a bare name) from ``folder``, as a script's own folder is first on its path."""
+    parts = module.split(".")
+    for base in (REPO, folder):
+        files = [base.joinpath(*parts[:i], "__init__.py") for i in range(1, len(parts) + 1)]
+        leaf = base.joinpath(*parts).with_suffix(".py")
+        hits = [f for f in (*files, leaf) if f.is_file()]
+        if leaf.is_file() or base.joinpath(*parts, "__init__.py").is_file():
+            return hits
+    return []
 
 
 def stamp_of(fig: Figure) -> tuple[str, bool] | None:

@@ -142,3 +142,46 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     assert rf.stamp(fig, 1.0).endswith(f"commit {head} plus uncommitted changes to the measured code (1 s).")
     # a script named in the command counts as measured code
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
+
+
+def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp_path, monkeypatch) -> None:
+    """measured_paths follows the command's script through its imports (a sibling by bare
+    name, a module of tests/ and each package's __init__.py, an import inside a function)
+    and the scripts it runs by file name; another benchmark's script and the packages'
+    own modules are not followed, so a change to that other script leaves the figure
+    current while a change to a helper it imports stales it."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t", "PATH": "/usr/bin:/bin"}
+        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True, env=env).stdout.strip()
+
+    files = {
+        "tests/benchmarks/bench_a.py": "import json\nfrom helper import f\n\ndef g():\n    from tests.lab.tools import h\n"
+                                       "    run([sys.executable, str(REPO / 'scripts' / 'make.py')])\n",
+        "tests/benchmarks/helper.py": "from solver.fit import x\n",
+        "tests/benchmarks/bench_other.py": "y = 1\n",
+        "tests/lab/__init__.py": "",
+        "tests/lab/tools.py": "h = 1\n",
+        "scripts/make.py": "z = 1\n",
+        "solver/fit.py": "x = 1\n",
+        "notes.md": "a\n",
+    }
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-q", "-m", "one")
+    old = git("rev-parse", "--short", "HEAD")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    fig = rf.Figure("a", "doc.md", ".venv/bin/python tests/benchmarks/bench_a.py --fast", "accuracy", 0.0)
+    assert rf.measured_paths(fig) == (*rf.PACKAGES, "scripts/make.py", "tests/benchmarks/bench_a.py", "tests/benchmarks/helper.py",
+                                      "tests/lab/__init__.py", "tests/lab/tools.py")
+    (tmp_path / "doc.md").write_text(f"<!-- begin: a -->\nMade by `cmd` on 2026-01-01, commit {old} (1 s).\n\nfigure\n<!-- end: a -->\n")
+    (tmp_path / "tests/benchmarks/bench_other.py").write_text("y = 2\n")
+    git("commit", "-q", "-am", "another benchmark changes")
+    assert rf.stale([fig]) == []
+    (tmp_path / "tests/lab/tools.py").write_text("h = 2\n")
+    git("commit", "-q", "-am", "a helper it imports changes")
+    assert [(f.name, paths) for f, _, paths in rf.stale([fig])] == [("a", ["tests/lab/tools.py"])]
