@@ -97,6 +97,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("io", RESULTS, f"{PY} tests/benchmarks/bench_io.py", "timing", 0.2),
     Figure("kinematics", RESULTS, f"{PY} tests/benchmarks/bench_kinematics.py", "timing", 0.5, fence=False),
     Figure("imports", RESULTS, f"{PY} tests/benchmarks/bench_imports.py", "timing", 0.5),
+    Figure("startup", RESULTS, f"{PY} tests/benchmarks/bench_startup.py --repeat 5", "timing", 1.5),
     Figure("imports-scipy-1.16", RESULTS, "rm -rf /tmp/addb_scipy_1_16 && .venv/bin/pip install -q --no-deps --target /tmp/addb_scipy_1_16 scipy==1.16.3 "
            f"&& PYTHONPATH=/tmp/addb_scipy_1_16 {PY} tests/benchmarks/bench_imports.py", "timing", 0.7),
     Figure("process-scipy-1.16", RESULTS, "rm -rf /tmp/addb_scipy_1_16 && .venv/bin/pip install -q --no-deps --target /tmp/addb_scipy_1_16 scipy==1.16.3 "

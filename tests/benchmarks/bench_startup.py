@@ -1,0 +1,88 @@
+"""A fresh ``addb process`` against the same work in a warm interpreter (run on demand).
+
+    .venv/bin/python tests/benchmarks/bench_startup.py [--repeat N] [SUBJECT ...]
+
+For each subject, the CPU time (user + sys) of
+
+* a fresh ``addb process`` (as ``bench_process.py`` runs it, as a user would: a new
+  process, addb's bytecode compiled first), median of ``--repeat`` runs;
+* ``solver.pipeline.process_subject`` on the same subject in one child interpreter that has
+  already processed it once (``--repeat`` + 1 calls; the first, which pays the imports and
+  every first-use set-up, is not counted), median: what a Dask worker of
+  ``addb process DATASET_DIR`` pays per subject once it has run one (block `dataset`).
+
+The difference is what one process pays besides the work: interpreter start, imports,
+first-use set-up and finalization. Frames are every trial's frames (results.json, as
+``bench_process.py``); frames per CPU-second both ways, and the CPU time that 200 frames
+per core-second allows (issue 29's target). SUBJECT as in ``bench_process.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from example_subjects import subject_folder  # this folder: the script's own
+from user_env import compile_sources, user_environment  # this folder: the script's own
+
+#: Run in the warm child: argv = subject folder, output folder, calls; prints one JSON list
+#: of the CPU seconds (user + sys of the whole process, every thread) of each call.
+WARM = """
+import json, shutil, sys, time
+from solver.pipeline import process_subject
+subject, out, calls = sys.argv[1], sys.argv[2], int(sys.argv[3])
+cpu = []
+for _ in range(calls):
+    shutil.rmtree(out, ignore_errors=True)
+    t0 = time.process_time()
+    process_subject(subject, out)
+    cpu.append(time.process_time() - t0)
+print(json.dumps(cpu))
+"""
+
+
+def fresh_process_cpu(subject: Path, out: Path) -> float:
+    """CPU seconds (user + sys) of one ``addb process SUBJECT --out OUT`` child."""
+    cmd = [str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out)]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(cmd, check=True, capture_output=True, env=user_environment())
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def warm_cpu(subject: Path, out: Path, calls: int) -> list[float]:
+    """CPU seconds of each of ``calls`` ``process_subject`` calls in one fresh child."""
+    proc = subprocess.run([sys.executable, "-c", WARM, str(subject), str(out), str(calls)],
+                          check=True, capture_output=True, text=True, env=user_environment())  # fmt: skip
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args()
+    compile_sources()
+    print(f"CPU seconds (user + sys), median of {args.repeat}; warm: calls 2 to {args.repeat + 1} in one interpreter\n")
+    print("| subject | frames | fresh process (s) | warm interpreter (s) | per-process cost (s) | frames per CPU-s: fresh, warm "
+          "| CPU at 200 frames per CPU-s (s) |")  # fmt: skip
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.subjects:
+            folder = subject_folder(name, Path(tmp))
+            fresh = [fresh_process_cpu(folder, Path(tmp) / f"{name}_fresh") for _ in range(args.repeat)]
+            warm = warm_cpu(folder, Path(tmp) / f"{name}_warm", args.repeat + 1)[1:]
+            frames = sum(int(json.loads(r.read_text()).get("n_frames", 0)) for r in (Path(tmp) / f"{name}_fresh").glob("*/results.json"))
+            f, w = statistics.median(fresh), statistics.median(warm)
+            print(f"| {name} | {frames} | {f:.2f} [{min(fresh):.2f}-{max(fresh):.2f}] | {w:.2f} [{min(warm):.2f}-{max(warm):.2f}] "
+                  f"| {f - w:.2f} | {frames / f:.0f}, {frames / w:.0f} | {frames / 200:.2f} |", flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
