@@ -192,9 +192,10 @@ def _git(*args: str) -> str:
 def stamp(fig: Figure, seconds: float) -> str:
     """The first line of a block: command, date, commit and duration; "plus uncommitted
     changes to the measured code" when the working tree differs from HEAD in
-    :func:`measured_paths` (the one definition :func:`stale` reads too)."""
+    :func:`measured_paths` (the one definition :func:`stale` reads too), a file not yet
+    committed included."""
     commit = _git("rev-parse", "--short", "HEAD")
-    dirty = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", *measured_paths(fig)], cwd=REPO, check=False).returncode != 0
+    dirty = bool(_git("status", "--porcelain", "--untracked-files=all", "--", *measured_paths(fig)))  # new files too
     minutes, secs = divmod(round(seconds), 60)
     took = f"{minutes} min {secs} s" if minutes else f"{secs} s"
     note = " plus uncommitted changes to the measured code" if dirty else ""
