@@ -86,6 +86,9 @@ def outcomes(junit: Path) -> list[tuple[str, str, str]]:
         for child in case:
             if child.tag in ("failure", "error", "skipped"):
                 message = (child.get("message") or "").strip().splitlines()[0] if child.get("message") else ""
+                if message in ("", "AssertionError"):  # a bare assert: the failing statement instead
+                    stated = [ln[1:].strip() for ln in (child.text or "").splitlines() if ln.startswith(">")]
+                    message = stated[-1] if stated else message
                 if child.tag == "skipped":
                     outcome = "xfailed" if child.get("type") == "pytest.xfail" else "skipped"
                 elif message.startswith("[XPASS(strict)]"):
