@@ -324,6 +324,8 @@ def script_closure(start: list[str] | tuple[str, ...]) -> list[str]:
                 name = node.value
                 found += [f for f in (path.parent / name, REPO / name, *(REPO / d / name for d in _SCRIPT_FOLDERS)) if f.is_file()]
             for f in found:
+                if not f.resolve().is_relative_to(REPO):  # e.g. "../x.py": not this repository's
+                    continue
                 r = f.resolve().relative_to(REPO).as_posix()
                 if r not in seen and not r.startswith(tuple(p + "/" for p in PACKAGES)):
                     todo.append(r)
