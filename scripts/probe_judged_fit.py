@@ -85,7 +85,8 @@ def outcomes(junit: Path) -> list[tuple[str, str, str]]:
         outcome, message = "passed", ""
         for child in case:
             if child.tag in ("failure", "error", "skipped"):
-                message = (child.get("message") or "").strip().splitlines()[0] if child.get("message") else ""
+                lines = (child.get("message") or "").strip().splitlines()
+                message = lines[0] if lines else ""
                 if message in ("", "AssertionError"):  # a bare assert: the failing statement instead
                     stated = [ln[1:].strip() for ln in (child.text or "").splitlines() if ln.startswith(">")]
                     message = stated[-1] if stated else message

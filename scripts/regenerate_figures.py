@@ -323,10 +323,10 @@ def script_closure(start: list[str] | tuple[str, ...]) -> list[str]:
             elif isinstance(node, ast.Constant) and isinstance(node.value, str) and re.fullmatch(r"[\w./-]+\.py", node.value):
                 name = node.value
                 found += [f for f in (path.parent / name, REPO / name, *(REPO / d / name for d in _SCRIPT_FOLDERS)) if f.is_file()]
-            for f in found:
-                if not f.resolve().is_relative_to(REPO):  # e.g. "../x.py": not this repository's
+            for f in map(Path.resolve, found):
+                if not f.is_relative_to(REPO):  # e.g. "../x.py": not this repository's
                     continue
-                r = f.resolve().relative_to(REPO).as_posix()
+                r = f.relative_to(REPO).as_posix()
                 if r not in seen and not r.startswith(tuple(p + "/" for p in PACKAGES)):
                     todo.append(r)
     return sorted(seen)

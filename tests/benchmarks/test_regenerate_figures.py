@@ -5,12 +5,20 @@ the command's output, and a failed command leaves the document as it was."""
 from __future__ import annotations
 
 import importlib.util
+import subprocess
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+
+
+def git_in(repo: Path, *args: str) -> str:
+    """``git ARGS`` in the test's own repository ``repo`` (a fixed author; no user config)."""
+    env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t", "PATH": "/usr/bin:/bin"}
+    return subprocess.run(["git", *args], cwd=repo, check=True, capture_output=True, text=True, env=env).stdout.strip()
 
 
 @pytest.fixture(scope="module")
@@ -89,11 +97,7 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     """In a repository of its own: a block stamped at HEAD is current; one stamped at a commit
     after which the measured code changed is listed with the changed paths (a change outside
     it is not); an uncommitted stamp is listed as such; an unstamped figure is left out."""
-    import subprocess
-
-    def git(*args: str) -> str:
-        env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t", "PATH": "/usr/bin:/bin"}
-        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True, env=env).stdout.strip()
+    git = partial(git_in, tmp_path)
 
     git("init", "-q")
     (tmp_path / "solver").mkdir()
@@ -157,11 +161,7 @@ def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp
     and the scripts it runs by file name; another benchmark's script and the packages'
     own modules are not followed, so a change to that other script leaves the figure
     current while a change to a helper it imports stales it."""
-    import subprocess
-
-    def git(*args: str) -> str:
-        env = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t", "PATH": "/usr/bin:/bin"}
-        return subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True, env=env).stdout.strip()
+    git = partial(git_in, tmp_path)
 
     files = {
         "tests/benchmarks/bench_a.py": "import json\nfrom helper import f\n\ndef g():\n    from tests.lab.tools import h\n"
