@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+from bench_process import _run as run_addb_process  # this folder: one `addb process`, (wall, CPU)
 from example_subjects import subject_folder  # this folder: the script's own
 from user_env import compile_sources, user_environment  # this folder: the script's own
 
@@ -45,15 +45,6 @@ for _ in range(calls):
     cpu.append(time.process_time() - t0)
 print(json.dumps(cpu))
 """
-
-
-def fresh_process_cpu(subject: Path, out: Path) -> float:
-    """CPU seconds (user + sys) of one ``addb process SUBJECT --out OUT`` child."""
-    cmd = [str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out)]
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run(cmd, check=True, capture_output=True, env=user_environment())
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
 def warm_cpu(subject: Path, out: Path, calls: int) -> list[float]:
@@ -76,7 +67,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.subjects:
             folder = subject_folder(name, Path(tmp))
-            fresh = [fresh_process_cpu(folder, Path(tmp) / f"{name}_fresh") for _ in range(args.repeat)]
+            fresh = [run_addb_process(folder, Path(tmp) / f"{name}_fresh", None, "default")[1] for _ in range(args.repeat)]
             warm = warm_cpu(folder, Path(tmp) / f"{name}_warm", args.repeat + 1)[1:]
             frames = sum(int(json.loads(r.read_text()).get("n_frames", 0)) for r in (Path(tmp) / f"{name}_fresh").glob("*/results.json"))
             f, w = statistics.median(fresh), statistics.median(warm)
