@@ -20,9 +20,10 @@ place in a document:
 
 Each block starts with the stamp ``Made by `COMMAND` on DATE, commit HASH (DURATION).``;
 when the working tree differs from the commit in the code the figure measures
-(:func:`measured_paths`: the packages, the scripts its command runs and the repository files
-those import or run), the stamp says so. ``--stale`` lists the
-blocks made before a change to the code they measure (:func:`stale`). A failed
+(:func:`measured_paths`: the scripts its command runs and the repository files those import
+or run, the packages' modules among them, followed file by file), the stamp says so.
+``--stale`` lists the blocks made before a change to the code they measure (:func:`stale`;
+a change to docstrings or comments alone is none). A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
@@ -41,6 +42,7 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -262,35 +264,56 @@ def check() -> list[str]:
 #: The stamp :func:`stamp` writes, read back by :func:`stamp_of`: the commit, and whether the
 #: tree had uncommitted changes then.
 STAMP = re.compile(r"^Made by `.*` on \d{4}-\d{2}-\d{2}, commit ([0-9a-f]{7,40})( plus uncommitted changes to the measured code)? \(", re.MULTILINE)
-#: The packages every figure measures: every command imports them, in its own process or
-#: through ``addb``.
+#: The repository's packages: a figure measures those of their modules its command reaches
+#: (:func:`script_closure`), and their data files beside them.
 PACKAGES = ("solver", "addb_viewer", "annotations")
 
 #: Folders searched for a script a file names by its file name alone (``"make_example_subject.py"``
 #: joined to ``REPO / "scripts"``, a sibling imported as ``from user_env import ...``).
 _SCRIPT_FOLDERS = ("scripts", "tests/benchmarks")
 
+#: The ``addb`` command line: its subcommands' modules are the string constants of
+#: ``COMMANDS`` there, each reached only by a figure that runs that subcommand.
+_CLI = "addb_viewer/cli.py"
+_COMMANDS_PACKAGE = "addb_viewer.commands."
+
+#: A module of the packages named in text: ``python -m addb_viewer.cli``, code passed to
+#: ``python -c``, ``importlib.import_module("solver.x")``.
+_MODULE_NAME = re.compile(r"\b((?:" + "|".join(PACKAGES) + r")(?:\.\w+)+)")
+
 
 def measured_paths(fig: Figure) -> tuple[str, ...]:
-    """The paths whose change can change ``fig``'s figures: :data:`PACKAGES`, the repository
-    scripts its command runs (``scripts/*.py``, ``tests/**/*.py``) and the repository files
-    those import or run, followed from file to file (:func:`script_closure`).
+    """The paths whose change can change ``fig``'s figures: the repository scripts its
+    command runs (``scripts/*.py``, ``tests/**/*.py``), the modules it names (``python -m``)
+    or runs through ``addb``, and the repository files those import or run, followed from
+    file to file into the packages (:func:`script_closure`).
 
-    A benchmark's script is measured only by the figures whose commands reach it, so a new
-    benchmark, or a change to one, leaves the other figures current."""
+    A benchmark's script, and a module of the packages, is measured only by the figures
+    whose commands reach it: a change to the diagnosis leaves the timing of ``addb
+    process`` current, and a new benchmark the other figures."""
     named = re.findall(r"((?:scripts|tests)/[\w./-]+\.py)", fig.command)
-    return PACKAGES + tuple(script_closure(named))
+    return tuple(script_closure(named, fig.command))
 
 
-def script_closure(start: list[str] | tuple[str, ...]) -> list[str]:
-    """Repository files reached from the scripts ``start`` (paths from the repository root).
+def script_closure(start: list[str] | tuple[str, ...], command: str = "") -> list[str]:
+    """Repository files reached from the scripts ``start`` (paths from the repository root)
+    and the shell ``command`` that runs them.
 
-    Followed: ``import``/``from`` statements anywhere in a file (``tests.diagnose.harness``
-    from the root, a bare ``bench_kinematics`` from the importing file's folder; the
-    ``__init__.py`` of each package on the way), and string constants naming a ``.py`` file
-    (a script run with ``subprocess``) that exists beside the file, in the root or in
-    :data:`_SCRIPT_FOLDERS`. Modules of :data:`PACKAGES` are measured whole and not
-    followed. A file that cannot be read or parsed is kept, and not followed.
+    Followed, in every file reached (scripts and modules of :data:`PACKAGES` alike):
+    ``import``/``from`` statements anywhere in a file (``tests.diagnose.harness`` from the
+    root, a bare ``bench_kinematics`` from the importing file's folder; the ``__init__.py``
+    of each package on the way); string constants other than docstrings that name a ``.py``
+    file (a script run with ``subprocess``) beside the file, in the root or in
+    :data:`_SCRIPT_FOLDERS`, or a module of the packages (``-m addb_viewer.cli``, code for
+    ``python -c``, ``importlib``); the ``addb`` executable (a constant ``"addb"`` or a path
+    ending in ``/addb``, or ``addb`` in ``command``) reaches :data:`_CLI`, and a
+    subcommand's module (``COMMANDS`` there) is followed whole when a file reached or
+    ``command`` names that subcommand (a constant equal to its name, or ``addb NAME``); the
+    others, which the command line imports to register them, are followed without their
+    functions' bodies (what their handlers import lazily is not loaded). A module of
+    the packages brings the data files of its folder (those in no subpackage: the viewer's
+    bundled geometry, the demo subject). A file that cannot be read or parsed is kept, and
+    not followed.
 
     Returns
     -------
@@ -299,37 +322,115 @@ def script_closure(start: list[str] | tuple[str, ...]) -> list[str]:
     """
     import ast
 
-    seen: set[str] = set()
-    todo = list(start)
+    seen: set[str] = set()  # followed whole
+    shallow_seen: set[str] = set()  # loaded, their functions' imports not followed
+    words: set[str] = set(re.findall(r"(?:^|[\s/])addb(?:_viewer\.cli)?\s+([a-z]\w*)", command))
+    deferred: dict[str, list[Path]] = {}  # subcommand -> its module's files, until it is named
+    todo = [(rel, False) for rel in (*start, *_files_of_text(command, REPO))]
+    if re.search(r"(?:^|[\s/])addb\s", command):
+        todo.append((_CLI, False))
+    unnamed_loaded = False
+    while True:
+        while todo:
+            rel, shallow = todo.pop()
+            if rel in seen or (shallow and rel in shallow_seen):
+                continue
+            (shallow_seen if shallow else seen).add(rel)
+            path = REPO / rel
+            if rel.startswith(tuple(p + "/" for p in PACKAGES)):
+                todo += [(f, False) for f in _data_files(path.parent)]
+            if path.suffix != ".py":
+                continue
+            try:
+                tree = ast.parse(path.read_text(), filename=rel)
+            except (OSError, SyntaxError, UnicodeDecodeError):
+                continue
+            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                          if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                          and n.body and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}  # fmt: skip
+            for node in _walk(tree, functions=not shallow):
+                found: list[Path] = []
+                if isinstance(node, ast.Import):
+                    for alias in node.names:
+                        found += _module_files(alias.name, path.parent)
+                elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                    found += _module_files(node.module, path.parent)
+                    for alias in node.names:  # ``from tests.diagnose import harness``
+                        found += _module_files(f"{node.module}.{alias.name}", path.parent)
+                elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+                    text = node.value
+                    if re.fullmatch(r"[\w./-]+\.py", text):
+                        found += [f for f in (path.parent / text, REPO / text, *(REPO / d / text for d in _SCRIPT_FOLDERS)) if f.is_file()]
+                    if text == "addb" or text.endswith("/addb"):
+                        found.append(REPO / _CLI)
+                    if re.fullmatch(r"[a-z]\w*", text):
+                        words.add(text)
+                    if rel == _CLI and text.startswith(_COMMANDS_PACKAGE):
+                        deferred[text.removeprefix(_COMMANDS_PACKAGE)] = _module_files(text, REPO)
+                    else:
+                        found += [REPO / f for f in _files_of_text(text, REPO)]
+                for f in map(Path.resolve, found):
+                    if not f.is_relative_to(REPO):  # e.g. "../x.py": not this repository's
+                        continue
+                    r = f.relative_to(REPO).as_posix()
+                    if r not in seen:
+                        todo.append((r, shallow))
+        named = [w for w in deferred if w in words]
+        for w in named:
+            todo += [(f.relative_to(REPO).as_posix(), False) for f in deferred.pop(w)]
+        if not named and not unnamed_loaded:
+            # the command line imports every subcommand's module to register it: those not
+            # run are loaded, without what their handlers import
+            unnamed_loaded = True
+            todo += [(f.relative_to(REPO).as_posix(), True) for files in deferred.values() for f in files]
+        if not todo:
+            return sorted(seen | shallow_seen)
+
+
+def _walk(tree: object, functions: bool = True) -> Iterator[object]:
+    """The nodes of ``tree`` (:func:`ast.walk`), without the bodies of functions unless
+    ``functions``: the statements that run when the module is imported."""
+    import ast
+
+    todo = [tree]
     while todo:
-        rel = todo.pop()
-        if rel in seen:
+        node = todo.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if functions or not isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                todo.append(child)
+            elif not isinstance(child, ast.Lambda):  # decorators and defaults run at import
+                todo += [*child.decorator_list, *child.args.defaults, *(d for d in child.args.kw_defaults if d is not None)]
+
+
+def _files_of_text(text: str, root: Path) -> list[str]:
+    """The files of the modules of :data:`PACKAGES` that ``text`` names (the longest dotted
+    prefix of each name that is a module: ``solver.dynamics.fit.converged_fit`` names
+    ``solver/dynamics/fit.py``)."""
+    out: list[str] = []
+    for name in _MODULE_NAME.findall(text):
+        parts = name.split(".")
+        for n in range(len(parts), 0, -1):
+            files = _module_files(".".join(parts[:n]), root)
+            if files:
+                out += [f.relative_to(root).as_posix() for f in files]
+                break
+    return out
+
+
+def _data_files(folder: Path) -> list[str]:
+    """The files other than Python sources under ``folder`` that belong to no subpackage
+    (a subfolder with an ``__init__.py`` is a package of its own), bytecode caches aside."""
+    out: list[str] = []
+    for f in sorted(folder.rglob("*")):
+        if f.suffix in (".py", ".pyc") or "__pycache__" in f.parts or not f.is_file():
             continue
-        seen.add(rel)
-        path = REPO / rel
-        try:
-            tree = ast.parse(path.read_text(), filename=rel)
-        except (OSError, SyntaxError, UnicodeDecodeError):
-            continue
-        for node in ast.walk(tree):
-            found: list[Path] = []
-            if isinstance(node, ast.Import):
-                for alias in node.names:
-                    found += _module_files(alias.name, path.parent)
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                found += _module_files(node.module, path.parent)
-                for alias in node.names:  # ``from tests.diagnose import harness``
-                    found += _module_files(f"{node.module}.{alias.name}", path.parent)
-            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and re.fullmatch(r"[\w./-]+\.py", node.value):
-                name = node.value
-                found += [f for f in (path.parent / name, REPO / name, *(REPO / d / name for d in _SCRIPT_FOLDERS)) if f.is_file()]
-            for f in map(Path.resolve, found):
-                if not f.is_relative_to(REPO):  # e.g. "../x.py": not this repository's
-                    continue
-                r = f.relative_to(REPO).as_posix()
-                if r not in seen and not r.startswith(tuple(p + "/" for p in PACKAGES)):
-                    todo.append(r)
-    return sorted(seen)
+        owner = f.parent
+        while owner != folder and not (owner / "__init__.py").is_file():
+            owner = owner.parent
+        if owner == folder:
+            out.append(f.relative_to(REPO).as_posix())
+    return out
 
 
 def _module_files(module: str, folder: Path) -> list[Path]:
@@ -374,7 +475,9 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
     Returns
     -------
     ``(figure, stamp commit, changed paths)`` for each stamped block whose commit differs
-    from HEAD in :func:`measured_paths` (``git diff --name-only COMMIT HEAD``), or whose
+    from HEAD in :func:`measured_paths` (``git diff --name-only COMMIT HEAD``; a Python file
+    whose code is the same but for docstrings, comments and layout, :func:`_same_code`, is
+    no change), or whose
     stamp says the tree had uncommitted changes then (``["uncommitted changes"]``; those
     changes cannot be compared). Timing figures are also moved by the host, which this
     does not see.
@@ -390,12 +493,38 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
         if found is None:
             continue
         commit, uncommitted = found
-        changed = _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split()
+        changed = [f for f in _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split() if not _same_code(commit, f)]
         if uncommitted:
             changed = ["uncommitted changes", *changed]
         if changed:
             out.append((fig, commit, changed))
     return out
+
+
+def _same_code(commit: str, path: str) -> bool:
+    """Whether the Python file ``path`` runs the same code at ``commit`` and at HEAD: its
+    syntax trees without docstrings are equal (comments, docstrings and layout may differ).
+    False for any other file, one missing at either commit, or one that does not parse."""
+    import ast
+
+    if not path.endswith(".py"):
+        return False
+    trees = []
+    for rev in (commit, "HEAD"):
+        shown = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=REPO, capture_output=True, text=True, check=False)
+        if shown.returncode != 0:
+            return False
+        try:
+            tree = ast.parse(shown.stdout)
+        except SyntaxError:
+            return False
+        for node in ast.walk(tree):
+            body = getattr(node, "body", None)
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body \
+                    and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
+                node.body = body[1:] or [ast.Pass()]
+        trees.append(ast.dump(tree))
+    return trees[0] == trees[1]
 
 
 def run(fig: Figure) -> bool:

@@ -102,6 +102,8 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     git("init", "-q")
     (tmp_path / "solver").mkdir()
     (tmp_path / "solver" / "fit.py").write_text("x = 1\n")
+    (tmp_path / "scripts").mkdir()
+    (tmp_path / "scripts" / "bench.py").write_text("from solver.fit import x\n")
     (tmp_path / "notes.md").write_text("a\n")
     git("add", "-A")
     git("commit", "-q", "-m", "one")
@@ -119,7 +121,7 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
 
     (tmp_path / "doc.md").write_text(block("now", head) + block("mid", mid) + block("old", old)
                                       + block("dirty", head, " plus uncommitted changes to the measured code"))
-    figs = [rf.Figure(n, "doc.md", "cmd", "accuracy", 0.0) for n in ("now", "mid", "old", "dirty", "unstamped")]
+    figs = [rf.Figure(n, "doc.md", "python scripts/bench.py", "accuracy", 0.0) for n in ("now", "mid", "old", "dirty", "unstamped")]
     found = {fig.name: (commit, paths) for fig, commit, paths in rf.stale(figs)}
     assert found == {"old": (old, ["solver/fit.py"]), "dirty": (head, ["uncommitted changes"])}
     # a block whose stamp cannot be read is an error, not a figure silently left out
@@ -127,12 +129,11 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     with pytest.raises(ValueError, match="doc.md: block 'bad' has no stamp"):
         rf.stale([rf.Figure("bad", "doc.md", "cmd", "accuracy", 0.0)])
     # what stamp() writes is what stamp_of() reads (here HEAD of this repository, clean)
-    fig = rf.Figure("fresh", "doc.md", "cmd", "accuracy", 0.0)
+    fig = rf.Figure("fresh", "doc.md", "python scripts/bench.py", "accuracy", 0.0)
     (tmp_path / "doc.md").write_text(rf.block_text(fig, rf.stamp(fig, 75.0), "figure") + "\n")
     assert rf.stamp_of(fig) == (head, False)
     # the stamp's "uncommitted" reads the same measured paths as stale(): a change to a
-    # script the command does not run leaves it clean, one to the packages marks it
-    (tmp_path / "scripts").mkdir()
+    # script the command does not run leaves it clean, one to the module it imports marks it
     (tmp_path / "scripts" / "tool.py").write_text("y = 1\n")
     git("add", "-A")
     git("commit", "-q", "-m", "a script")
@@ -158,9 +159,9 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
 def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp_path, monkeypatch) -> None:
     """measured_paths follows the command's script through its imports (a sibling by bare
     name, a module of tests/ and each package's __init__.py, an import inside a function)
-    and the scripts it runs by file name; another benchmark's script and the packages'
-    own modules are not followed, so a change to that other script leaves the figure
-    current while a change to a helper it imports stales it."""
+    and the scripts it runs by file name, into the packages' modules; another benchmark's
+    script is not measured, so a change to it leaves the figure current while a change to
+    a helper it imports stales it."""
     git = partial(git_in, tmp_path)
 
     files = {
@@ -183,7 +184,7 @@ def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp
     old = git("rev-parse", "--short", "HEAD")
     monkeypatch.setattr(rf, "REPO", tmp_path)
     fig = rf.Figure("a", "doc.md", ".venv/bin/python tests/benchmarks/bench_a.py --fast", "accuracy", 0.0)
-    assert rf.measured_paths(fig) == (*rf.PACKAGES, "scripts/make.py", "tests/benchmarks/bench_a.py", "tests/benchmarks/helper.py",
+    assert rf.measured_paths(fig) == ("scripts/make.py", "solver/fit.py", "tests/benchmarks/bench_a.py", "tests/benchmarks/helper.py",
                                       "tests/lab/__init__.py", "tests/lab/tools.py")
     (tmp_path / "doc.md").write_text(f"<!-- begin: a -->\nMade by `cmd` on 2026-01-01, commit {old} (1 s).\n\nfigure\n<!-- end: a -->\n")
     (tmp_path / "tests/benchmarks/bench_other.py").write_text("y = 2\n")
@@ -192,3 +193,83 @@ def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp
     (tmp_path / "tests/lab/tools.py").write_text("h = 2\n")
     git("commit", "-q", "-am", "a helper it imports changes")
     assert [(f.name, paths) for f, _, paths in rf.stale([fig])] == [("a", ["tests/lab/tools.py"])]
+
+
+def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_path, monkeypatch) -> None:
+    """Through ``addb``: a benchmark that runs ``addb process`` measures the command line, the
+    process subcommand's module and what it imports (lazily too), and the data files beside
+    a module reached; of the diagnose subcommand, only its module, which the command line
+    imports to register it, not what its handler imports; so a change to the
+    diagnosis, or to a docstring or comment of the pipeline, leaves its figure current,
+    while a change to the pipeline's code stales it. A figure that runs ``addb diagnose``
+    measures the diagnosis."""
+    git = partial(git_in, tmp_path)
+
+    files = {
+        "addb_viewer/__init__.py": "",
+        "addb_viewer/cli.py": "import importlib\nCOMMANDS = ('addb_viewer.commands.process', 'addb_viewer.commands.diagnose')\n",
+        "addb_viewer/commands/__init__.py": "",
+        "addb_viewer/commands/process.py": "def run(args):\n    from solver.pipeline import process\n",
+        "addb_viewer/commands/diagnose.py": "def run(args):\n    from solver.diagnose.core import diagnose\n",
+        "addb_viewer/geometry_data/femur.vtp": "mesh\n",
+        "solver/__init__.py": "",
+        "solver/pipeline.py": '"""The pipeline."""\n\ndef process():\n    return 1  # one\n',
+        "solver/diagnose/__init__.py": "",
+        "solver/diagnose/core.py": "def diagnose():\n    return 2\n",
+        "tests/benchmarks/bench_process.py": "import subprocess, sys\nfrom pathlib import Path\n\n"
+                                             "subprocess.run([str(Path(sys.executable).parent / 'addb'), 'process', 'x'])\n",
+    }
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-q", "-m", "one")
+    old = git("rev-parse", "--short", "HEAD")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    fig = rf.Figure("p", "doc.md", ".venv/bin/python tests/benchmarks/bench_process.py", "timing", 0.0)
+    assert rf.measured_paths(fig) == (
+        "addb_viewer/__init__.py", "addb_viewer/cli.py", "addb_viewer/commands/__init__.py", "addb_viewer/commands/diagnose.py",
+        "addb_viewer/commands/process.py", "addb_viewer/geometry_data/femur.vtp", "solver/__init__.py", "solver/pipeline.py", "tests/benchmarks/bench_process.py",
+    )  # fmt: skip
+    on_shell = rf.Figure("d", "doc.md", "cd /tmp && .venv/bin/addb diagnose x", "accuracy", 0.0)
+    assert "solver/diagnose/core.py" in rf.measured_paths(on_shell) and "solver/pipeline.py" not in rf.measured_paths(on_shell)
+    (tmp_path / "doc.md").write_text(f"<!-- begin: p -->\nMade by `cmd` on 2026-01-01, commit {old} (1 s).\n\nfigure\n<!-- end: p -->\n")
+    (tmp_path / "solver/diagnose/core.py").write_text("def diagnose():\n    return 3\n")
+    (tmp_path / "solver/pipeline.py").write_text('"""The pipeline, reworded."""\n\n\ndef process():\n    return 1  # the one\n')
+    git("commit", "-q", "-am", "the diagnosis and the pipeline's words change")
+    assert rf.stale([fig]) == []
+    (tmp_path / "solver/pipeline.py").write_text('"""The pipeline, reworded."""\n\n\ndef process():\n    return 2\n')
+    git("commit", "-q", "-am", "the pipeline's code changes")
+    assert [(f.name, paths) for f, _, paths in rf.stale([fig])] == [("p", ["solver/pipeline.py"])]
+
+
+@pytest.mark.parametrize(
+    ("figure", "command"),
+    [("process", ["process", "{subject}", "--out", "{out}"]), ("diagnose-draws-0-9", ["diagnose", "{subject}", "--trial", "walk", "--out", "{out}", "--json"])],
+    ids=["addb process", "addb diagnose"],
+)
+def test_every_module_a_command_loads_is_measured_by_its_figure(rf, figure: str, command: list[str], tmp_path) -> None:
+    """The static closure against a real run: every module of the packages that ``addb
+    process`` (then ``addb diagnose``) has loaded when it exits on the walk (``sys.modules``,
+    the subcommand's module imported by name included) is among the files the figure that
+    times (or measures) that command counts as measured."""
+    from tests.conftest import SHARED_DATA, writable_copy
+
+    subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
+    out, listed = tmp_path / "out", tmp_path / "modules.txt"
+    if figure != "process":
+        subprocess.run([str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out)], check=True, capture_output=True)
+    args = [a.format(subject=subject, out=out) for a in command]
+    run_cli = (  # the console script's own start, with the loaded modules written at exit
+        "import atexit, sys; from pathlib import Path; "
+        f"atexit.register(lambda: Path({str(listed)!r}).write_text(chr(10).join(sorted(sys.modules)))); "
+        f"from addb_viewer.cli import main; sys.exit(main({args!r}))"
+    )
+    subprocess.run([sys.executable, "-c", run_cli], check=True, capture_output=True, cwd=tmp_path)
+    ours = [m for m in listed.read_text().split() if m.split(".")[0] in rf.PACKAGES]
+    assert f"addb_viewer.commands.{command[0]}" in ours  # imported by name (importlib), not by a statement
+    measured = set(rf.measured_paths(next(f for f in rf.FIGURES if f.name == figure)))
+    files = {m: [p.relative_to(REPO).as_posix() for p in rf._module_files(m, REPO)][-1:] for m in ours}
+    missing = sorted(m for m, f in files.items() if not f or f[0] not in measured)
+    assert missing == []
