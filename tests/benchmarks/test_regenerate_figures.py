@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import SHARED_DATA, writable_copy
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -246,19 +248,23 @@ def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_pa
 
 @pytest.mark.parametrize(
     ("figure", "command"),
-    [("process", ["process", "{subject}", "--out", "{out}"]), ("diagnose-draws-0-9", ["diagnose", "{subject}", "--trial", "walk", "--out", "{out}", "--json"])],
-    ids=["addb process", "addb diagnose"],
-)
+    [
+        ("kinematics", ["kinematics", "{subject}", "--out", "{out}"]),
+        ("process", ["process", "{subject}", "--out", "{out}"]),
+        ("b3d", ["convert", str(SHARED_DATA / "b3d" / "results.b3d"), "--out", "{out}"]),
+        ("diagnose-draws-0-9", ["diagnose", "{subject}", "--trial", "walk", "--out", "{out}", "--json"]),
+    ],
+    ids=["addb kinematics", "addb process", "addb convert", "addb diagnose"],
+)  # fmt: skip
 def test_every_module_a_command_loads_is_measured_by_its_figure(rf, figure: str, command: list[str], tmp_path) -> None:
     """The static closure against a real run: every module of the packages that ``addb
-    process`` (then ``addb diagnose``) has loaded when it exits on the walk (``sys.modules``,
-    the subcommand's module imported by name included) is among the files the figure that
-    times (or measures) that command counts as measured."""
-    from tests.conftest import SHARED_DATA, writable_copy
-
+    kinematics``, ``addb process``, ``addb convert`` (of results.b3d) or ``addb diagnose``
+    (after ``addb process``) has loaded when it exits (``sys.modules``, the subcommand's
+    module imported by name included) is among the files the figure that times (or
+    measures) that command counts as measured."""
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
     out, listed = tmp_path / "out", tmp_path / "modules.txt"
-    if figure != "process":
+    if command[0] == "diagnose":
         subprocess.run([str(Path(sys.executable).parent / "addb"), "process", str(subject), "--out", str(out)], check=True, capture_output=True)
     args = [a.format(subject=subject, out=out) for a in command]
     run_cli = (  # the console script's own start, with the loaded modules written at exit
