@@ -23,7 +23,7 @@ when the working tree differs from the commit in the code the figure measures
 (:func:`measured_paths`: the scripts its command runs and the repository files those import
 or run, the packages' modules among them, followed file by file), the stamp says so.
 ``--stale`` lists the blocks made before a change to the code they measure (:func:`stale`;
-a change to docstrings or comments alone is none). A failed
+a change to docstrings, comments or command-line help alone is none). A failed
 command leaves its block as it was and makes the exit status 1 (the others still run).
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
@@ -503,8 +503,9 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
 
 def _same_code(commit: str, path: str) -> bool:
     """Whether the Python file ``path`` runs the same code at ``commit`` and at HEAD: its
-    syntax trees without docstrings are equal (comments, docstrings and layout may differ).
-    False for any other file, one missing at either commit, or one that does not parse."""
+    syntax trees without docstrings and command-line help texts (the string of a ``help=``
+    keyword) are equal (comments, docstrings, help and layout may differ). False for any
+    other file, one missing at either commit, or one that does not parse."""
     import ast
 
     if not path.endswith(".py"):
@@ -523,6 +524,8 @@ def _same_code(commit: str, path: str) -> bool:
             if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body \
                     and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
                 node.body = body[1:] or [ast.Pass()]
+            if isinstance(node, ast.keyword) and node.arg == "help" and isinstance(node.value, (ast.Constant, ast.JoinedStr)):
+                node.value = ast.Constant("")
         trees.append(ast.dump(tree))
     return trees[0] == trees[1]
 

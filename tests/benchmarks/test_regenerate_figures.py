@@ -202,7 +202,7 @@ def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_pa
     process subcommand's module and what it imports (lazily too), and the data files beside
     a module reached; of the diagnose subcommand, only its module, which the command line
     imports to register it, not what its handler imports; so a change to the
-    diagnosis, or to a docstring or comment of the pipeline, leaves its figure current,
+    diagnosis, or to a docstring, comment or help text of the pipeline, leaves its figure current,
     while a change to the pipeline's code stales it. A figure that runs ``addb diagnose``
     measures the diagnosis."""
     git = partial(git_in, tmp_path)
@@ -211,7 +211,8 @@ def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_pa
         "addb_viewer/__init__.py": "",
         "addb_viewer/cli.py": "import importlib\nCOMMANDS = ('addb_viewer.commands.process', 'addb_viewer.commands.diagnose')\n",
         "addb_viewer/commands/__init__.py": "",
-        "addb_viewer/commands/process.py": "def run(args):\n    from solver.pipeline import process\n",
+        "addb_viewer/commands/process.py": "def register(sub):\n    sub.add_argument('--fit', help='the fit')\n\n\n"
+                                           "def run(args):\n    from solver.pipeline import process\n",
         "addb_viewer/commands/diagnose.py": "def run(args):\n    from solver.diagnose.core import diagnose\n",
         "addb_viewer/geometry_data/femur.vtp": "mesh\n",
         "solver/__init__.py": "",
@@ -239,7 +240,11 @@ def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_pa
     (tmp_path / "doc.md").write_text(f"<!-- begin: p -->\nMade by `cmd` on 2026-01-01, commit {old} (1 s).\n\nfigure\n<!-- end: p -->\n")
     (tmp_path / "solver/diagnose/core.py").write_text("def diagnose():\n    return 3\n")
     (tmp_path / "solver/pipeline.py").write_text('"""The pipeline, reworded."""\n\n\ndef process():\n    return 1  # the one\n')
-    git("commit", "-q", "-am", "the diagnosis and the pipeline's words change")
+    (tmp_path / "addb_viewer/commands/process.py").write_text(
+        "def register(sub):\n    sub.add_argument('--fit', help='the dynamics fit, ' f'{1}')\n\n\n"
+        "def run(args):\n    from solver.pipeline import process\n"
+    )
+    git("commit", "-q", "-am", "the diagnosis and the words of the pipeline and of its help change")
     assert rf.stale([fig]) == []
     (tmp_path / "solver/pipeline.py").write_text('"""The pipeline, reworded."""\n\n\ndef process():\n    return 2\n')
     git("commit", "-q", "-am", "the pipeline's code changes")
