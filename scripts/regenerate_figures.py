@@ -178,9 +178,6 @@ FIGURES: tuple[Figure, ...] = (
            "--json docs/diagnose/results_marker_offset_opencap_walking1.json", "accuracy", 1.5),
     Figure("diagnose-findings", "", f"{PY} tests/benchmarks/findings_diagnose.py --rounds 4 --markdown docs/diagnose/findings_runs.md",
            "accuracy", 5.0, writes=("docs/diagnose/findings_runs.md",)),
-    Figure("diagnose-judged-converged", "docs/diagnose/RESULTS.md",
-           f"{PY} scripts/probe_judged_fit.py tests/diagnose/test_diagnose_hidden_walk.py tests/diagnose/test_diagnose_hidden_run.py "
-           "tests/diagnose/test_diagnose_consistent.py", "accuracy", 4.0, fence=False),
     Figure("diagnose-findings-run", "",
            f"{PY} tests/benchmarks/findings_diagnose.py --trials run --rounds 4 --markdown docs/diagnose/findings_runs_run.md",
            "accuracy", 3.0, writes=("docs/diagnose/findings_runs_run.md",)),

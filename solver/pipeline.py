@@ -460,8 +460,8 @@ def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOp
     """Process options for a named dynamics fit: ``"default"`` (the same as ``"converged"``),
     ``"converged"`` (:func:`solver.dynamics.fit.converged_fit`: exact banded Gauss-Newton
     steps until the cost and the body mass factors settle) or ``"band"`` (``FitSettings()``:
-    truncated-band steps, a fixed number of rounds; the fit the diagnosis judges on,
-    :mod:`solver.diagnose.judged_fit`).
+    truncated-band steps, a fixed number of rounds; the older default, which the diagnosis
+    was calibrated on until 2026-11-26, :mod:`solver.diagnose.judged_fit`).
 
     Raises
     ------

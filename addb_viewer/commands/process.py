@@ -117,8 +117,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--fit", choices=("default", "converged", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up
         help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps until the cost and the "
-             "body mass factors settle) or 'band' (truncated-band steps, a fixed number of rounds: the older "
-             "default, which addb diagnose judges on; see tests/benchmarks/RESULTS.md)",
+             "body mass factors settle; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed "
+             "number of rounds: the older default; see tests/benchmarks/RESULTS.md)",
     )  # fmt: skip
     p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")

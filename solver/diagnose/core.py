@@ -541,8 +541,8 @@ def choice_on_marker_motion(
     kept: KeptShare | None = None,
     own_noise: Callable[[], tuple[list[Evaluation], KeptShare]] | None = None,
 ) -> tuple[Evaluation, str] | None:
-    """A force delay, plate shift, plate registration or plate gain chosen on the
-    marker-only motion, or None.
+    """A force delay, plate shift, plate registration, plate zero drift or plate gain
+    chosen on the marker-only motion, or None.
 
     A delay between plates and cameras leaves its evidence in the force transients of
     every foot strike. The dynamics fit cannot follow a force that comes too late, so it
@@ -691,11 +691,10 @@ def diagnose_trial(
 ) -> Diagnosis:
     """Diagnose one processed trial of a subject.
 
-    The trial is judged on the fit the diagnosis was calibrated on, the band fit
-    (:mod:`solver.diagnose.judged_fit`): when the output was made with another (the
-    pipeline's default converged fit), the subject's dynamics are run again with it in a
-    scratch folder first, and the report's figures are that fit's
-    (``settings["judged_fit"]``).
+    The trial is judged on the fit the diagnosis is calibrated on, the pipeline's default
+    converged fit (:mod:`solver.diagnose.judged_fit`): when the output was made with another
+    (``--fit band``), the subject's dynamics are run again with it in a scratch folder
+    first, and the report's figures are that fit's (``settings["judged_fit"]``).
 
     Parameters
     ----------

@@ -1,20 +1,22 @@
 """The dynamics fit the diagnosis judges on, rebuilt when a trial was processed with another.
 
 The diagnosis' choice rule (its 10 % relative gain, the folds, the plausible sizes, the
-neutral bases of its benchmark: docs/diagnose/RESULTS.md) was calibrated on the dynamics
-fit with ``direction="band"``, a fixed number of rounds and its weights
-(:class:`solver.dynamics.fit.FitSettings`'s defaults, ``addb process --fit band``). The
-fit that runs to convergence (:func:`solver.dynamics.fit.converged_fit`, the pipeline's
-default) moves the motion further toward the measured forces: a hidden force error then
-shows far less in the residual forces and more in the marker errors, and 10 of the 58
-hidden-cause tests of tests/diagnose failed when the diagnosis judged that motion with its
-thresholds (measured 2026-11-24 with the converged fit's first weights;
-docs/diagnose/RESULTS.md, "The fit it judges on").
+neutral bases of its benchmark: docs/diagnose/RESULTS.md) is calibrated on the pipeline's
+default fit, the one that runs to convergence (:func:`solver.dynamics.fit.converged_fit`,
+``addb process`` without ``--fit``). Until 2026-11-26 it was calibrated on the older band
+fit (``direction="band"``, a fixed number of rounds, ``addb process --fit band``), and every
+output of the converged fit was processed again with the band fit for the diagnosis. The
+converged motion takes up more of a hidden force error (a plate's zero drift shows on its
+idle rows and far less on its loaded ones), so causes acting on the forces are now also
+chosen on the motion the markers alone decide (a plate's zero drift since 2026-11-26,
+:attr:`solver.diagnose.causes.base.Cause.chosen_on_marker_motion`); the detection rates on
+the converged fit are in docs/diagnose/RESULTS.md, with the band fit's beside them.
 
-So the diagnosis judges every trial on the band fit: when the trial's output was made with
-another fit, the dynamics stage is run again with ``FitSettings()`` (the recorded
-``derivative`` kept) into a scratch folder, from the output's
-cached kinematics (:func:`solver.pipeline.reprocess_dynamics`, which equals a full run
+So the diagnosis judges every trial on the converged fit: an output made with it (the
+default) is judged as it is; when the trial's output was made with another fit (``--fit
+band``), the dynamics stage is run again with :func:`~solver.dynamics.fit.converged_fit`
+(the recorded ``derivative`` kept) into a scratch folder, from the output's cached
+kinematics (:func:`solver.pipeline.reprocess_dynamics`, run cold, which equals a full run
 with the same flags bit for bit), and the diagnosis reads that folder. The user's output
 is not touched, but for one cache: that folder is kept in
 ``OUT/.addb_cache/judged_fit/<trial>/`` with the key it was made from (the subject's
@@ -40,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from solver.dynamics.fit import FitSettings
+from solver.dynamics.fit import FitSettings, converged_fit
 
 if TYPE_CHECKING:
     from solver.dynamics.stage import DynamicsOptions
@@ -54,10 +56,9 @@ _KEY_FILE = "key.json"
 
 def judged_fit(recorded: FitSettings) -> FitSettings:
     """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
-    thresholds were calibrated on, :class:`~solver.dynamics.fit.FitSettings`' defaults
-    (``direction="band"``, its weights, rounds stopping on their number only), with the
-    recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
-    return FitSettings(derivative=recorded.derivative)
+    thresholds are calibrated on, the pipeline's default :func:`~solver.dynamics.fit.converged_fit`,
+    with the recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
+    return converged_fit(derivative=recorded.derivative)
 
 
 def is_judged_fit(recorded: FitSettings) -> bool:
@@ -125,7 +126,7 @@ def judged_output(
     with tempfile.TemporaryDirectory(prefix="addb_judged_fit_") as tmp:
         base = Path(tmp) / "out"
         if _copy_entry(entry, base, key):
-            say("the diagnosis' fit (band): reused from the cache (same inputs, options and flags)", 1.0)
+            say("the diagnosis' fit (converged): reused from the cache (same inputs, options and flags)", 1.0)
             yield base
             return
         cache = Path(out_dir) / CACHE_DIR
@@ -134,7 +135,7 @@ def judged_output(
             shutil.copy2(cache / KINEMATICS_CACHE, base / CACHE_DIR / KINEMATICS_CACHE)
         reprocess_dynamics(
             subject_dir, base, [trial], dict(unmeasured_force or {}) or None,
-            lambda m, f: say(f"the diagnosis' fit (band): {m}", f), options=options, warm_start=False,
+            lambda m, f: say(f"the diagnosis' fit (converged): {m}", f), options=options, warm_start=False,
         )  # fmt: skip
         shutil.rmtree(base / CACHE_DIR, ignore_errors=True)  # the kinematics cache stays in OUT only
         _store(base, entry, key)

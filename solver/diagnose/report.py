@@ -232,8 +232,9 @@ def to_text(diag: Diagnosis) -> str:
     judged = diag.settings.get("judged_fit", {})
     if judged.get("rebuilt"):
         lines.insert(1, (
-            "  (judged on the band dynamics fit the diagnosis is calibrated on, run again for it: the trial was "
-            f"processed with the {judged['processed_direction']!r} fit, whose residuals are lower than the ones below)"
+            "  (judged on the pipeline's default (converged) dynamics fit the diagnosis is calibrated on, run again "
+            f"for it: the trial was processed with the {judged['processed_direction']!r} fit, whose figures differ from "
+            "the ones below)"
         ))  # fmt: skip
     lo = a["left_out"]
     if lo["frames"]:

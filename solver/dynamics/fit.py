@@ -94,8 +94,7 @@ class FitSettings:
         this (relative) after a round whose coordinate steps all stopped on ``tolerance``:
         the coordinates were fitted to the masses the solve returns. When the steps did not
         stop, the masses stand and another round of steps follows. Default 0: always
-        ``rounds`` rounds, as the diagnosis was calibrated with ``"band"``;
-        :func:`converged_fit` sets 0.01.
+        ``rounds`` rounds (the older ``"band"`` fit); :func:`converged_fit` sets 0.01.
     iterations
         Gauss-Newton iterations per round.
     band
@@ -123,8 +122,8 @@ class FitSettings:
         of the natural splines, one banded Cholesky factorization per solve (module
         docstring); with :func:`converged_fit`, the pipeline's default, it reaches lower
         residuals *and* lower marker RMS than ``"band"`` on every subject measured, in fewer
-        steps. The diagnosis' thresholds were calibrated on ``"band"``, which it judges every
-        trial on (:mod:`solver.diagnose.judged_fit`). ``"exact"``: the exact system in q by conjugate
+        steps; the diagnosis judges every trial on it (:mod:`solver.diagnose.judged_fit`).
+        ``"exact"``: the exact system in q by conjugate
         gradients preconditioned with the banded matrix (Nocedal & Wright 2006, §5.1 and
         §7.1); it converges slowly. Measured in tests/benchmarks/RESULTS.md, "Step
         direction of the dynamics fit".

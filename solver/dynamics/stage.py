@@ -75,8 +75,9 @@ class DynamicsOptions:
     fit
         Weights and stopping rule of the dynamics fit (its ``derivative`` also sets the
         ID's derivatives); default :func:`solver.dynamics.fit.converged_fit`, the fit that
-        runs to convergence (``FitSettings()`` is the fixed-rounds ``"band"`` fit, ``addb
-        process --fit band``, which the diagnosis judges on: :mod:`solver.diagnose.judged_fit`).
+        runs to convergence and the one the diagnosis judges on
+        (:mod:`solver.diagnose.judged_fit`); ``FitSettings()`` is the fixed-rounds ``"band"``
+        fit, ``addb process --fit band``.
     """
 
     rate_hz: float = 100.0

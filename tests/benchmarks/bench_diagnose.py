@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             folder, trial = TRIALS[key]
             for seed in range(args.synthetic):
                 dst = work / f"synthetic-{key}-{seed}"
-                consistent_subject(bases[key].processed, SUBJECTS / folder, dst, seed=seed)
+                consistent_subject(bases[key].processed, SUBJECTS / folder, dst, seed=seed, base=bases[key].subject)
                 report = diagnose_json(dst, trial)
                 synthetic.append({"trial": key, "seed": seed, "chosen": report["chosen"], "reason": report["reason"],
                                   "diagnose_seconds": report["seconds"]["total"]})

@@ -61,7 +61,7 @@ class Base:
 
     @property
     def processed(self) -> ProcessedTrial:
-        """The processed trial of the base (its default output folder, band fit)."""
+        """The processed trial of the base (its default output folder, default fit)."""
         return load_processed(self.subject / "addb_out", self.trial)
 
 
@@ -75,7 +75,7 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 8) -> Base:
     applied = []
     report: dict[str, Any] = {}
     for _ in range(max_rounds):
-        _process_band(subject)
+        _process(subject)
         report = diagnose_json(subject, trial, "--apply")
         others = [a["extension"] for a in report.get("also_standing_out", [])]
         for entry in others:
@@ -84,7 +84,7 @@ def neutral_base(key: str, dst: Path, max_rounds: int = 8) -> Base:
             break
         applied += ([report["extension"]] if report["chosen"] is not None else []) + others
     else:
-        _process_band(subject)
+        _process(subject)
         report = diagnose_json(subject, trial)
     return Base(subject, trial, report, applied)
 
@@ -97,17 +97,16 @@ def probe_walk_base(work: Path | None, prefix: str) -> tuple[Path, Base]:
         return folder, neutral_base("walk", folder / "base")
 
 
-def _process_band(subject: Path) -> None:
-    """Process ``subject`` into its default output folder with the band fit, the one the
-    diagnosis judges on (:mod:`solver.diagnose.judged_fit`): a base's processed motion,
-    on which hidden marker offsets and consistent trials are built, is then the one the
-    diagnosis was calibrated with, whatever the pipeline's default (the draws themselves
-    are processed by ``addb diagnose`` with the default fit)."""
+def _process(subject: Path) -> None:
+    """Process ``subject`` into its default output folder with the pipeline's default
+    (converged) fit, the one the diagnosis judges on (:mod:`solver.diagnose.judged_fit`): a
+    base's processed motion, on which hidden marker offsets and consistent trials are built,
+    is then the one the diagnosis was calibrated with."""
     shutil.rmtree(subject / "addb_out", ignore_errors=True)
     with contextlib.redirect_stdout(io.StringIO()):  # its summary table: not a benchmark's output
-        code = cli(["process", str(subject), "--out", str(subject / "addb_out"), "--fit", "band"])
+        code = cli(["process", str(subject), "--out", str(subject / "addb_out")])
     if code != 0:
-        raise RuntimeError(f"addb process --fit band failed on {subject}")
+        raise RuntimeError(f"addb process failed on {subject}")
 
 
 def draw(cause: str, index: int, keys: tuple[str, ...] = ("walk", "run")) -> tuple[str, int]:

@@ -36,8 +36,8 @@ def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
     subject, report = walk
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
         assert np.isfinite(report["baseline"][key])
-    # processed with the pipeline's default (converged) fit, judged on the band fit
-    assert report["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "coefficients", "rebuilt": True}
+    # processed with the pipeline's default (converged) fit, the one the diagnosis judges on
+    assert report["settings"]["judged_fit"] == {"direction": "coefficients", "processed_direction": "coefficients", "rebuilt": False}
     assert sorted(c["cause"] for c in report["candidates"]) == sorted(CAUSES)
     # the causes whose rows carry the markers' errors are cross-validated on folds mixing the phases
     assert report["settings"]["folds"] == 5
@@ -61,40 +61,54 @@ def _without_times(x: object) -> object:
     return x
 
 
-def test_a_converged_output_is_judged_as_a_band_output_and_left_untouched(walk: tuple[Path, dict], tmp_path: Path) -> None:
-    """The diagnosis judges on the band fit it was calibrated on (solver/diagnose/judged_fit.py):
-    on an output made with the default converged fit it runs that fit again in a scratch
-    folder, and its report equals, value for value, the report on an output made with
-    ``--fit band``; the user's output keeps its files (only diagnosis.json and the judged
-    fit's cache entry, ``.addb_cache/judged_fit/walk``, are added by the first diagnosis)."""
+@pytest.fixture(scope="module")
+def band(walk: tuple[Path, dict]) -> Path:
+    """The walk processed with ``--fit band`` into a folder of its own (before any test
+    diagnoses it there)."""
+    subject, _ = walk
+    out = subject.parent / "band"
+    assert cli(["process", str(subject), "--out", str(out), "--fit", "band"]) == 0
+    return out
+
+
+def test_a_band_output_is_judged_on_the_converged_fit_and_left_untouched(walk: tuple[Path, dict], band: Path) -> None:
+    """The diagnosis judges on the pipeline's default converged fit its rule was calibrated
+    on (solver/diagnose/judged_fit.py): a default output is judged as it is, and on an output
+    made with ``--fit band`` the converged fit runs again in a scratch folder, so the report
+    equals, value for value, the one on the default output; the user's output keeps its
+    files (only diagnosis.json and the judged fit's cache entry,
+    ``.addb_cache/judged_fit/walk``, are added by the first diagnosis)."""
     subject, report = walk
     out = subject / "addb_out"
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     again = diagnose_json(subject, "walk")
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     assert after == before
+    assert not (out / ".addb_cache" / "judged_fit").exists()  # judged as processed: nothing run again
     assert _without_times(again) == _without_times(report)
-    band = tmp_path / "band"
-    assert cli(["process", str(subject), "--out", str(band), "--fit", "band"]) == 0
+    band_files = {p.relative_to(band): p.read_bytes() for p in band.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     on_band = diagnose_json(subject, "walk", "--out", str(band))
-    assert on_band["settings"]["judged_fit"] == {"direction": "band", "processed_direction": "band", "rebuilt": False}
+    assert on_band["settings"]["judged_fit"] == {"direction": "coefficients", "processed_direction": "band", "rebuilt": True}
     assert _without_times(on_band) == _without_times(report)
+    kept = {p.relative_to(band): p.read_bytes() for p in band.rglob("*") if p.is_file() and p.name != "diagnosis.json" and ".addb_cache" not in p.parts}
+    assert kept == {k: v for k, v in band_files.items() if ".addb_cache" not in k.parts}
     results = json.loads((band / "walk" / "results.json").read_text())
-    for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
-        assert report["baseline"][key] == results[key]
     converged = json.loads((out / "walk" / "results.json").read_text())
+    for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
+        assert report["baseline"][key] == converged[key]
     assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
 
 
-def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], band: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The judged fit's run is kept in ``OUT/.addb_cache/judged_fit/<trial>`` with its key:
     a second diagnosis of unchanged inputs runs no dynamics and reports the same values; a
     flag edit changes the key, runs the fit again with the flags and replaces the entry."""
     from solver import pipeline
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
 
-    subject, report = walk
-    out = subject / "addb_out"
+    subject, _ = walk
+    out = band
+    report = diagnose_json(subject, "walk", "--out", str(out))
     entry = out / ".addb_cache" / "judged_fit" / "walk"
     key = json.loads((entry / "key.json").read_text())
     assert key["trial"] == "walk" and key["flags"] == {}
@@ -106,7 +120,7 @@ def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path
         return real(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(pipeline, "reprocess_dynamics", counting)
-    again = diagnose_json(subject, "walk")
+    again = diagnose_json(subject, "walk", "--out", str(out))
     assert calls == []
     assert _without_times(again) == _without_times(report)
     n = load_processed(out, "walk").n_frames
@@ -121,7 +135,7 @@ def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path
     assert not (entry / "out" / ".addb_cache").exists()  # the kinematics cache stays in OUT only
 
 
-def test_a_cache_entry_replaced_during_a_diagnosis_takes_no_files_from_it(walk: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_cache_entry_replaced_during_a_diagnosis_takes_no_files_from_it(walk: tuple[Path, dict], band: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A diagnosis reads the judged fit's cache entry from its own copy: another diagnosis
     that replaces (or removes) the entry meanwhile leaves the folder being read whole."""
     import shutil
@@ -130,7 +144,7 @@ def test_a_cache_entry_replaced_during_a_diagnosis_takes_no_files_from_it(walk: 
     from solver.diagnose.judged_fit import judged_output
 
     subject, _ = walk
-    out = subject / "addb_out"
+    out = band
     entry = out / ".addb_cache" / "judged_fit" / "walk"
     with judged_output(subject, out, "walk"):  # the entry for these flags (none), run if missing
         pass

@@ -23,8 +23,8 @@ def processed_walk(tmp_path_factory: pytest.TempPathFactory):
     from solver.pipeline import options_for_fit, process_subject
 
     subject = copy_subject(WALK, tmp_path_factory.mktemp("real") / "walk")
-    # the band fit's motion, as the benchmark's bases (tests/diagnose/harness.py, _process_band)
-    process_subject(subject, subject / "addb_out", options=options_for_fit("band"))
+    # the default (converged) fit's motion, as the benchmark's bases (tests/diagnose/harness.py, _process)
+    process_subject(subject, subject / "addb_out", options=options_for_fit("converged"))
     return load_processed(subject / "addb_out", "walk")
 
 

@@ -35,6 +35,9 @@ class PlateForceOffset(ForceCorrection):
     main_parameter = "offset_N"
     min_effect = 10.0  # N
     max_effect = 300.0  # N
+    # the converged motion takes up a drift on the plate's loaded frames (walk draw 3004: 3
+    # of 5 folds improved there, 5 of 5 on the marker-only motion; docs/diagnose/RESULTS.md)
+    chosen_on_marker_motion = True
 
     def alternatives(self, ctx: Context, full: Any) -> list[Alternative]:
         """One alternative per plate: the offset (3,), N, ground frame."""
