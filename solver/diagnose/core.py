@@ -559,8 +559,9 @@ def choice_on_marker_motion(
     since 2026-11-24, a run draw hiding a 2.7 cm sideways shift and a 1 degree turn of both
     belts named a 2.8 kg mass redistribution, the fitted motion keeping under 0.5 cm of the
     shift), the causes acting on the forces are compared on the marker-only motion (same
-    :func:`.selection.choose` rule, same frames U); if a delay, a plate shift or the plates'
-    registration (:data:`MARKER_MOTION_CHOICES`) stands out there, it is the choice: a force
+    :func:`.selection.choose` rule, same frames U); if a delay, a plate shift, the plates'
+    registration or a plate's zero drift (:data:`MARKER_MOTION_CHOICES`; the drift since
+    2026-11-26, judged on the converged fit) stands out there, it is the choice: a force
     error matters for every dynamic output, a marker offset for one marker's fit.
 
     When nothing that may be chosen there stands out, the force-side causes are compared once
