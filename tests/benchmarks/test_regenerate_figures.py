@@ -23,6 +23,18 @@ def git_in(repo: Path, *args: str) -> str:
     return subprocess.run(["git", *args], cwd=repo, check=True, capture_output=True, text=True, env=env).stdout.strip()
 
 
+def repository_of(root: Path, files: dict[str, str]) -> str:
+    """A new git repository in ``root`` holding ``files`` (path -> text) in one commit;
+    returns that commit's short hash."""
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    git_in(root, "init", "-q")
+    git_in(root, "add", "-A")
+    git_in(root, "commit", "-q", "-m", "one")
+    return git_in(root, "rev-parse", "--short", "HEAD")
+
+
 @pytest.fixture(scope="module")
 def rf():
     spec = importlib.util.spec_from_file_location("regenerate_figures", REPO / "scripts" / "regenerate_figures.py")
@@ -177,13 +189,7 @@ def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp
         "solver/fit.py": "x = 1\n",
         "notes.md": "a\n",
     }
-    for rel, text in files.items():
-        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / rel).write_text(text)
-    git("init", "-q")
-    git("add", "-A")
-    git("commit", "-q", "-m", "one")
-    old = git("rev-parse", "--short", "HEAD")
+    old = repository_of(tmp_path, files)
     monkeypatch.setattr(rf, "REPO", tmp_path)
     fig = rf.Figure("a", "doc.md", ".venv/bin/python tests/benchmarks/bench_a.py --fast", "accuracy", 0.0)
     assert rf.measured_paths(fig) == ("scripts/make.py", "solver/fit.py", "tests/benchmarks/bench_a.py", "tests/benchmarks/helper.py",
@@ -222,13 +228,7 @@ def test_a_figure_measures_the_package_modules_its_subcommand_reaches(rf, tmp_pa
         "tests/benchmarks/bench_process.py": "import subprocess, sys\nfrom pathlib import Path\n\n"
                                              "subprocess.run([str(Path(sys.executable).parent / 'addb'), 'process', 'x'])\n",
     }
-    for rel, text in files.items():
-        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / rel).write_text(text)
-    git("init", "-q")
-    git("add", "-A")
-    git("commit", "-q", "-m", "one")
-    old = git("rev-parse", "--short", "HEAD")
+    old = repository_of(tmp_path, files)
     monkeypatch.setattr(rf, "REPO", tmp_path)
     fig = rf.Figure("p", "doc.md", ".venv/bin/python tests/benchmarks/bench_process.py", "timing", 0.0)
     assert rf.measured_paths(fig) == (
