@@ -417,10 +417,11 @@ def _files_of_text(text: str, root: Path) -> list[str]:
 
 def _data_files(folder: Path) -> list[str]:
     """The files other than Python sources under ``folder`` that belong to no subpackage
-    (a subfolder with an ``__init__.py`` is a package of its own), bytecode caches aside."""
+    (a subfolder with an ``__init__.py`` is a package of its own), bytecode caches and
+    Markdown notes for readers aside."""
     out: list[str] = []
     for f in sorted(folder.rglob("*")):
-        if f.suffix in (".py", ".pyc") or "__pycache__" in f.parts or not f.is_file():
+        if f.suffix in (".py", ".pyc", ".md") or "__pycache__" in f.parts or not f.is_file():
             continue
         owner = f.parent
         while owner != folder and not (owner / "__init__.py").is_file():
