@@ -413,7 +413,16 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
     blocks = make_blocks(data.n_frames, data.dt, options.block_seconds)
     ranked = best_per_cause(evaluations, options.rule)
-    chosen, reason = choose(ranked, options.rule, blocks, evaluations, JointGains(alts, evaluations, folds).kept_share)
+    # two overlapping causes (a plate's shift, the plates' registration) that each keep their
+    # gain on top of the other on the fitted motion are told apart on the marker-only one
+    kept_ik = JointGains(alts_ik, evaluations_ik, folds).kept_share
+    twins = {(e.cause, e.choice): e for e in evaluations_ik}
+
+    def on_marker_motion(best: Evaluation, rival: Evaluation) -> float | None:
+        a, b = twins.get((best.cause, best.choice)), twins.get((rival.cause, rival.choice))
+        return None if a is None or b is None else kept_ik(a, b)
+
+    chosen, reason = choose(ranked, options.rule, blocks, evaluations, JointGains(alts, evaluations, folds).kept_share, on_marker_motion)
     held_ctx, held_alts = ctx, alts
     own_sigmas: list[Sigmas] = []
 
@@ -426,7 +435,6 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             ev.motion = "marker-only"
         return evs_own, JointGains(alts_own, evs_own, folds).kept_share
 
-    kept_ik = JointGains(alts_ik, evaluations_ik, folds).kept_share
     on_markers = choice_on_marker_motion(chosen, evaluations_ik, options.rule, blocks, kept_ik, own_noise)
     if on_markers is not None:
         chosen, why = on_markers

@@ -425,6 +425,27 @@ def test_overlapping_causes_are_told_apart_by_the_gain_each_keeps(kept_best: flo
     assert f"fitted together it keeps {100 * kept_best:.0f}% of its own gain" in reason
 
 
+@pytest.mark.parametrize(("on_markers_registration", "on_markers_shift", "named"), [(0.68, -0.02, "plate_registration"), (-0.02, 0.68, "plate_position_offset"), (None, None, "plate_position_offset")])
+def test_two_overlapping_causes_that_each_keep_their_gain_are_told_apart_on_the_other_motion(
+    on_markers_registration: float | None, on_markers_shift: float | None, named: str
+) -> None:
+    # walk draw 9006 on the converged fit: the left plate's shift scores a little above the
+    # plates' registration and each keeps about half of its gain on top of the other on the
+    # fitted motion; on the marker-only motion the registration keeps 68 % on top of the
+    # shift and the shift nothing on top of the registration, and the registration is named.
+    # Without the other motion's shares the higher score stands out.
+    registration = _evaluation("plate_registration", REGISTRATION, 0.3)
+    shift = _evaluation("plate_position_offset", SHIFT, 0.3)
+    shift.score = 1.1 * registration.score
+    kept = _kept_from({(id(registration), id(shift)): 0.515, (id(shift), id(registration)): 0.555})
+    tie = None
+    if on_markers_registration is not None:
+        tie = _kept_from({(id(registration), id(shift)): on_markers_registration, (id(shift), id(registration)): on_markers_shift})
+    ranked = [shift, registration]
+    chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept, tie)
+    assert chosen is not None and chosen.cause == named, reason
+
+
 GAIN = {"plate": "L", "gain": 0.94}
 MASS = {"mass_change_kg": -3.0}
 
