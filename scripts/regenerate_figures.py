@@ -323,6 +323,7 @@ def script_closure(start: list[str] | tuple[str, ...], command: str = "") -> lis
     shallow_seen: set[str] = set()  # loaded, their functions' imports not followed
     words: set[str] = set(re.findall(r"(?:^|[\s/])addb(?:_viewer\.cli)?\s+([a-z]\w*)", command))
     deferred: dict[str, list[Path]] = {}  # subcommand -> its module's files, until it is named
+    data_folders: set[Path] = set()
     todo = [(rel, False) for rel in (*start, *_files_of_text(command, REPO))]
     if re.search(r"(?:^|[\s/])addb\s", command):
         todo.append((_CLI, False))
@@ -334,7 +335,8 @@ def script_closure(start: list[str] | tuple[str, ...], command: str = "") -> lis
                 continue
             (shallow_seen if shallow else seen).add(rel)
             path = REPO / rel
-            if rel.startswith(tuple(p + "/" for p in PACKAGES)):
+            if rel.startswith(tuple(p + "/" for p in PACKAGES)) and path.parent not in data_folders:
+                data_folders.add(path.parent)
                 todo += [(f, False) for f in _data_files(path.parent)]
             if path.suffix != ".py":
                 continue
@@ -342,9 +344,7 @@ def script_closure(start: list[str] | tuple[str, ...], command: str = "") -> lis
                 tree = ast.parse(path.read_text(), filename=rel)
             except (OSError, SyntaxError, UnicodeDecodeError):
                 continue
-            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
-                          if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
-                          and n.body and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}  # fmt: skip
+            docstrings = {id(owner.body[0].value) for owner in _docstring_owners(tree)}
             for node in _walk(tree, functions=not shallow):
                 found: list[Path] = []
                 if isinstance(node, ast.Import):
@@ -382,6 +382,17 @@ def script_closure(start: list[str] | tuple[str, ...], command: str = "") -> lis
             todo += [(f.relative_to(REPO).as_posix(), True) for files in deferred.values() for f in files]
         if not todo:
             return sorted(seen | shallow_seen)
+
+
+def _docstring_owners(tree: object) -> list[object]:
+    """The module, classes and functions of ``tree`` whose first statement is a docstring."""
+    import ast
+
+    return [
+        n for n in ast.walk(tree)
+        if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and n.body
+        and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant) and isinstance(n.body[0].value.value, str)
+    ]  # fmt: skip
 
 
 def _walk(tree: object, functions: bool = True) -> Iterator[object]:
@@ -486,12 +497,18 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
         A stamp names a commit this clone does not have.
     """
     out = []
+    same: dict[tuple[str, str], bool] = {}  # (commit, path) -> _same_code, within this call
     for fig in figures:
         found = stamp_of(fig)
         if found is None:
             continue
         commit, uncommitted = found
-        changed = [f for f in _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split() if not _same_code(commit, f)]
+        changed = []
+        for f in _git("diff", "--name-only", commit, "HEAD", "--", *measured_paths(fig)).split():
+            if (commit, f) not in same:
+                same[commit, f] = _same_code(commit, f)
+            if not same[commit, f]:
+                changed.append(f)
         if uncommitted:
             changed = ["uncommitted changes", *changed]
         if changed:
@@ -517,11 +534,9 @@ def _same_code(commit: str, path: str) -> bool:
             tree = ast.parse(shown.stdout)
         except SyntaxError:
             return False
+        for owner in _docstring_owners(tree):
+            owner.body = owner.body[1:] or [ast.Pass()]
         for node in ast.walk(tree):
-            body = getattr(node, "body", None)
-            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body \
-                    and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
-                node.body = body[1:] or [ast.Pass()]
             if isinstance(node, ast.keyword) and node.arg == "help" and isinstance(node.value, (ast.Constant, ast.JoinedStr)):
                 node.value = ast.Constant("")
         trees.append(ast.dump(tree))
