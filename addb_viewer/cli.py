@@ -8,6 +8,8 @@ starts fast. Exit codes: 0 success, 1 bad input (a clear message on stderr), 2 u
 from __future__ import annotations
 
 import argparse
+import atexit
+import gc
 import importlib
 import os
 import sys
@@ -66,8 +68,59 @@ def one_blas_thread() -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
+# mallopt(3) parameters (glibc's malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+#: glibc's mmap threshold and trim threshold for :func:`run_to_completion`, bytes.
+MMAP_THRESHOLD, TRIM_THRESHOLD = 32 << 20, 128 << 20
+#: Generation-2 threshold of the garbage collector for :func:`run_to_completion` (Python's default 10).
+FULL_COLLECTION_THRESHOLD = 1000
+
+
+def run_to_completion() -> bool:
+    """Settings for a console process that runs one command and exits (not a server).
+
+    * glibc's malloc: a fixed mmap threshold (:data:`MMAP_THRESHOLD`) and trim threshold
+      (:data:`TRIM_THRESHOLD`), set together with ``mallopt(3)``. A fresh process starts
+      with glibc's adaptive mmap threshold at 128 kB, so the pipeline's numpy temporaries
+      over that size are mapped, faulted in page by page and unmapped again until the
+      threshold has adapted; from the heap they reuse pages already faulted in. Setting
+      either alone turns the adaptation off and is slower (mallopt(3); the same effect as
+      Dask's ``MALLOC_TRIM_THRESHOLD_``, which the dataset runner removes).
+    * Full garbage collections (generation 2) once every :data:`FULL_COLLECTION_THRESHOLD`
+      collections of generation 1 instead of 10: each traverses every object the imports
+      made (numpy, scipy, pinocchio), some 20 ms apiece, and a command's own cycles are few.
+    * :func:`gc.freeze` at exit (an atexit function): the interpreter's finalization then
+      skips its last collection over all those objects (about 0.1 s after ``addb
+      process``'s imports); every other step of a normal exit still runs.
+
+    What this saves a whole ``addb process`` is measured in tests/benchmarks/RESULTS.md
+    (block ``startup``). The malloc settings apply on glibc only (elsewhere mallopt is
+    missing and they are skipped).
+
+    Returns
+    -------
+    Whether the malloc settings were applied.
+    """
+    gc.set_threshold(*gc.get_threshold()[:2], FULL_COLLECTION_THRESHOLD)
+    atexit.register(gc.freeze)
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # not glibc
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) & bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``addb`` console script; returns the process exit code."""
+    """Entry point of the ``addb`` console script; returns the process exit code.
+
+    Called with no ``argv`` (the console script, ``python -m addb_viewer.cli``), the
+    process is the command's own: a command that runs to completion gets
+    :func:`run_to_completion`, one that serves until stopped (its parser's default
+    ``serves=True``: ``addb view``) does not. Called with an ``argv`` (from Python, as the
+    tests do), the interpreter's settings are left alone.
+    """
     import warnings
 
     one_blas_thread()
@@ -78,6 +131,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help()
         return 2
+    if argv is None and not getattr(args, "serves", False):
+        run_to_completion()
     try:
         return handler(args)
     except AddbError as exc:

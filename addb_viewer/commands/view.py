@@ -214,4 +214,4 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="dataset: worker processes that process the subjects without output in the background "
         "(default: the cores less one; 0: none)",
     )
-    p.set_defaults(handler=run)
+    p.set_defaults(handler=run, serves=True)  # runs until stopped: no run_to_completion (addb_viewer.cli)

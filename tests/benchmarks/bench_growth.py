@@ -7,7 +7,8 @@ The Camargo level-ground circuit (``scripts/make_example_subject.py camargo2021_
 and the MOT's rows up to N / 100 s after the first sample; every cut keeps the static-free,
 one-trial subject as it is) and each cut is processed by ``process_subject`` in a fresh
 Python process (addb's bytecode compiled first, as an install has it: ``user_env.py``;
-OpenBLAS started with one thread, as the ``addb`` console script starts it). Last, the whole trial is processed at ``--rate-for-memory`` Hz (130.4 Hz:
+OpenBLAS started with one thread and the malloc and garbage-collector settings of
+:func:`addb_viewer.cli.run_to_completion`, as the ``addb`` console script starts). Last, the whole trial is processed at ``--rate-for-memory`` Hz (130.4 Hz:
 about 2,000 frames; the recording is at 200 Hz) for the issue's memory target (under
 500 MB for a 2,000-frame trial). Prints per run: frames, wall time, CPU time (user + sys)
 and peak resident memory of the child (``os.wait4``), the dynamics' frames (trial.npz),
@@ -35,7 +36,7 @@ REPO = Path(__file__).resolve().parents[2]
 NAME = "camargo2021_levelground"
 CHILD = (
     "import sys; from pathlib import Path; sys.path.insert(0, {repo!r});"
-    "from addb_viewer.cli import one_blas_thread; one_blas_thread();"  # as the addb console script starts
+    "from addb_viewer.cli import one_blas_thread, run_to_completion; one_blas_thread(); run_to_completion();"  # as the addb console script starts
     "from dataclasses import replace; from solver.dynamics.stage import DynamicsOptions;"
     "from solver.pipeline import options_for_fit, process_subject; o = options_for_fit({fit!r});"
     "o = replace(o, dynamics=replace(o.dynamics or DynamicsOptions(), rate_hz={rate!r}));"
