@@ -747,15 +747,17 @@ def mass_regression(
     p_mat = np.zeros((10 * (model.njoints - 1), len(joints)))
     for c, j in enumerate(joints):
         p_mat[10 * (j - 1) : 10 * j, c] = params[j]
-    tau_pin = np.empty((idx.size, sk.nv, len(joints)))  # expanded joint forces of each factor
-    for k in range(idx.size):
-        tau_pin[k] = pin.computeJointTorqueRegressor(model, data, qp[k], vp[k], ap[k]) @ p_mat
-    # C^T tau_pin on the root coordinates (C has one nonzero per expanded DoF)
+    # C^T tau_pin on the root coordinates (C has one nonzero per expanded DoF): only the
+    # expanded DoFs of the root coordinates are needed
     vals, cols = sk.cmap.jacobian_batch(q[idx])  # (K, nv), (nv,)
+    root_dofs = [(i, int(dof)) for i, r in enumerate(root) for dof in np.flatnonzero(cols == r)]
+    rows = [dof for _, dof in root_dofs]
+    tau_pin = np.empty((idx.size, len(rows), len(joints)))  # those DoFs' forces of each factor
+    for k in range(idx.size):
+        tau_pin[k] = pin.computeJointTorqueRegressor(model, data, qp[k], vp[k], ap[k])[rows] @ p_mat
     a = np.zeros((idx.size, 6, len(joints)))
-    for i, r in enumerate(root):
-        for dof in np.flatnonzero(cols == r):
-            a[:, i] += vals[:, dof, None] * tau_pin[:, dof]
+    for c, (i, dof) in enumerate(root_dofs):
+        a[:, i] += vals[:, dof, None] * tau_pin[:, c]
     return a.reshape(-1, len(joints)), tau_ext[:, root].reshape(-1), joints
 
 
