@@ -403,10 +403,12 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     # residual would call far more frames unmeasured)
     ik_options = replace(options, causes=tuple(c for c in options.causes if cause(c).on_marker_motion != "skipped"))
     ctx_ik, alts_ik, evaluations_ik, _ = evaluate(data_ik, ik_options, unmeasured=(ctx.unmeasured, ctx.unmeasured_reasons))
+    twins: dict[tuple[str, object], Evaluation] = {}  # each alternative's evaluation on the marker-only motion
     for ev in evaluations_ik:
         ev.motion = "marker-only"
+        twins.setdefault((ev.cause, ev.choice), ev)
     for ev in evaluations:
-        twin = next((e for e in evaluations_ik if e.cause == ev.cause and e.choice == ev.choice), None)
+        twin = twins.get((ev.cause, ev.choice))
         if twin is not None and cause(ev.cause).on_marker_motion == "estimated":
             ev.parameters_fitted_motion, ev.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
             twin.parameters_fitted_motion, twin.uncertainty_fitted_motion = ev.parameters, ev.uncertainty
@@ -416,7 +418,6 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     # two overlapping causes (a plate's shift, the plates' registration) that each keep their
     # gain on top of the other on the fitted motion are told apart on the marker-only one
     kept_ik = JointGains(alts_ik, evaluations_ik, folds).kept_share
-    twins = {(e.cause, e.choice): e for e in evaluations_ik}
 
     def on_marker_motion(best: Evaluation, rival: Evaluation) -> float | None:
         a, b = twins.get((best.cause, best.choice)), twins.get((rival.cause, rival.choice))
