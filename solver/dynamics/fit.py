@@ -46,6 +46,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
@@ -53,7 +54,7 @@ from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
 
 from solver.dynamics.banded import BlockBands, banded_cholesky, banded_cholesky_back
-from solver.dynamics.spline import Derivatives
+from solver.dynamics.spline import CoefficientMaps, Derivatives
 from solver.errors import DynamicsError
 from solver.kinematics.ik import solver_bounds
 from solver.model.skeleton import Skeleton
@@ -261,6 +262,40 @@ def _rows(idx: IntArray) -> IntArray | slice:
     return idx
 
 
+@lru_cache(maxsize=8)
+def _coefficient_setup(t: int, dt: float, derivative: str) -> tuple[CoefficientMaps, tuple[IntArray, ...], int, FloatArray]:
+    """What :meth:`_TrialProblem.coefficient_equations` needs of a trial's length ``t``,
+    frame interval ``dt`` (s) and ``derivative`` method, made once for every round of the
+    fit (each round builds its problems again for the new masses).
+
+    Returns
+    -------
+    cmaps
+        :meth:`Derivatives.coefficient_maps <solver.dynamics.spline.Derivatives.coefficient_maps>`.
+    passes
+        Frames in passes whose windows start at distinct coefficients (all frames at once
+        for the quintic spline; the end frames of central differences share a window).
+    nb
+        Block bandwidth of the normal matrix.
+    smooth_bands
+        ``(nb + 1, nc)`` the bands of ``E2^T E2``, ``[o, i] = S[i, i + o]``: the smoothness
+        rows are the spline's accelerations ``qdd = E2 a``, as wide as a window.
+
+    The arrays are read-only (shared between problems).
+    """
+    cm = Derivatives(t, dt, derivative).coefficient_maps()
+    first = np.searchsorted(cm.start, cm.start, side="left")
+    rank = np.arange(t) - first
+    passes = tuple(np.flatnonzero(rank == r) for r in range(int(rank.max()) + 1))
+    smooth = (cm.e2.T @ cm.e2).tocsr()
+    rows, cols = smooth.nonzero()
+    width = max(cm.width, int(np.abs(cols - rows).max(initial=0)) + 1)
+    smooth_bands = np.array([np.pad(smooth.diagonal(o), (0, o)) for o in range(width)])
+    for a in (*passes, smooth_bands, cm.start, cm.weights):
+        a.flags.writeable = False
+    return cm, passes, width - 1, smooth_bands
+
+
 class _TrialProblem:
     """Residuals and linearization of one trial for a fixed model."""
 
@@ -297,19 +332,9 @@ class _TrialProblem:
         self._bands: BlockBands | None = None  # the normal matrix's storage, reused
 
     def _init_coefficients(self) -> None:
-        """The pieces of :meth:`coefficient_equations` that do not change with q."""
-        cm = self.cmaps = self.ops.coefficient_maps()
-        # frames in passes whose windows start at distinct coefficients (all frames at once
-        # for the quintic spline; the end frames of central differences share a window)
-        first = np.searchsorted(cm.start, cm.start, side="left")
-        rank = np.arange(self.t) - first
-        self._passes = [np.flatnonzero(rank == r) for r in range(int(rank.max()) + 1)]
-        # the smoothness rows are the spline's accelerations qdd = E2 a (see cost): as wide as a window
-        smooth = (cm.e2.T @ cm.e2).tocsr()
-        rows, cols = smooth.nonzero()
-        width = max(cm.width, int(np.abs(cols - rows).max(initial=0)) + 1)
-        self._nb = width - 1  # block bandwidth
-        self._smooth_bands = np.array([np.pad(smooth.diagonal(o), (0, o)) for o in range(width)])  # [o, i] = S[i, i + o]
+        """The pieces of :meth:`coefficient_equations` that do not change with q (shared by
+        the problems of one trial length and frame interval: :func:`_coefficient_setup`)."""
+        self.cmaps, self._passes, self._nb, self._smooth_bands = _coefficient_setup(self.t, self.data.dt, self.st.derivative)
 
     # -------------------------------------------------------------- residuals
     def kinematics(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
