@@ -96,8 +96,7 @@ def test_a_band_output_is_judged_on_the_converged_fit_and_left_untouched(walk: t
     converged = json.loads((out / "walk" / "results.json").read_text())
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
         assert report["baseline"][key] == converged[key]
-    # the band output is another fit: its residual is higher (2.9 against 3.1 N, measured 2026-11-26)
-    assert converged["linear_residual_rms_N"] < 0.95 * results["linear_residual_rms_N"]
+    assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
 
 
 def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], band: Path, monkeypatch: pytest.MonkeyPatch) -> None:

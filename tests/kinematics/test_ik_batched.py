@@ -1,7 +1,6 @@
-"""The keyframes of the trajectory solve (``IkSettings.keyframe_stride``, every 4 frames by
-default): the batched solver repeats the per-frame solver exactly, and keyframes every 4
-frames reach the frame-by-frame solve's (``keyframe_stride=1``) marker errors on real
-walking with a motion no rougher."""
+"""The keyframe option of the trajectory solve (``IkSettings.keyframe_stride``): the batched
+solver repeats the per-frame solver exactly, and keyframes every 4 frames reach the
+frame-by-frame solve's marker errors on real walking with a motion no rougher."""
 
 from __future__ import annotations
 
@@ -22,13 +21,14 @@ WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 @cache
 def walk() -> tuple[FrameSolver, np.ndarray, np.ndarray]:
     """Generic Rajagopal model, the walk's markers, a solver with keyframes every 4 frames,
-    and the frame-by-frame solve (``keyframe_stride=1``)."""
+    and the frame-by-frame solve (the default, ``keyframe_stride=1``)."""
     sk = Skeleton(read_osim(WALK / "unscaled_generic.osim"))
     mk = read_trc(WALK / "trials" / "walk" / "markers.trc")
     names = [n for n in mk.names if n in sk.marker_names]
     obs = np.asarray(mk.positions)[:, [mk.names.index(n) for n in names]]
     solver = FrameSolver(sk, sk.marker_index(names), np.ones(len(names)), IkSettings(keyframe_stride=4))
-    one = FrameSolver(sk, solver.markers, np.ones(len(names)), IkSettings(keyframe_stride=1))
+    one = FrameSolver(sk, solver.markers, np.ones(len(names)), IkSettings())
+    assert one.settings.keyframe_stride == 1
     q = solve_trajectory(one, obs, initial_pose(one, obs[0]))
     return solver, obs, q
 
