@@ -2,9 +2,10 @@
 
 For each trial with force plates, on a writable copy of its subject: diagnose, and while a
 cause stands out, apply it (``--apply``) and diagnose the reprocessed subject again (at
-most ``--rounds`` rounds). Prints (and with ``--markdown`` writes) each round's named cause,
-its estimate and uncertainty, its held-out gain, the metrics before and after, and the
-final verdict; ``--json`` keeps every report.
+most ``--rounds`` rounds). Prints (and with ``--markdown`` writes) each round's four
+best-scoring candidates, and the named one when it is not among them (a marker offset is
+scored on its marker's own error), each with its estimate, uncertainty and held-out gain;
+the metrics before and after; and the final verdict. ``--json`` keeps every report.
 
 Run::
 
@@ -45,6 +46,19 @@ def findings(key: str, work: Path, rounds: int) -> list[dict[str, Any]]:
     return reports
 
 
+def _candidate_line(c: dict[str, Any]) -> str:
+    """One candidate: cause, score, held-out gain, estimate ± standard error."""
+    return f"{c['cause']:<26s} score {c['score']:10.0f}  gain {100 * (c['gain'] or 0):5.1f}%  {_fmt_params(c['cause'], c['parameters'], c['uncertainty'])}"
+
+
+def _named_candidate(report: dict[str, Any]) -> dict[str, Any] | None:
+    """The candidate the report names (its cause and parameters), or None."""
+    return next(
+        (c for c in report["candidates"] if c["cause"] == report["chosen"] and c["parameters"] == report.get("chosen_parameters")),
+        None,
+    )
+
+
 def markdown(all_reports: dict[str, list[dict[str, Any]]], command: str) -> str:
     lines = ["# Findings on the unmodified real trials (raw runs)", "", f"Made by `{command}`.", ""]
     for key, reports in all_reports.items():
@@ -56,7 +70,10 @@ def markdown(all_reports: dict[str, list[dict[str, Any]]], command: str) -> str:
             lines.append("")
             lines.append("```")
             for c in r["candidates"][:4]:
-                lines.append(f"{c['cause']:<26s} score {c['score']:10.0f}  gain {100 * (c['gain'] or 0):5.1f}%  {_fmt_params(c['cause'], c['parameters'], c['uncertainty'])}")
+                lines.append(_candidate_line(c))
+            named = _named_candidate(r)
+            if named is not None and named not in r["candidates"][:4]:  # e.g. a marker offset, scored on its marker's own error
+                lines.append(_candidate_line(named) + f"  (named; number {r['candidates'].index(named) + 1} by score)")
             lines.append("```")
             lines.append("")
             lines.append(r["reason"])
