@@ -87,7 +87,12 @@ class FitSettings:
         s_F and s_M on frames with unmeasured force: a weak pull of the free centre-of-mass
         accelerations there (the unmeasured force stays free to reach body weight).
     mass_sigma
-        Prior deviation of each body's mass factor from 1 (relative).
+        Prior deviation of each body's mass factor from 1 (relative), at each mass solve:
+        the prior is centred on the masses of that round (the factor a solve returns
+        multiplies them), not on the model's, so over rounds the factors can keep moving
+        by a similar step. On the walk, the run and the OpenCap subject they do (1-5 %
+        per solve), and ``rounds`` ends the alternation there, not ``mass_tolerance``
+        (tests/benchmarks/RESULTS.md, block ``fit-rounds``, 4 rounds against 6).
     rounds
         At most this many alternations of coordinate steps and mass solves.
     mass_tolerance
