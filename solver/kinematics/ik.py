@@ -65,8 +65,8 @@ class IkSettings:
         benchmark verdicts but lost walk draw 5008 of ``plate_position_offset`` (a plate
         shift held back by the plates' registration at the 20 % rule's edge). Tried again on
         2026-11-26, with the diagnosis judging the converged fit (whose end point depends
-        far less on its start): a fresh ``addb process`` of the OpenCap subject took about
-        0.08 CPU-s less (of 2.1), and the diagnosis benchmark (180 draws, 10 consistent
+        far less on its start): a fresh ``addb process`` of the OpenCap subject was a few
+        per cent cheaper (not measured as a figure), and the diagnosis benchmark (180 draws, 10 consistent
         trials) kept every verdict but run draw 2009 of ``body_mass`` (a 3.7 kg error no
         longer named: the right plate's gain, fitted together with the mass change, left
         it 40 % of its gain, where 80 % is needed to stand out). Switching still needs that
