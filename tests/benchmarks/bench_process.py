@@ -58,6 +58,13 @@ def _run(subject: Path, out: Path, src: str | None, fit: str) -> tuple[float, fl
     if src:  # the other tree's `solver` first on the path; run outside the repo so '' does not shadow it
         env["PYTHONPATH"] = os.pathsep.join([src, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         cwd = tempfile.gettempdir()
+    return timed_child(cmd, env, cwd)
+
+
+def timed_child(cmd: list[str], env: dict[str, str], cwd: str | None = None) -> tuple[float, float]:
+    """Run ``cmd`` as a child process to its end: (wall s, CPU s user + sys of the child,
+    from ``getrusage(RUSAGE_CHILDREN)`` before and after). Raises CalledProcessError when it
+    fails."""
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, env=env, cwd=cwd)

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import statistics
 import subprocess
 import sys
@@ -32,6 +31,7 @@ import tempfile
 from pathlib import Path
 
 from bench_process import _run as run_addb_process  # this folder: one `addb process`, (wall, CPU)
+from bench_process import timed_child  # this folder: a child process's (wall, CPU)
 from example_subjects import subject_folder  # this folder: the script's own
 from user_env import compile_sources, user_environment  # this folder: the script's own
 
@@ -57,10 +57,7 @@ DEFAULTS = "import sys; from addb_viewer.cli import main; sys.exit(main(sys.argv
 
 def defaults_cpu(subject: Path, out: Path) -> float:
     """CPU seconds (user + sys) of one fresh ``addb process`` with the interpreter's defaults."""
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run([sys.executable, "-c", DEFAULTS, "process", str(subject), "--out", str(out)], check=True, capture_output=True, env=user_environment())
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return timed_child([sys.executable, "-c", DEFAULTS, "process", str(subject), "--out", str(out)], user_environment())[1]
 
 
 def warm_cpu(subject: Path, out: Path, calls: int) -> list[float]:
