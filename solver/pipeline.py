@@ -197,7 +197,8 @@ def process_kinematics(
     Raises
     ------
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError
-        Bad input, naming the file or trial.
+        Bad input, naming the file or trial; a name in ``options.trials`` that the subject
+        does not have raises KinematicsError before the stage runs.
     """
     with single_threaded_blas(load_scipy=False):  # the kinematics stage uses numpy's BLAS only
         return _process_kinematics(subject_dir, out_dir, options, progress, scaled_model)
@@ -213,6 +214,7 @@ def _process_kinematics(
     opts = options or ProcessOptions()
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
+    _selected(opts.trials, [t.name for t in subject.trials])  # a wrong name fails before the stage runs
     sk = subject_kinematics(subject, opts.kinematics, progress, scaled_model=scaled_model, trials=opts.trials)
     kin = sk.kinematics
     wanted = _selected(opts.trials, [t.name for t in kin.trials])
@@ -276,7 +278,8 @@ def process_subject(
     Raises
     ------
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
-        Bad input, naming the file or trial.
+        Bad input, naming the file or trial; a name in ``options.trials`` that the subject
+        does not have raises KinematicsError before any stage runs.
     """
     with single_threaded_blas():
         return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress)
@@ -528,6 +531,7 @@ def _process_subject(
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
     subject = load_subject(subject_dir)
+    _selected(opts.trials, [t.name for t in subject.trials])  # a wrong name fails before any stage runs
     subject = extend_subject(subject)  # mass and model saved by `addb diagnose --apply`
     key = kinematics_cache_key(subject, opts.kinematics)
     sk = None

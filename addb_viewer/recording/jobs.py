@@ -28,6 +28,7 @@ def ensure_processed(
     out_dir: str | os.PathLike[str] | None = None,
     *,
     progress: Progress | None = None,
+    trial: str | None = None,
 ) -> Path:
     """The output folder of a subject, processing the subject first if it holds no
     processed trial.
@@ -40,18 +41,31 @@ def ensure_processed(
         Output folder; default :func:`addb_viewer.locations.default_output_dir`.
     progress
         Called with (message, fraction) while processing.
+    trial
+        The trial the caller needs: when the subject must be processed first and has no
+        trial of that name, SubjectFolderError is raised before processing.
 
     Returns
     -------
     Path
         The output folder.
+
+    Raises
+    ------
+    SubjectFolderError
+        The subject must be processed and ``subject_dir`` is not a folder, or has no trial
+        ``trial``.
     """
+    from solver.io.subject import load_subject
     from solver.pipeline import process_subject
 
     out = Path(out_dir) if out_dir is not None else default_output_dir(subject_dir)
     if not processed_trials(out):
         if not Path(subject_dir).is_dir():
             raise SubjectFolderError("not a folder", path=subject_dir)
+        names = [t.name for t in load_subject(subject_dir).trials]
+        if trial is not None and trial not in names:  # a typo costs no processing
+            raise SubjectFolderError(f"no trial {trial!r}; the subject's trials are {', '.join(names)}", path=subject_dir)
         process_subject(subject_dir, out, progress=progress)
     return out
 
@@ -150,11 +164,14 @@ def record_subject_trial(
     ------
     GeometryPathError
         ``geometry`` is not a folder (checked before any processing).
+    SubjectFolderError
+        The subject has no trial ``trial`` (checked before any processing), or it was not
+        processed.
     """
     from addb_viewer.geometry import mesh_search_path, trial_search_path
 
     mesh_search_path(None, None, geometry, bundled=False)  # a wrong --geometry fails first
-    out = ensure_processed(subject_dir, out_dir, progress=progress)
+    out = ensure_processed(subject_dir, out_dir, progress=progress, trial=trial)
     processed = load_trial(out, trial)
     return write_recording(
         processed,
