@@ -150,6 +150,7 @@ FIGURES: tuple[Figure, ...] = (
         "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after && echo 'every other file byte-identical'",
         "accuracy", 1.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
+    Figure("dataset-client", RESULTS, f"{PY} tests/benchmarks/bench_dataset_client.py", "timing", 1.5, fence=False),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 walk camargo", "timing", 1.5, fence=False),
     Figure("reprocess-band", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --fit band walk camargo",
            "timing", 5.0, fence=False),
