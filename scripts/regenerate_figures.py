@@ -479,12 +479,23 @@ def stamp_of(fig: Figure) -> tuple[str, bool] | None:
     return match.group(1), bool(match.group(2))
 
 
+def _unmade(fig: Figure) -> bool:
+    """Whether ``fig``'s block is in its document but holds nothing yet (a figure registered
+    and not made: no stamp to read, and nothing to be stale against)."""
+    doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
+    if not doc or not (REPO / doc).exists():
+        return False
+    found = _pattern(fig.name).findall((REPO / doc).read_text())
+    return bool(found) and not found[0][len(BEGIN.format(fig.name)) : -len(END.format(fig.name))].strip()
+
+
 def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
     """Figures whose block was made before a change to the code it measures.
 
     Returns
     -------
-    ``(figure, stamp commit, changed paths)`` for each stamped block whose commit differs
+    ``(figure, stamp commit, changed paths)`` for each empty block (never made: commit
+    ``""``) and each stamped block whose commit differs
     from HEAD in :func:`measured_paths` (``git diff --name-only COMMIT HEAD``; a Python file
     whose code is the same but for docstrings, comments and layout, :func:`_same_code`, is
     no change), or whose
@@ -500,6 +511,9 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
     out = []
     same: dict[tuple[str, str], bool] = {}  # (commit, path) -> _same_code, within this call
     for fig in figures:
+        if _unmade(fig):
+            out.append((fig, "", ["its block is empty"]))
+            continue
         found = stamp_of(fig)
         if found is None:
             continue
@@ -577,7 +591,8 @@ def main() -> int:
         found = stale()
         for fig, commit, changed in found:
             shown = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
-            print(f"{fig.name:40s} {fig.kind:8s} made at {commit}; changed since: {shown}")
+            made = f"made at {commit}; changed since: {shown}" if commit else f"not made: {shown}"
+            print(f"{fig.name:40s} {fig.kind:8s} {made}")
         print(f"{len(found)} of {len(FIGURES)} figures made before a change to the code they measure")
         return 0
     if args.check:

@@ -110,7 +110,8 @@ def test_a_missing_block_is_an_error_naming_the_document(rf, tmp_path) -> None:
 def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, monkeypatch) -> None:
     """In a repository of its own: a block stamped at HEAD is current; one stamped at a commit
     after which the measured code changed is listed with the changed paths (a change outside
-    it is not); an uncommitted stamp is listed as such; an unstamped figure is left out."""
+    it is not); an uncommitted stamp is listed as such, and an empty block as never made; an
+    unstamped figure is left out."""
     git = partial(git_in, tmp_path)
 
     git("init", "-q")
@@ -138,6 +139,11 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     figs = [rf.Figure(n, "doc.md", "python scripts/bench.py", "accuracy", 0.0) for n in ("now", "mid", "old", "dirty", "unstamped")]
     found = {fig.name: (commit, paths) for fig, commit, paths in rf.stale(figs)}
     assert found == {"old": (old, ["solver/fit.py"]), "dirty": (head, ["uncommitted changes"])}
+    # an empty block (registered, never made) is listed as such, not an error
+    (tmp_path / "doc.md").write_text("<!-- begin: new -->\n<!-- end: new -->\n" + block("now", head))
+    assert [(f.name, c, p) for f, c, p in rf.stale([rf.Figure(n, "doc.md", "cmd", "accuracy", 0.0) for n in ("new", "now")])] == [
+        ("new", "", ["its block is empty"])
+    ]
     # a block whose stamp cannot be read is an error, not a figure silently left out
     (tmp_path / "doc.md").write_text("<!-- begin: bad -->\nno stamp\n<!-- end: bad -->\n")
     with pytest.raises(ValueError, match="doc.md: block 'bad' has no stamp"):
