@@ -457,6 +457,16 @@ def _module_files(module: str, folder: Path) -> list[Path]:
     return []
 
 
+def _block(fig: Figure) -> tuple[str, str | None]:
+    """``(document, whole block text)`` of ``fig``: its document's block, or the first
+    document it writes; the text is None when there is no such document or block."""
+    doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
+    if not doc or not (REPO / doc).exists():
+        return doc, None
+    found = _pattern(fig.name).findall((REPO / doc).read_text())
+    return doc, (found[0] if found else None)
+
+
 def stamp_of(fig: Figure) -> tuple[str, bool] | None:
     """``(commit, uncommitted)`` from the stamp of ``fig``'s block (its document's, or the
     first document it writes), or None when it has no block (figures that only write data
@@ -467,13 +477,10 @@ def stamp_of(fig: Figure) -> tuple[str, bool] | None:
     ValueError
         The block's first line is not a stamp :data:`STAMP` reads (naming the document).
     """
-    doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
-    if not doc or not (REPO / doc).exists():
+    doc, block = _block(fig)
+    if block is None:
         return None
-    found = _pattern(fig.name).findall((REPO / doc).read_text())
-    if not found:
-        return None
-    match = STAMP.search(found[0])
+    match = STAMP.search(block)
     if match is None:
         raise ValueError(f"{doc}: block {fig.name!r} has no stamp 'Made by `COMMAND` on DATE, commit HASH (DURATION).'")
     return match.group(1), bool(match.group(2))
@@ -482,11 +489,8 @@ def stamp_of(fig: Figure) -> tuple[str, bool] | None:
 def _unmade(fig: Figure) -> bool:
     """Whether ``fig``'s block is in its document but holds nothing yet (a figure registered
     and not made: no stamp to read, and nothing to be stale against)."""
-    doc = fig.doc or next((w for w in fig.writes if w.endswith(".md")), "")
-    if not doc or not (REPO / doc).exists():
-        return False
-    found = _pattern(fig.name).findall((REPO / doc).read_text())
-    return bool(found) and not found[0][len(BEGIN.format(fig.name)) : -len(END.format(fig.name))].strip()
+    block = _block(fig)[1]
+    return block is not None and not block[len(BEGIN.format(fig.name)) : -len(END.format(fig.name))].strip()
 
 
 def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
