@@ -115,6 +115,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("fit-round-tolerance", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 "
            "camargo2021_levelground --direction coefficients --rounds 4 --round-tolerance none 3e-4 1e-3 2e-3",
            "timing", 1.5, fence=False),
+    Figure("joint-fit", RESULTS, f"{PY} tests/benchmarks/bench_joint_fit.py --sigma 0.25 0.5", "timing", 1.5, fence=False),
     Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 0.5, fence=False),
     Figure("growth-band", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit band", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),

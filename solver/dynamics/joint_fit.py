@@ -1,0 +1,259 @@
+"""The dynamics fit with the body masses solved jointly with the coordinates (a candidate).
+
+:func:`solver.dynamics.fit.fit_dynamics`, the pipeline's fit, alternates rounds of
+coordinate steps with a least-squares solve of the body mass factors whose prior is centred
+on each round's masses. That alternation has no fixed cost, so it has no end point: run on,
+the mass factors of the distal segments keep drifting (the walk's left toes 0.49 of their
+mass after 24 rounds, 2026-11-26), and the cap of 4 rounds is what stops it on the walk, the
+run and the OpenCap subject (tests/benchmarks/RESULTS.md, block ``fit-rounds``).
+
+:func:`fit_dynamics_joint` minimizes one cost, fixed for the whole fit: the trials' costs of
+:mod:`solver.dynamics.fit` (markers, root residual wrench, accelerations) plus a prior
+``sum_j w_j² (f_j - 1)²`` on the mass factor f_j of each mass-carrying pinocchio joint,
+relative to the masses the fit starts from. Each Levenberg-Marquardt step solves the spline
+coefficients of every trial and the relative changes s of the factors at once: each trial's
+banded normal matrix in the coefficients is bordered by J dense columns, the derivatives of
+its weighted residual wrench with respect to s (:meth:`_BorderedProblem.mass_rows`), and
+the bordered system is solved by its Schur complement (each trial's banded Cholesky
+factor, J + 1 back-substitutions, then a J x J system; Triggs et al. 2000, "Bundle
+adjustment - a modern synthesis", §6.1, the same reduction with cameras and points). The
+total mass, set by the centre-of-mass fit, is held: each step keeps ``sum_j m_j s_j = 0``
+(a Lagrange multiplier on the J x J system). The fit stops when a step lowers the cost by
+less than ``FitSettings.tolerance`` (relative): a convergence test on one cost.
+
+The root residual wrench is linear in each joint's inertia. With F_j and N_j the rate of
+linear momentum of joint j's bodies and of their angular momentum about the ground origin
+(pinocchio's ``data.of`` of the joint's subtree minus its children's, world frame), m_j
+their mass, c_j their centre of mass, c and M the whole body's, pdot its rate of linear
+momentum and F_ext the external force, scaling joint j's mass and inertia by 1 + s_j gives
+
+    d F_res / d s_j = F_j - m_j g
+    d M_res / d s_j = N_j - c x F_j - (m_j (c_j - c) / M) x (pdot - F_ext)
+
+for F_res = pdot - M g - F_ext and M_res = kdot_G - (M_ext - c x F_ext), kdot_G = N - c x pdot
+(tests/dynamics/test_joint_fit.py checks them by finite differences).
+
+Not the pipeline's fit: ``addb process`` runs :func:`~solver.dynamics.fit.fit_dynamics`,
+whose outputs the diagnosis is calibrated on (docs/diagnose/RESULTS.md). This module is the
+measured candidate for issue 29's "stops on a convergence test"
+(tests/benchmarks/RESULTS.md, block ``joint-fit``: ``tests/benchmarks/bench_joint_fit.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import LinAlgError
+
+from solver.dynamics.banded import banded_cholesky, banded_cholesky_back
+from solver.dynamics.fit import FitOutput, FitSettings, FitTrialInput, _TrialProblem, converged_fit
+from solver.errors import DynamicsError
+from solver.model.skeleton import Skeleton
+
+FloatArray = np.ndarray
+#: Solves of one step (the damping grows 4-fold after each that raises the cost).
+TRIES = 10
+
+
+def mass_joints(sk: Skeleton) -> list[int]:
+    """Pinocchio joints that carry mass: one mass factor each (the bodies welded to a joint
+    share it, as in :func:`solver.dynamics.fit.mass_regression`)."""
+    return [j for j in range(1, sk.model.njoints) if sk.model.inertias[j].mass > 0]
+
+
+class _BorderedProblem(_TrialProblem):
+    """A trial's problem with the mass border of its Gauss-Newton system
+    (``direction="coefficients"`` only)."""
+
+    def __init__(self, sk: Skeleton, data: FitTrialInput, st: FitSettings, joints: list[int]) -> None:
+        super().__init__(sk, data, st)
+        self.joints = joints
+        model = sk.model
+        self._m = np.array([model.inertias[j].mass for j in joints])
+        self._lever = np.array([model.inertias[j].lever for j in joints])  # (J, 3), joint frame
+        self.rows: FloatArray | None = None  # (T, 6, J) weighted d res / d s at the last linearization
+        self.res: FloatArray | None = None  # (T, 6) weighted residual wrench there
+        self.border: FloatArray | None = None  # (nc, nf, J) J_a^T rows
+
+    def mass_rows(self, q: FloatArray) -> FloatArray:
+        """``(T, 6, J)`` derivatives of the unweighted root residual wrench [force, moment
+        about the centre of mass] (N, N·m; ground frame) with respect to s_j, the relative
+        change of the mass and inertia of joint ``joints[j]`` (module docstring)."""
+        qp, vp, ap, hdot, com = self._dynamics_state(q)
+        model, data = self.sk.model, self.sk.data
+        t = self.t
+        ofs = np.empty((t, model.njoints, 6))
+        for k in range(t):
+            pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+            ofs[k] = [f.vector for f in data.of]  # each subtree's momentum rate, world frame, about the origin
+        own = ofs.copy()
+        for j in range(model.njoints - 1, 0, -1):
+            own[:, model.parents[j]] -= ofs[:, j]
+        joints = self.joints
+        rot, pos = self.sk._joint_poses_soa(q)
+        c_j = np.einsum("jikt,jk->tji", rot[joints], self._lever) + pos[joints].transpose(2, 0, 1)  # (T, J, 3)
+        f_j, n_j = own[:, joints, :3], own[:, joints, 3:]
+        d_f = f_j - self._m[None, :, None] * self.g
+        dc = self._m[None, :, None] * (c_j - com[:, None, :]) / self.mass
+        lin = hdot[:, :3] - self.data.force  # pdot - F_ext
+        d_m = n_j - np.cross(com[:, None, :], f_j) - np.cross(dc, lin[:, None, :])
+        return np.concatenate([d_f, d_m], axis=2).transpose(0, 2, 1)
+
+    def _linearize(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        out = super()._linearize(q)
+        _, _, res, dq, dv, da = out
+        self.rows = self.mass_rows(q) * self.w_res[:, :, None]
+        self.res = res
+        cm, nj = self.cmaps, len(self.joints)
+        # J_a^T rows: each frame's rows depend on the coefficients through E0, E1, E2 (the
+        # same maps as the gradient's), so the border is E0^T P0 + E1^T P1 + E2^T P2 with
+        # P[k] = (d r_k / d x_k)^T rows_k for x the positions, velocities, accelerations
+        parts = [np.einsum("krf,krj->kfj", d, self.rows).reshape(self.t, -1) for d in (dq, dv, da)]
+        self.border = (cm.e0.T @ parts[0] + cm.e1.T @ parts[1] + cm.e2.T @ parts[2]).reshape(-1, self.nf, nj)
+        return out
+
+
+def fit_dynamics_joint(
+    build: Callable[[Mapping[str, float]], Skeleton],
+    trials: Sequence[FitTrialInput],
+    settings: FitSettings | None = None,
+    progress: Callable[[str, float], None] | None = None,
+) -> FitOutput:
+    """Fit the coordinates of every trial and the body mass factors together (module docstring).
+
+    Parameters
+    ----------
+    build
+        ``(mass_factors: dict[body, float]) -> Skeleton``: the model with each body's mass
+        and inertia multiplied by its factor, all rescaled to the model's total mass (as
+        :func:`solver.dynamics.stage.run_dynamics` builds it).
+    trials
+        The trials with force data.
+    settings
+        Weights, ``mass_sigma`` (the prior's deviation of a factor from 1, relative),
+        ``tolerance`` (the convergence test) and ``rounds x iterations`` (the most steps);
+        ``direction`` must be ``"coefficients"``. Default :func:`~solver.dynamics.fit.converged_fit`.
+    progress
+        Optional callable (message, fraction).
+
+    Returns
+    -------
+    FitOutput
+        ``(T, n)`` coordinates per trial, the factor of every body (relative to ``build({})``'s
+        masses), and the total cost after each accepted step (the first entry at the start).
+
+    The prior weights are set once, at the first step, on the scale of the data as the
+    alternation sets its own: ``w_j² = share_j mean_i(|G_i|²) / (6 mass_sigma²)``, G the
+    columns of the weighted residual rows' derivatives with respect to s and share_j the
+    joint's share of the mass. A step that raises the cost is solved again with 4 times the
+    damping, the coordinates it carried past a bound held where they are; after
+    :data:`TRIES` such solves the fit ends where it is.
+
+    Raises
+    ------
+    DynamicsError
+        ``settings.direction`` is not ``"coefficients"``.
+    """
+    st = settings or converged_fit()
+    if st.direction != "coefficients":
+        raise DynamicsError(f"the joint mass fit needs direction='coefficients', not {st.direction!r}")
+    sk = build({})
+    joints = mass_joints(sk)
+    m0 = np.array([sk.model.inertias[j].mass for j in joints])
+    bodies: dict[int, list[str]] = {}
+    for b, j in zip(sk.body_names, sk.body_joint):
+        bodies.setdefault(int(j), []).append(b)
+
+    def factors_of(f: FloatArray) -> dict[str, float]:
+        return {b: float(fj) for j, fj in zip(joints, f) for b in bodies.get(j, [])}
+
+    def problems(sk: Skeleton) -> list[_BorderedProblem]:
+        return [_BorderedProblem(sk, tr, st, joints) for tr in trials]
+
+    nj = len(joints)
+    f = np.ones(nj)
+    qs = [np.array(tr.q, dtype=float) for tr in trials]
+    probs = problems(sk)
+    w2 = np.zeros(nj)  # prior weights squared, set at the first step
+    cost = sum(p.cost(q) for p, q in zip(probs, qs))
+    history = [cost]
+    mu = 1e-6
+    steps = st.rounds * st.iterations
+    for it in range(steps):
+        if progress:
+            progress(f"dynamics fit: step {it + 1}", it / steps)
+        systems = []
+        c_ss = np.zeros((nj, nj))
+        g_s = np.zeros(nj)
+        for p, q in zip(probs, qs):
+            bands, grad, g_q, diag = p.coefficient_equations(q)
+            x = q[:, p.free]
+            held = ((x <= p.lo[p.free]) & (g_q > 0)) | ((x >= p.hi[p.free]) & (g_q < 0))
+            grad = grad.copy()
+            if held.any():
+                p._hold(bands, grad, held, diag)
+            c_ss += np.einsum("krj,kri->ji", p.rows, p.rows)
+            g_s += np.einsum("krj,kr->j", p.rows, p.res)
+            systems.append((p, q, bands, grad, held, diag, p.border.reshape(-1, nj)))
+        if it == 0:
+            w2 = (m0 / m0.sum()) * np.mean(np.diag(c_ss)) / (6.0 * st.mass_sigma**2)
+        c_ss += np.diag(w2 * f**2)
+        g_s += w2 * f * (f - 1.0)  # the prior's residuals w (f (1 + s) - 1): half-cost gradient at s = 0
+        damp_s = np.maximum(np.diag(c_ss).copy(), 1e-9)
+        constraint = m0 * f  # sum_j m_j s_j = 0: the total mass stays
+        step = None
+        for _ in range(TRIES):
+            schur = c_ss + mu * np.diag(damp_s)
+            rhs = -g_s.copy()
+            backs = []
+            try:
+                for p, q, bands, grad, held, diag, border in systems:
+                    ab = bands.lower_band_storage()  # a fresh copy: the bands stay for another try
+                    damp = np.maximum(diag.reshape(-1), 1e-9)
+                    ab[0] += mu * damp
+                    chol = banded_cholesky(ab, overwrite=True)
+                    z = banded_cholesky_back(chol, border)  # (N, J)
+                    y = banded_cholesky_back(chol, grad.reshape(-1))
+                    schur -= border.T @ z
+                    rhs += border.T @ y
+                    backs.append((z, y, damp))
+            except LinAlgError:
+                mu *= 10
+                continue
+            kkt = np.zeros((nj + 1, nj + 1))
+            kkt[:nj, :nj] = schur
+            kkt[:nj, nj] = kkt[nj, :nj] = constraint
+            ds = np.linalg.solve(kkt, np.concatenate([rhs, [0.0]]))[:nj]
+            f_new = np.clip(f * (1.0 + ds), 0.5, 2.0)
+            probs_new = problems(build(factors_of(f_new)))
+            predicted = float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
+            q_new, deltas = [], []
+            for (p, q, _, grad, _, _, _), (z, y, damp), pn in zip(systems, backs, probs_new):
+                da = -y - z @ ds
+                predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
+                deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
+                q_new.append(pn._take(q, deltas[-1]))
+            cost_new = sum(pn.cost(qn) for pn, qn in zip(probs_new, q_new)) + float(np.sum(w2 * (f_new - 1.0) ** 2))
+            if cost_new < cost:
+                rho = (cost - cost_new) / max(predicted, 1e-300)
+                mu = max(mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12)
+                step = (cost - cost_new) / max(cost, 1e-30)
+                f, probs, qs, cost = f_new, probs_new, q_new, cost_new
+                history.append(cost)
+                break
+            # the coordinates the step carried past a bound are held where they are for the
+            # next solve (a hold toward the bound, as a single trial's step has, kept the
+            # walk's fit from any further decrease: the rejected step had flung them there)
+            for (p, q, bands, grad, held, diag, _), delta in zip(systems, deltas):
+                x = q[:, p.free]
+                lo, hi = p.lo[p.free], p.hi[p.free]
+                over = ((x + delta < lo) | (x + delta > hi)) & ~held
+                if over.any():
+                    held |= over
+                    p._hold(bands, grad, over, diag)
+            mu *= 4
+        if step is None or step < st.tolerance:
+            break
+    return FitOutput(tuple(qs), factors_of(f), tuple(history))
