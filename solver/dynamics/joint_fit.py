@@ -46,8 +46,9 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import LinAlgError
+from scipy.linalg.lapack import dtbtrs
 
-from solver.dynamics.banded import banded_cholesky, banded_cholesky_back
+from solver.dynamics.banded import banded_cholesky
 from solver.dynamics.fit import FitOutput, FitSettings, FitTrialInput, _TrialProblem, converged_fit
 from solver.errors import DynamicsError
 from solver.model.skeleton import Skeleton
@@ -55,6 +56,27 @@ from solver.model.skeleton import Skeleton
 FloatArray = np.ndarray
 #: Solves of one step (the damping grows 4-fold after each that raises the cost).
 TRIES = 10
+#: After a step that needed more damping than the last, the damping stays at least that
+#: high for the next steps, the floor halving at each (a step at a third of it, Nielsen's
+#: rule after a good step, raised the cost on the walk and the OpenCap subject at every step).
+FLOOR_DECAY = 0.5
+
+
+def _triangular_solve(factor: FloatArray, rhs: FloatArray, transpose: bool = False) -> FloatArray:
+    """``L^-1 rhs`` (``L^-T rhs`` with ``transpose``) for the lower banded Cholesky factor L
+    of :func:`solver.dynamics.banded.banded_cholesky` (LAPACK ``dtbtrs``); ``rhs`` ``(N,)`` or
+    ``(N, k)``.
+
+    Raises
+    ------
+    LinAlgError
+        A LAPACK argument error or a zero on the factor's diagonal.
+    """
+    b = rhs.reshape(rhs.shape[0], -1)
+    x, info = dtbtrs(factor, b, uplo="L", trans="T" if transpose else "N")
+    if info != 0:
+        raise LinAlgError(f"dtbtrs failed (info {info})")
+    return x.reshape(rhs.shape)
 
 
 def mass_joints(sk: Skeleton) -> list[int]:
@@ -179,7 +201,7 @@ def fit_dynamics_joint(
     w2 = np.zeros(nj)  # prior weights squared, set at the first step
     cost = sum(p.cost(q) for p, q in zip(probs, qs))
     history = [cost]
-    mu = 1e-6
+    mu, floor = 1e-6, 0.0
     steps = st.rounds * st.iterations
     for it in range(steps):
         if progress:
@@ -203,22 +225,23 @@ def fit_dynamics_joint(
         g_s += w2 * f * (f - 1.0)  # the prior's residuals w (f (1 + s) - 1): half-cost gradient at s = 0
         damp_s = np.maximum(np.diag(c_ss).copy(), 1e-9)
         constraint = m0 * f  # sum_j m_j s_j = 0: the total mass stays
-        step = None
+        step, raised = None, False
         for _ in range(TRIES):
+            # Schur complement with A = L L^T: S = C - W^T W, W = L^-1 B; da = -L^-T (v + W ds), v = L^-1 g
             schur = c_ss + mu * np.diag(damp_s)
             rhs = -g_s.copy()
-            backs = []
+            solved = []
             try:
                 for p, q, bands, grad, held, diag, border in systems:
                     ab = bands.lower_band_storage()  # a fresh copy: the bands stay for another try
                     damp = np.maximum(diag.reshape(-1), 1e-9)
                     ab[0] += mu * damp
                     chol = banded_cholesky(ab, overwrite=True)
-                    z = banded_cholesky_back(chol, border)  # (N, J)
-                    y = banded_cholesky_back(chol, grad.reshape(-1))
-                    schur -= border.T @ z
-                    rhs += border.T @ y
-                    backs.append((z, y, damp))
+                    wv = _triangular_solve(chol, np.column_stack([border, grad.reshape(-1)]))
+                    w_b, v = wv[:, :nj], wv[:, nj]
+                    schur -= w_b.T @ w_b
+                    rhs += w_b.T @ v
+                    solved.append((chol, w_b, v, damp))
             except LinAlgError:
                 mu *= 10
                 continue
@@ -230,15 +253,18 @@ def fit_dynamics_joint(
             probs_new = problems(build(factors_of(f_new)))
             predicted = float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
             q_new, deltas = [], []
-            for (p, q, _, grad, _, _, _), (z, y, damp), pn in zip(systems, backs, probs_new):
-                da = -y - z @ ds
+            for (p, q, _, grad, _, _, _), (chol, w_b, v, damp), pn in zip(systems, solved, probs_new):
+                da = -_triangular_solve(chol, v + w_b @ ds, transpose=True)
                 predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
                 deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
                 q_new.append(pn._take(q, deltas[-1]))
             cost_new = sum(pn.cost(qn) for pn, qn in zip(probs_new, q_new)) + float(np.sum(w2 * (f_new - 1.0) ** 2))
             if cost_new < cost:
                 rho = (cost - cost_new) / max(predicted, 1e-300)
-                mu = max(mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12)
+                if raised:
+                    floor = max(floor, mu)
+                mu = max(mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12, floor)
+                floor *= FLOOR_DECAY
                 step = (cost - cost_new) / max(cost, 1e-30)
                 f, probs, qs, cost = f_new, probs_new, q_new, cost_new
                 history.append(cost)
@@ -254,6 +280,7 @@ def fit_dynamics_joint(
                     held |= over
                     p._hold(bands, grad, over, diag)
             mu *= 4
+            raised = True
         if step is None or step < st.tolerance:
             break
     return FitOutput(tuple(qs), factors_of(f), tuple(history))
