@@ -15,8 +15,9 @@ coefficients of every trial and the relative changes s of the factors at once: e
 banded normal matrix in the coefficients is bordered by J dense columns, the derivatives of
 its weighted residual wrench with respect to s (:meth:`_BorderedProblem.mass_rows`), and
 the bordered system is solved by its Schur complement (each trial's banded Cholesky
-factor, J + 1 back-substitutions, then a J x J system; Triggs et al. 2000, "Bundle
-adjustment - a modern synthesis", §6.1, the same reduction with cameras and points). The
+factor L, J + 1 forward substitutions W = L^-1 [B, g], the J x J system S = C - W^T W, one
+back-substitution for the coordinates' step; Triggs et al. 2000, "Bundle adjustment - a
+modern synthesis", §6.1, the same reduction with cameras and points). The
 total mass, set by the centre-of-mass fit, is held: each step keeps ``sum_j m_j s_j = 0``
 (a Lagrange multiplier on the J x J system). The fit stops when a step lowers the cost by
 less than ``FitSettings.tolerance`` (relative): a convergence test on one cost.
@@ -170,8 +171,9 @@ def fit_dynamics_joint(
     alternation sets its own: ``w_j² = share_j mean_i(|G_i|²) / (6 mass_sigma²)``, G the
     columns of the weighted residual rows' derivatives with respect to s and share_j the
     joint's share of the mass. A step that raises the cost is solved again with 4 times the
-    damping, the coordinates it carried past a bound held where they are; after
-    :data:`TRIES` such solves the fit ends where it is.
+    damping, the coordinates it carried past a bound held where they are, and the damping
+    of the next steps stays at least that high (:data:`FLOOR_DECAY`); after :data:`TRIES`
+    such solves the fit ends where it is.
 
     Raises
     ------
@@ -206,7 +208,7 @@ def fit_dynamics_joint(
     for it in range(steps):
         if progress:
             progress(f"dynamics fit: step {it + 1}", it / steps)
-        systems = []
+        systems, solved = [], []  # the last step's normal matrices and factors go before new ones are made
         c_ss = np.zeros((nj, nj))
         g_s = np.zeros(nj)
         for p, q in zip(probs, qs):
