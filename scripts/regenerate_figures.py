@@ -168,6 +168,13 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-results", "docs/diagnose/RESULTS.md",
            f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
            fence=False),
+    Figure("diagnose-joint-draws-0-9", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.5 -- --draws 10 --synthetic 5 "
+           "--json docs/diagnose/joint_fit_draws_0_9.json", "accuracy", 20.0),
+    Figure("diagnose-joint-draws-10-19", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.5 -- --first 10 --draws 10 "
+           "--synthetic 0 --json docs/diagnose/joint_fit_draws_10_19.json", "accuracy", 15.0),
+    Figure("diagnose-joint-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --compare docs/diagnose/results_draws_0_9.json "
+           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_draws_0_9.json docs/diagnose/joint_fit_draws_10_19.json",
+           "accuracy", 0.1, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
