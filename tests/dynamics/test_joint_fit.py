@@ -124,3 +124,53 @@ def test_the_joint_fit_is_at_least_as_good_as_the_alternation_on_the_walk(walk: 
     assert j["n_observed_frames"] == a["n_observed_frames"]  # type: ignore[index]
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
         assert j[key] <= a[key], key  # type: ignore[index]
+
+
+def test_restarted_from_its_answer_the_joint_fit_finds_little_more(walk: dict[str, object]) -> None:
+    """One fixed cost, so a restart from the coordinates the fit ended on (the masses back
+    at the start's) is comparable: it lowers the cost by less than 1 % of what the first
+    fit removed. (It does lower it, by 0.2 % of the cost on the walk, 2026-11-26: the test
+    on one step's decrease stops in a slow tail; run on to 48 steps the walk's cost fell
+    0.3 % further, OpenCap's 0.5 %.)"""
+    out: FitOutput = walk["joint"]  # type: ignore[assignment]
+    st = replace(walk["settings"], mass_sigma=SIGMA)  # type: ignore[type-var]
+    trials = [replace(tr, q=q) for tr, q in zip(walk["trials"], out.q)]  # type: ignore[call-overload]
+    again = fit_dynamics_joint(walk["build"], trials, st)  # type: ignore[arg-type]
+    removed = out.history[0] - out.history[-1]
+    assert again.history[-1] <= out.history[-1] * (1 + st.tolerance)
+    assert out.history[-1] - again.history[-1] < 0.01 * removed
+
+
+OPENCAP = WALK.parent / "opencap_uhlrich2023"
+
+
+def test_the_joint_fit_solves_two_trials_together_on_opencap(tmp_path: Path) -> None:
+    """The OpenCap subject's two trials (a drop jump and a walk) share the mass factors:
+    the fit ends on its convergence test with the total mass kept, and every trial's marker
+    RMS and residuals at or below the alternation's (the pipeline's metrics)."""
+    seen: dict[str, object] = {}
+
+    def joint(build, trials, settings, progress=None) -> FitOutput:  # type: ignore[no-untyped-def]
+        out = fit_dynamics_joint(build, trials, replace(settings, mass_sigma=SIGMA), progress)
+        seen.update(out=out, settings=settings, build=build, n=len(trials))
+        return out
+
+    stage_module.fit_dynamics = joint  # type: ignore[assignment]
+    try:
+        process_subject(OPENCAP, tmp_path / "joint")
+    finally:
+        stage_module.fit_dynamics = fit_dynamics
+    process_subject(OPENCAP, tmp_path / "alternation")
+    out: FitOutput = seen["out"]  # type: ignore[assignment]
+    st = seen["settings"]
+    assert seen["n"] == 2
+    h = out.history
+    assert (h[-2] - h[-1]) / h[-2] < st.tolerance and len(h) - 1 < st.rounds * st.iterations  # type: ignore[attr-defined]
+    build = seen["build"]
+    assert build(out.mass_factors).total_mass == pytest.approx(build({}).total_mass, rel=1e-12)  # type: ignore[operator]
+    for trial in ("DJ1", "walking1"):
+        a = json.loads((tmp_path / "alternation" / trial / "results.json").read_text())
+        j = json.loads((tmp_path / "joint" / trial / "results.json").read_text())
+        assert j["n_observed_frames"] == a["n_observed_frames"]
+        for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
+            assert j[key] <= a[key], (trial, key)
