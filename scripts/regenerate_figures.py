@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import re
+import shlex
 import subprocess
 import sys
 import time
@@ -501,7 +502,17 @@ def _unmade(fig: Figure) -> bool:
     return block is not None and not block[len(BEGIN.format(fig.name)) : -len(END.format(fig.name))].strip()
 
 
-def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
+def _reader(fig: Figure, figures: tuple[Figure, ...] | list[Figure]) -> Figure | None:
+    """The first figure of ``figures`` with a block whose command names a ``.json`` file that
+    ``fig``'s command names (the block that pools the data ``fig`` writes), or None."""
+    data = {t for t in shlex.split(fig.command) if t.endswith(".json")}
+    for other in figures:
+        if other.name != fig.name and data & set(shlex.split(other.command)) and _block(other)[1] is not None:
+            return other
+    return None
+
+
+def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
     """Figures whose block was made before a change to the code it measures.
 
     Returns
@@ -515,6 +526,12 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
     changes cannot be compared). Timing figures are also moved by the host, which this
     does not see.
 
+    A figure that only writes data files (no block of its own, such as the diagnosis'
+    draws) is read against the stamp of the first of ``readers`` that pools its ``.json``
+    output (:func:`_reader`), with its own measured code: when the code changes after that
+    block was made, the writer is listed beside it (re-making the pooling block alone would
+    stamp the old data with the new code). A writer no block reads is left out.
+
     Raises
     ------
     subprocess.CalledProcessError
@@ -527,6 +544,9 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Fi
             out.append((fig, "", ["its block is empty"]))
             continue
         found = stamp_of(fig)
+        if found is None:
+            reader = _reader(fig, readers)
+            found = stamp_of(reader) if reader is not None else None
         if found is None:
             continue
         commit, uncommitted = found

@@ -176,6 +176,32 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
 
 
+def test_a_data_writer_is_stale_with_the_block_that_pools_its_output(rf, tmp_path, monkeypatch) -> None:
+    """A figure that writes only a data file (the diagnosis' draws) has no stamp of its own:
+    it is read against the stamp of the block whose command reads that file, with its own
+    measured code, so a change to that code after the block was made lists the writer too
+    (and a change to the pooling script alone does not); a writer no block reads is left out."""
+    git = partial(git_in, tmp_path)
+    repository_of(tmp_path, {"solver/fit.py": "x = 1\n", "scripts/draws.py": "from solver.fit import x\n", "scripts/pool.py": "y = 1\n"})
+    made = git("rev-parse", "--short", "HEAD")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    (tmp_path / "doc.md").write_text(f"<!-- begin: pool -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nt\n<!-- end: pool -->\n")
+    draws = rf.Figure("draws", "", "python scripts/draws.py --json out/d.json", "accuracy", 0.0)
+    pool = rf.Figure("pool", "doc.md", "python scripts/pool.py --from-json out/d.json", "accuracy", 0.0)
+    lone = rf.Figure("lone", "", "python scripts/draws.py --json out/other.json", "accuracy", 0.0)
+    figs = [draws, pool, lone]
+    assert rf.stale(figs, readers=figs) == []
+    (tmp_path / "scripts" / "pool.py").write_text("y = 2\n")
+    git("commit", "-q", "-am", "the pooling script changes")
+    assert [(f.name, p) for f, _, p in rf.stale(figs, readers=figs)] == [("pool", ["scripts/pool.py"])]
+    (tmp_path / "solver" / "fit.py").write_text("x = 2\n")
+    git("commit", "-q", "-am", "the code the draws measure changes")
+    assert [(f.name, c, p) for f, c, p in rf.stale(figs, readers=figs)] == [
+        ("draws", made, ["solver/fit.py"]),
+        ("pool", made, ["scripts/pool.py"]),
+    ]
+
+
 def test_a_figure_measures_the_scripts_its_command_reaches_and_no_others(rf, tmp_path, monkeypatch) -> None:
     """measured_paths follows the command's script through its imports (a sibling by bare
     name, a module of tests/ and each package's __init__.py, an import inside a function)
