@@ -42,6 +42,7 @@ from solver.dynamics.fit import FitSettings, converged_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
 from tests.benchmarks.example_subjects import subject_folder
+from tests.benchmarks.trial_results import force_trial_results
 
 
 def _variants(directions: list[str], rounds: list[int], round_tolerances: list[str]) -> list[tuple[str, int, str]]:
@@ -88,12 +89,9 @@ def main() -> None:
                 process_subject(subject, out, options=options)
                 wall = time.perf_counter() - t0
                 fit_s = (json.loads((out / "subject.json").read_text()).get("dynamics_seconds") or {}).get("dynamics_fit", float("nan"))
-                for res in sorted(out.glob("*/results.json")):
-                    r = json.loads(res.read_text())
-                    if "linear_residual_rms_N" not in r:
-                        continue
+                for trial, r in force_trial_results(out):
                     print(
-                        f"| {name} / {res.parent.name} | {direction} | {rounds} | {rt} | {wall:.1f} | {fit_s:.1f} | {steps[0]} "
+                        f"| {name} / {trial} | {direction} | {rounds} | {rt} | {wall:.1f} | {fit_s:.1f} | {steps[0]} "
                         f"| {r['n_observed_frames']} "
                         f"| {r['marker_rms_m'] * 100:.3f} | {r['linear_residual_rms_N']:.2f} ({r['linear_residual_mean_N']:.2f}) "
                         f"| {r['angular_residual_rms_Nm']:.2f} |",

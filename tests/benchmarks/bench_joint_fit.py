@@ -28,7 +28,6 @@ the centre-of-mass fit set), measured frames, marker RMS (cm), and the linear (N
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -44,6 +43,7 @@ from solver.dynamics.fit import FitOutput, fit_dynamics
 from solver.dynamics.joint_fit import fit_dynamics_joint
 from solver.pipeline import process_subject
 from tests.benchmarks.example_subjects import subject_folder
+from tests.benchmarks.trial_results import force_trial_results
 
 
 def _largest_change(build: object, factors: dict[str, float]) -> float:
@@ -99,12 +99,9 @@ def main() -> None:
                     process_subject(subject, out)
                 finally:
                     stage_module.fit_dynamics = fit_dynamics
-                for res in sorted(out.glob("*/results.json")):
-                    r = json.loads(res.read_text())
-                    if "linear_residual_rms_N" not in r:
-                        continue
+                for trial, r in force_trial_results(out):
                     print(
-                        f"| {name} / {res.parent.name} | {label} | {record['cpu']:.2f} | {record['steps']} | {record['stop']} "
+                        f"| {name} / {trial} | {label} | {record['cpu']:.2f} | {record['steps']} | {record['stop']} "
                         f"| {record['change']:.1f} | {r['n_observed_frames']} | {r['marker_rms_m'] * 100:.3f} "
                         f"| {r['linear_residual_rms_N']:.2f} | {r['angular_residual_rms_Nm']:.2f} |",
                         flush=True,
