@@ -455,16 +455,18 @@ def load_kinematics_cache(out_dir: str | Path, key: dict[str, Any]) -> tuple[Sub
     return data["kinematics"], "kinematics cache is valid"
 
 
-FIT_CHOICES = ("default", "converged", "band")
+FIT_CHOICES = ("default", "converged", "rounds", "band")
 """Names of the dynamics fits ``addb process --fit`` offers (:func:`options_for_fit`)."""
 
 
 def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOptions:
     """Process options for a named dynamics fit: ``"default"`` (the same as ``"converged"``),
     ``"converged"`` (:func:`solver.dynamics.fit.converged_fit`: exact banded Gauss-Newton
-    steps until the cost and the body mass factors settle) or ``"band"`` (``FitSettings()``:
-    truncated-band steps, a fixed number of rounds; the older default, which the diagnosis
-    was calibrated on until 2026-11-26, :mod:`solver.diagnose.judged_fit`).
+    steps of the coordinates and the body mass factors together until the cost settles,
+    :mod:`solver.dynamics.joint_fit`), ``"rounds"`` (:func:`solver.dynamics.fit.alternating_fit`:
+    the same steps alternating with mass solves, the default until 2026-11-26 and the fit the
+    diagnosis judges on, :mod:`solver.diagnose.judged_fit`) or ``"band"`` (``FitSettings()``:
+    truncated-band steps, a fixed number of rounds; the older default).
 
     Raises
     ------
@@ -474,11 +476,11 @@ def options_for_fit(name: str, trials: Sequence[str] | None = None) -> ProcessOp
     if name not in FIT_CHOICES:
         raise ValueError(f"unknown dynamics fit {name!r} (use one of {', '.join(FIT_CHOICES)})")
     dynamics = None
-    if name == "band":
-        from solver.dynamics.fit import FitSettings
+    if name in ("band", "rounds"):
+        from solver.dynamics.fit import FitSettings, alternating_fit
         from solver.dynamics.stage import DynamicsOptions
 
-        dynamics = DynamicsOptions(fit=FitSettings())
+        dynamics = DynamicsOptions(fit=FitSettings() if name == "band" else alternating_fit())
     return ProcessOptions(trials=tuple(trials) if trials else None, dynamics=dynamics)
 
 

@@ -115,10 +115,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
-        "--fit", choices=("default", "converged", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up
-        help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps until the cost and the "
-             "body mass factors settle; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed "
-             "number of rounds: the older default; see tests/benchmarks/RESULTS.md)",
+        "--fit", choices=("default", "converged", "rounds", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up
+        help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps of the coordinates and the "
+             "body mass factors together until the cost settles), 'rounds' (the same steps alternating with "
+             "mass solves; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed number of "
+             "rounds: the older default; see tests/benchmarks/RESULTS.md)",
     )  # fmt: skip
     p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")

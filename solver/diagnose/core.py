@@ -701,10 +701,11 @@ def diagnose_trial(
 ) -> Diagnosis:
     """Diagnose one processed trial of a subject.
 
-    The trial is judged on the fit the diagnosis is calibrated on, the pipeline's default
-    converged fit (:mod:`solver.diagnose.judged_fit`): when the output was made with another
-    (``--fit band``), the subject's dynamics are run again with it in a scratch folder
-    first, and the report's figures are that fit's (``settings["judged_fit"]``).
+    The trial is judged on the fit the diagnosis is calibrated on, the alternation of
+    ``addb process --fit rounds`` (:mod:`solver.diagnose.judged_fit`): when the output was
+    made with another (the default joint fit, ``--fit band``), the subject's dynamics are run
+    again with it in a scratch folder first, and the report's figures are that fit's
+    (``settings["judged_fit"]``: the two fits' names, :func:`solver.dynamics.fit.fit_name`).
 
     Parameters
     ----------
@@ -734,6 +735,7 @@ def diagnose_trial(
         The trial has no dynamics (no force plates).
     """
     from solver.diagnose.judged_fit import is_judged_fit, judged_fit, judged_output
+    from solver.dynamics.fit import fit_name
     from solver.pipeline import recorded_dynamics_options
 
     say = progress or (lambda m, f: None)
@@ -747,8 +749,8 @@ def diagnose_trial(
         processed = load_processed(base, trial)
         diag = diagnose_processed(processed, inputs, options, lambda m, f: say(m, share + (1 - share) * f))
     diag.settings["judged_fit"] = {
-        "direction": judged_fit(processed_fit).direction,
-        "processed_direction": processed_fit.direction,
+        "fit": fit_name(judged_fit(processed_fit)),
+        "processed_fit": fit_name(processed_fit),
         "rebuilt": rebuilt,
     }
     return diag

@@ -1,31 +1,34 @@
 """The dynamics fit the diagnosis judges on, rebuilt when a trial was processed with another.
 
 The diagnosis' choice rule (its 10 % relative gain, the folds, the plausible sizes, the
-neutral bases of its benchmark: docs/diagnose/RESULTS.md) is calibrated on the pipeline's
-default fit, the one that runs to convergence (:func:`solver.dynamics.fit.converged_fit`,
-``addb process`` without ``--fit``). Until 2026-11-26 it was calibrated on the older band
-fit (``direction="band"``, a fixed number of rounds, ``addb process --fit band``), and every
-output of the converged fit was processed again with the band fit for the diagnosis. The
-converged motion takes up more of a hidden force error (a plate's zero drift shows on its
-idle rows and far less on its loaded ones), so causes acting on the forces are now also
-chosen on the motion the markers alone decide (a plate's zero drift since 2026-11-26,
-:attr:`solver.diagnose.causes.base.Cause.chosen_on_marker_motion`); the detection rates on
-the converged fit are in docs/diagnose/RESULTS.md, with the band fit's beside them.
+neutral bases of its benchmark: docs/diagnose/RESULTS.md) is calibrated on the alternation
+of exact coordinate steps and body mass solves (:func:`solver.dynamics.fit.alternating_fit`,
+``addb process --fit rounds``), the pipeline's default until 2026-11-26. Before
+that it was calibrated on the older band fit (``direction="band"``, a fixed number of rounds,
+``addb process --fit band``). The converged motion takes up more of a hidden force error (a
+plate's zero drift shows on its idle rows and far less on its loaded ones), so causes acting
+on the forces are also chosen on the motion the markers alone decide (a plate's zero drift,
+:attr:`solver.diagnose.causes.base.Cause.chosen_on_marker_motion`).
 
-So the diagnosis judges every trial on the converged fit: an output made with it (the
-default) is judged as it is; when the trial's output was made with another fit (``--fit
-band``), the dynamics stage is run again with :func:`~solver.dynamics.fit.converged_fit`
-(the recorded ``derivative`` kept) into a scratch folder, from the output's cached
-kinematics (:func:`solver.pipeline.reprocess_dynamics`, run cold, which equals a full run
-with the same flags bit for bit), and the diagnosis reads that folder. The user's output
-is not touched, but for one cache: that folder is kept in
-``OUT/.addb_cache/judged_fit/<trial>/`` with the key it was made from (the subject's
-input files, model, options, addb's version and source digest as for the kinematics
-cache, the judged dynamics options, the trial and the reviewer's flags;
-:func:`judged_cache_key`), so a second diagnosis of unchanged inputs (``addb diagnose``,
-then ``addb diagnose --apply``) reads it instead of running the fit again. Any change of
-the key runs the fit again and replaces the entry; a folder that cannot be written keeps
-no cache.
+The pipeline's default is now the joint mass fit (:func:`~solver.dynamics.fit.converged_fit`,
+:mod:`solver.dynamics.joint_fit`). Its freer body masses take up part of a hidden mass or
+plate error before the diagnosis looks: with it in the alternation's place and the rules
+unchanged, three rows of docs/diagnose/RESULTS.md fell by one or two draws of 20
+(tests/benchmarks/RESULTS.md, block ``diagnose-joint-compare``). Until the rules are
+re-derived on it, the diagnosis judges every trial on the alternation: an output made with
+it (``--fit rounds``, or an older default output) is judged as it is; when the trial's
+output was made with another fit (the default, ``--fit band``), the dynamics stage is run
+again with :func:`~solver.dynamics.fit.alternating_fit` (the recorded ``derivative`` kept)
+into a scratch folder, from the output's cached kinematics
+(:func:`solver.pipeline.reprocess_dynamics`, run cold, which equals a full run with the same
+flags bit for bit), and the diagnosis reads that folder. The user's output is not touched,
+but for one cache: that folder is kept in ``OUT/.addb_cache/judged_fit/<trial>/`` with the
+key it was made from (the subject's input files, model, options, addb's version and source
+digest as for the kinematics cache, the judged dynamics options, the trial and the
+reviewer's flags; :func:`judged_cache_key`), so a second diagnosis of unchanged inputs
+(``addb diagnose``, then ``addb diagnose --apply``) reads it instead of running the fit
+again. Any change of the key runs the fit again and replaces the entry; a folder that cannot
+be written keeps no cache.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from solver.dynamics.fit import FitSettings, converged_fit
+from solver.dynamics.fit import FitSettings, alternating_fit
 
 if TYPE_CHECKING:
     from solver.dynamics.stage import DynamicsOptions
@@ -56,9 +59,9 @@ _KEY_FILE = "key.json"
 
 def judged_fit(recorded: FitSettings) -> FitSettings:
     """The fit the diagnosis judges a trial processed with ``recorded`` on: the one its
-    thresholds are calibrated on, the pipeline's default :func:`~solver.dynamics.fit.converged_fit`,
-    with the recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
-    return converged_fit(derivative=recorded.derivative)
+    thresholds are calibrated on, :func:`~solver.dynamics.fit.alternating_fit`, with the
+    recorded ``derivative`` (which also sets the inverse dynamics' derivatives)."""
+    return alternating_fit(derivative=recorded.derivative)
 
 
 def is_judged_fit(recorded: FitSettings) -> bool:

@@ -232,8 +232,8 @@ def to_text(diag: Diagnosis) -> str:
     judged = diag.settings.get("judged_fit", {})
     if judged.get("rebuilt"):
         lines.insert(1, (
-            "  (judged on the pipeline's default (converged) dynamics fit the diagnosis is calibrated on, run again "
-            f"for it: the trial was processed with the {judged['processed_direction']!r} fit, whose figures differ from "
+            f"  (judged on the {judged['fit']!r} dynamics fit the diagnosis is calibrated on, run again "
+            f"for it: the trial was processed with the {judged['processed_fit']!r} fit, whose figures differ from "
             "the ones below)"
         ))  # fmt: skip
     lo = a["left_out"]

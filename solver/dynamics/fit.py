@@ -39,7 +39,11 @@ earlier ones, so the prior moves with the fit: on the walk and the OpenCap subje
 factors move about 2 % a round, in the same direction every round, and the fit runs every
 round); the alternation stops when a solve changes no factor by more than
 ``mass_tolerance`` (when set) after a round whose steps settled to ``tolerance``, or after
-``rounds``.
+``rounds``. That alternation (``FitSettings.mass_fit = "rounds"``) has no fixed cost, so
+the cap of ``rounds`` is what ends it on most subjects. The pipeline's default
+(:func:`converged_fit`, ``mass_fit = "joint"``) instead solves the mass factors in every
+step together with the coordinates, on one cost with a prior anchored at the starting
+masses, and stops on a convergence test (:mod:`solver.dynamics.joint_fit`).
 """
 
 from __future__ import annotations
@@ -86,13 +90,20 @@ class FitSettings:
     unobserved_force_sigma, unobserved_moment_sigma
         s_F and s_M on frames with unmeasured force: a weak pull of the free centre-of-mass
         accelerations there (the unmeasured force stays free to reach body weight).
+    mass_fit
+        How the body mass factors are fitted. ``"rounds"`` (default): the alternation of
+        rounds of coordinate steps and mass solves (module docstring; :func:`fit_dynamics`).
+        ``"joint"``: every step solves the coordinates and the mass factors together, on one
+        cost whose mass prior is anchored at the starting masses, until the cost settles
+        (:func:`solver.dynamics.joint_fit.fit_dynamics_joint`; :func:`converged_fit`).
     mass_sigma
-        Prior deviation of each body's mass factor from 1 (relative), at each mass solve:
-        the prior is centred on the masses of that round (the factor a solve returns
-        multiplies them), not on the model's, so over rounds the factors can keep moving
-        by a similar step. On the walk, the run and the OpenCap subject they do (1-5 %
-        per solve), and ``rounds`` ends the alternation there, not ``mass_tolerance``
-        (tests/benchmarks/RESULTS.md, block ``fit-rounds``, 4 rounds against 6).
+        Prior deviation of each body's mass factor from 1 (relative). With ``"rounds"``, at
+        each mass solve: the prior is centred on the masses of that round (the factor a
+        solve returns multiplies them), not on the model's, so over rounds the factors can
+        keep moving by a similar step. On the walk, the run and the OpenCap subject they do
+        (1-5 % per solve), and ``rounds`` ends the alternation there, not ``mass_tolerance``
+        (tests/benchmarks/RESULTS.md, block ``fit-rounds``, 4 rounds against 6). With
+        ``"joint"``, relative to the masses the fit starts from, for the whole fit.
     rounds
         At most this many alternations of coordinate steps and mass solves.
     mass_tolerance
@@ -144,6 +155,7 @@ class FitSettings:
     accel_sigma: float = 500.0
     unobserved_force_sigma: float = 2000.0
     unobserved_moment_sigma: float = 2000.0
+    mass_fit: str = "rounds"
     mass_sigma: float = 0.25
     rounds: int = 4
     iterations: int = 12
@@ -158,21 +170,38 @@ class FitSettings:
 
     @property
     def converges(self) -> bool:
-        """The fit runs until it settles (exact steps, rounds stopped on the mass factors, as
-        :func:`converged_fit`), so its end point does not depend on where it starts."""
-        return self.direction == "coefficients" and self.mass_tolerance > 0
+        """The fit runs until it settles (exact steps; the joint mass fit, or rounds stopped
+        on the mass factors), so its end point does not depend on where it starts."""
+        return self.direction == "coefficients" and (self.mass_fit == "joint" or self.mass_tolerance > 0)
+
+
+def fit_name(st: FitSettings) -> str:
+    """The ``addb process --fit`` name of a fit's settings (:data:`solver.pipeline.FIT_CHOICES`):
+    ``"band"`` (``direction`` other than ``"coefficients"``), ``"rounds"`` (the alternation)
+    or ``"converged"`` (the joint mass fit); names the fit for the diagnosis' report."""
+    if st.direction != "coefficients":
+        return "band"
+    return "converged" if st.mass_fit == "joint" else "rounds"
 
 
 #: Weights of :func:`converged_fit` that differ from ``FitSettings()``'s (sigmas: rad/s², N, N·m).
 CONVERGED_WEIGHTS = {"accel_sigma": 120.0, "force_sigma": 4.0, "moment_sigma": 4.0}
 
 
+#: Prior deviation of the joint mass fit's factors (:func:`converged_fit`). At 0.5 the fit
+#: left the run's linear residual above the alternation's (1.26 N against 1.20); at 1 it is
+#: at or below it on the walk, the run and the OpenCap subject (tests/benchmarks/RESULTS.md,
+#: block ``joint-fit``).
+JOINT_MASS_SIGMA = 1.0
+
+
 def converged_fit(**changes: object) -> FitSettings:
     """Settings of a fit that runs to convergence, the pipeline's default:
-    ``direction="coefficients"`` (exact banded Gauss-Newton steps), ``mass_tolerance=0.01``
-    (rounds stop when the body mass factors settle), ``round_tolerance=1e-3`` (the rounds
-    before the last stop early while the masses move; the last runs to ``tolerance``) and
-    the weights of :data:`CONVERGED_WEIGHTS`, other fields as given or default.
+    ``direction="coefficients"`` (exact banded Gauss-Newton steps), ``mass_fit="joint"``
+    (coordinates and body mass factors solved together until the cost settles,
+    :mod:`solver.dynamics.joint_fit`, with ``mass_sigma`` :data:`JOINT_MASS_SIGMA`) and the
+    weights of :data:`CONVERGED_WEIGHTS`, other fields as given or default.
+    :func:`alternating_fit` is the same with the alternation of rounds.
 
     The weights matter at the minimum, which the band fit never reaches. With ``FitSettings()``'s
     (accelerations 500 rad/s², residuals 2 N and 2 N·m) the minimum buys ~1 N residuals with
@@ -193,7 +222,24 @@ def converged_fit(**changes: object) -> FitSettings:
     TypeError
         A field FitSettings does not have.
     """
-    return FitSettings(**{"direction": "coefficients", "mass_tolerance": 0.01, "round_tolerance": 1e-3, **CONVERGED_WEIGHTS, **changes})  # type: ignore[arg-type]
+    return FitSettings(**{"direction": "coefficients", "mass_fit": "joint", "mass_sigma": JOINT_MASS_SIGMA, **CONVERGED_WEIGHTS, **changes})  # type: ignore[arg-type]
+
+
+def alternating_fit(**changes: object) -> FitSettings:
+    """Settings of the converged fit's alternation (the pipeline's default until
+    2026-11-26, and the fit the diagnosis is calibrated on, :mod:`solver.diagnose.judged_fit`):
+    the exact steps and weights of :func:`converged_fit`, with ``mass_fit="rounds"``,
+    ``mass_sigma=0.25``, ``mass_tolerance=0.01`` (rounds stop when the body mass factors
+    settle; on the walk, the run and the OpenCap subject the cap of ``rounds`` comes first)
+    and ``round_tolerance=1e-3`` (the rounds before the last stop early while the masses
+    move; the last runs to ``tolerance``), other fields as given.
+
+    Raises
+    ------
+    TypeError
+        A field FitSettings does not have.
+    """
+    return converged_fit(**{"mass_fit": "rounds", "mass_sigma": 0.25, "mass_tolerance": 0.01, "round_tolerance": 1e-3, **changes})
 
 
 @dataclass(frozen=True)
@@ -335,6 +381,10 @@ class _TrialProblem:
         # linearized next, and its centroidal terms are the ones the line search computed
         self._state: tuple[FloatArray, ...] | None = None
         self._bands: BlockBands | None = None  # the normal matrix's storage, reused
+        #: keep pinocchio's ``data.of`` of every frame at each linearization, as
+        #: ``subtree_rates`` ``(T, njoints, 6)`` (the joint mass fit's mass columns need them)
+        self.keep_subtree_rates = False
+        self.subtree_rates: FloatArray | None = None
 
     def _init_coefficients(self) -> None:
         """The pieces of :meth:`coefficient_equations` that do not change with q (shared by
@@ -423,8 +473,12 @@ class _TrialProblem:
         hq = np.empty((t, 6, nv))
         hv = np.empty((t, 6, nv))
         ha = np.empty((t, 6, nv))
+        of = np.empty((t, model.njoints, 6)) if self.keep_subtree_rates else None
         for k in range(t):
             _, hq[k], hv[k], ha[k] = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
+            if of is not None:  # each subtree's momentum rate, world frame, about the origin
+                of[k] = [f.vector for f in data.of]
+        self.subtree_rates = of
         # the external moment about the centre of mass moves with it: d/dq of c x F_ext, with
         # the centre-of-mass Jacobian J_c = A_g[:3] / m (d hdot / d a is the centroidal
         # momentum matrix A_g, whose linear rows are m J_c; Orin et al. 2013)
@@ -751,6 +805,19 @@ class _TrialProblem:
         return q, cost0, mu
 
 
+def mass_joints(sk: Skeleton) -> list[int]:
+    """Pinocchio joints that carry mass: one mass factor each (the bodies welded to a joint share it)."""
+    return [j for j in range(1, sk.model.njoints) if sk.model.inertias[j].mass > 0]
+
+
+def bodies_of_joints(sk: Skeleton) -> dict[int, list[str]]:
+    """Pinocchio joint index -> names of the bodies that move with it (a mass factor's bodies)."""
+    out: dict[int, list[str]] = {}
+    for b, j in zip(sk.body_names, sk.body_joint):
+        out.setdefault(int(j), []).append(b)
+    return out
+
+
 def mass_regression(
     sk: Skeleton, q: FloatArray, qd: FloatArray, qdd: FloatArray, wrenches: list[tuple[str, FloatArray]], observed: NDArray[np.bool_]
 ) -> tuple[FloatArray, FloatArray, list[int]]:
@@ -766,7 +833,7 @@ def mass_regression(
     from solver.model.skeleton import ExternalWrench
 
     model, data = sk.model, sk.data
-    joints = [j for j in range(1, model.njoints) if model.inertias[j].mass > 0]
+    joints = mass_joints(sk)
     params = {j: model.inertias[j].toDynamicParameters() for j in joints}
     idx = np.flatnonzero(observed)
     qp, vp, ap = sk.cmap.expand(q[idx], qd[idx], qdd[idx])
@@ -810,15 +877,20 @@ def fit_dynamics(
         Weights and limits.
     progress
         Optional callable (message, fraction).
+
+    Raises
+    ------
+    DynamicsError
+        ``settings.mass_fit`` is not ``"rounds"``, or a trial's problem cannot be set up.
     """
     st = settings or FitSettings()
+    if st.mass_fit != "rounds":
+        raise DynamicsError(f"fit_dynamics runs mass_fit='rounds', not {st.mass_fit!r} (the joint fit is solver.dynamics.joint_fit.fit_dynamics_joint)")
     factors = {}
     sk: Skeleton = build(factors)  # type: ignore[operator]
     qs = [np.array(tr.q, dtype=float) for tr in trials]
     history = []
-    body_of_joint = {}
-    for b, j in zip(sk.body_names, sk.body_joint):
-        body_of_joint.setdefault(int(j), []).append(b)
+    body_of_joint = bodies_of_joints(sk)
     final = False  # the masses settled: this round of steps, to ``tolerance``, is the last
     mus = [1e-6] * len(trials)  # each trial's damping where its last round stopped
     resume = False  # the masses stood: each trial's steps go on from where they stopped

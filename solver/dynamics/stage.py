@@ -12,7 +12,8 @@ then for the subject:
 3. the centre-of-mass fit with free accelerations on unobserved frames (:mod:`.com_fit`)
    gives the mass; the root translation is shifted so that the model's centre of mass
    follows the fitted path;
-4. the dynamics fit of coordinates and body masses (:mod:`.fit`);
+4. the dynamics fit of coordinates and body masses (:mod:`.joint_fit` by default, or the
+   alternation of :mod:`.fit`);
 5. inverse dynamics: joint torques and root residuals; Hicks-style metrics.
 """
 
@@ -29,6 +30,7 @@ from numpy.typing import NDArray
 from solver.dynamics.com_fit import ComTrial, fit_com
 from solver.dynamics.contact import ContactResult, ContactSettings, assign_contacts
 from solver.dynamics.fit import FitSettings, FitTrialInput, converged_fit, fit_dynamics
+from solver.dynamics.joint_fit import fit_dynamics_joint
 from solver.dynamics.metrics import residual_metrics
 from solver.dynamics.preprocess import (
     common_time,
@@ -74,10 +76,11 @@ class DynamicsOptions:
         Thresholds of contact assignment and proposals.
     fit
         Weights and stopping rule of the dynamics fit (its ``derivative`` also sets the
-        ID's derivatives); default :func:`solver.dynamics.fit.converged_fit`, the fit that
-        runs to convergence and the one the diagnosis judges on
-        (:mod:`solver.diagnose.judged_fit`); ``FitSettings()`` is the fixed-rounds ``"band"``
-        fit, ``addb process --fit band``.
+        ID's derivatives); default :func:`solver.dynamics.fit.converged_fit`, the joint
+        mass fit that runs to convergence (:mod:`solver.dynamics.joint_fit`);
+        :func:`~solver.dynamics.fit.alternating_fit` is the alternation the diagnosis judges
+        on (:mod:`solver.diagnose.judged_fit`, ``addb process --fit rounds``);
+        ``FitSettings()`` is the fixed-rounds ``"band"`` fit, ``addb process --fit band``.
     """
 
     rate_hz: float = 100.0
@@ -379,7 +382,8 @@ def run_dynamics(
         def build(fac: Mapping[str, float]) -> Skeleton:
             return Skeleton(_with_mass(model_m, mass, fac) if fac else model_m)
 
-        out = fit_dynamics(build, inputs, opts.fit, progress=lambda m, f: say(m, 0.15 + 0.75 * f))
+        fit = fit_dynamics_joint if opts.fit.mass_fit == "joint" else fit_dynamics
+        out = fit(build, inputs, opts.fit, progress=lambda m, f: say(m, 0.15 + 0.75 * f))
         factors = out.mass_factors
         for p, q in zip(prepared, out.q):
             p.q = q

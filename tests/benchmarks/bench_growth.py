@@ -83,7 +83,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cuts", type=int, nargs="+", default=[500, 1000, 1534])
     ap.add_argument("--rate-for-memory", type=float, default=130.4)
-    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"])
+    ap.add_argument("--fit", default="default", choices=["default", "converged", "rounds", "band"])
     args = ap.parse_args()
     compile_sources()
     print("| run | frames | wall (s) | CPU (s) | CPU ms per frame | dynamics fit (s) | peak memory (MB) |")

@@ -1,17 +1,18 @@
-"""The joint mass fit against the pipeline's alternation, on the shared subjects (run on demand).
+"""The joint mass fit (the pipeline's default) against the alternation, on the shared subjects (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_joint_fit.py [--sigma 0.5 ...] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_joint_fit.py [SUBJECT ...] [--sigma 1 ...]
 
 For each subject (default: the Rajagopal walk and run and the OpenCap subject of
 ../shared/data/subjects, and the Camargo circuit, assembled by
 ``scripts/make_example_subject.py camargo2021_levelground``), one ``process_subject`` in
-this process, into a temporary folder, with the pipeline's fit
-(:func:`solver.dynamics.fit.fit_dynamics`, the alternation of coordinate rounds and mass
-solves, :func:`~solver.dynamics.fit.converged_fit`) and one per ``--sigma`` with
-:func:`solver.dynamics.joint_fit.fit_dynamics_joint` in its place (the same settings, its
-``mass_sigma`` set to the value: the deviation of the anchored prior). Everything but the
-dynamics fit is the pipeline's: the inverse dynamics and the metrics run on the model with
-the fitted masses. BLAS runs on one thread, as in ``addb process``.
+this process, into a temporary folder, with the alternation of coordinate rounds and mass
+solves (:func:`solver.dynamics.fit.alternating_fit`, ``addb process --fit rounds``; the
+default until 2026-11-26) and one per ``--sigma`` with the joint fit
+(:func:`solver.dynamics.fit.converged_fit`, :mod:`solver.dynamics.joint_fit`, the default)
+with that ``mass_sigma`` (the deviation of the anchored prior; the default's is
+:data:`solver.dynamics.fit.JOINT_MASS_SIGMA`). Everything but the dynamics fit is the
+pipeline's: the inverse dynamics and the metrics run on the model with the fitted masses.
+BLAS runs on one thread, as in ``addb process``.
 
 Prints a Markdown table per trial with force plates: the dynamics fit's CPU time (s, the
 process' time over the fit call, every trial of the subject), its steps (the alternation:
@@ -31,7 +32,6 @@ import argparse
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -39,9 +39,16 @@ sys.path.insert(0, str(REPO))
 
 import solver.dynamics.stage as stage_module
 from solver import single_threaded_blas
-from solver.dynamics.fit import FitOutput, fit_dynamics
+from solver.dynamics.fit import (
+    JOINT_MASS_SIGMA,
+    FitOutput,
+    alternating_fit,
+    converged_fit,
+    fit_dynamics,
+)
 from solver.dynamics.joint_fit import fit_dynamics_joint
-from solver.pipeline import process_subject
+from solver.dynamics.stage import DynamicsOptions
+from solver.pipeline import ProcessOptions, process_subject
 from tests.benchmarks.example_subjects import subject_folder
 from tests.benchmarks.trial_results import force_trial_results
 
@@ -57,7 +64,7 @@ def _largest_change(build: object, factors: dict[str, float]) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023", "camargo2021_levelground"])
-    ap.add_argument("--sigma", type=float, nargs="+", default=[0.5], help="mass_sigma of the joint fit's prior (one row each)")
+    ap.add_argument("--sigma", type=float, nargs="+", default=[JOINT_MASS_SIGMA], help="mass_sigma of the joint fit's prior (one row each)")
     args = ap.parse_args()
     record: dict[str, object] = {}
 
@@ -74,7 +81,7 @@ def main() -> None:
         def run(build, trials, settings, progress=None) -> FitOutput:  # type: ignore[no-untyped-def]
             said: list[str] = []
             t0 = time.process_time()
-            out = fit_dynamics_joint(build, trials, replace(settings, mass_sigma=sigma), progress=lambda m, f: said.append(m))
+            out = fit_dynamics_joint(build, trials, settings, progress=lambda m, f: said.append(m))
             h = out.history
             last = (h[-2] - h[-1]) / h[-2] if len(h) > 1 else 0.0
             stop = "test" if last < settings.tolerance else ("cap" if len(said) == settings.rounds * settings.iterations else "stalled")
@@ -88,17 +95,19 @@ def main() -> None:
         "| marker RMS (cm) | linear residual RMS, N | angular residual RMS, N·m |"
     )
     print("| --- | --- | ---: | --- | --- | ---: | ---: | ---: | ---: | ---: |")
-    variants = [("alternation (default)", alternation)] + [(f"joint, mass_sigma {s:g}", joint(s)) for s in args.sigma]
+    variants = [("alternation (--fit rounds)", alternating_fit(), alternation)] + [
+        (f"joint, mass_sigma {s:g}" + (" (default)" if s == JOINT_MASS_SIGMA else ""), converged_fit(mass_sigma=s), joint(s)) for s in args.sigma
+    ]
     with tempfile.TemporaryDirectory() as tmp, single_threaded_blas():
         for name in args.subjects:
             subject = subject_folder(name, Path(tmp))
-            for i, (label, fit) in enumerate(variants):
+            for i, (label, settings, fit) in enumerate(variants):
                 out = Path(tmp) / f"{name}_{i}"
-                stage_module.fit_dynamics = fit  # type: ignore[assignment]
+                stage_module.fit_dynamics, stage_module.fit_dynamics_joint = fit, fit  # type: ignore[assignment]
                 try:
-                    process_subject(subject, out)
+                    process_subject(subject, out, options=ProcessOptions(dynamics=DynamicsOptions(fit=settings)))
                 finally:
-                    stage_module.fit_dynamics = fit_dynamics
+                    stage_module.fit_dynamics, stage_module.fit_dynamics_joint = fit_dynamics, fit_dynamics_joint
                 for trial, r in force_trial_results(out):
                     print(
                         f"| {name} / {trial} | {label} | {record['cpu']:.2f} | {record['steps']} | {record['stop']} "

@@ -97,7 +97,7 @@ def main() -> None:
     ap.add_argument("subjects", nargs="*", default=["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--src", default=None, help="source tree whose solver package to run")
-    ap.add_argument("--fit", default="default", choices=["default", "converged", "band"], help="addb process --fit")
+    ap.add_argument("--fit", default="default", choices=["default", "converged", "rounds", "band"], help="addb process --fit")
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     ap.add_argument("--against", default=None, help="source tree to time alternately with this one (CPU side by side)")
     args = ap.parse_args()

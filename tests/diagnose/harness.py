@@ -98,13 +98,13 @@ def probe_walk_base(work: Path | None, prefix: str) -> tuple[Path, Base]:
 
 
 def _process(subject: Path) -> None:
-    """Process ``subject`` into its default output folder with the pipeline's default
-    (converged) fit, the one the diagnosis judges on (:mod:`solver.diagnose.judged_fit`): a
-    base's processed motion, on which hidden marker offsets and consistent trials are built,
-    is then the one the diagnosis was calibrated with."""
+    """Process ``subject`` into its default output folder with the fit the diagnosis judges
+    on (``--fit rounds``, :mod:`solver.diagnose.judged_fit`): a base's processed motion, on
+    which hidden marker offsets and consistent trials are built, is then the one the
+    diagnosis was calibrated with, and its diagnosis runs no second fit."""
     shutil.rmtree(subject / "addb_out", ignore_errors=True)
     with contextlib.redirect_stdout(io.StringIO()):  # its summary table: not a benchmark's output
-        code = cli(["process", str(subject), "--out", str(subject / "addb_out")])
+        code = cli(["process", str(subject), "--out", str(subject / "addb_out"), "--fit", "rounds"])
     if code != 0:
         raise RuntimeError(f"addb process failed on {subject}")
 

@@ -36,8 +36,8 @@ def test_json_object_has_the_issue_keys(walk: tuple[Path, dict]) -> None:
     subject, report = walk
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
         assert np.isfinite(report["baseline"][key])
-    # processed with the pipeline's default (converged) fit, the one the diagnosis judges on
-    assert report["settings"]["judged_fit"] == {"direction": "coefficients", "processed_direction": "coefficients", "rebuilt": False}
+    # processed with the pipeline's default (joint) fit: judged on the alternation, run again for it
+    assert report["settings"]["judged_fit"] == {"fit": "rounds", "processed_fit": "converged", "rebuilt": True}
     assert sorted(c["cause"] for c in report["candidates"]) == sorted(CAUSES)
     # the causes whose rows carry the markers' errors are cross-validated on folds mixing the phases
     assert report["settings"]["folds"] == 5
@@ -71,32 +71,40 @@ def band(walk: tuple[Path, dict]) -> Path:
     return out
 
 
-def test_a_band_output_is_judged_on_the_converged_fit_and_left_untouched(walk: tuple[Path, dict], band: Path) -> None:
-    """The diagnosis judges on the pipeline's default converged fit its rule was calibrated
-    on (solver/diagnose/judged_fit.py): a default output is judged as it is, and on an output
-    made with ``--fit band`` the converged fit runs again in a scratch folder, so the report
-    equals, value for value, the one on the default output; the user's output keeps its
-    files (only diagnosis.json and the judged fit's cache entry,
+def test_every_output_is_judged_on_the_alternation_and_left_untouched(walk: tuple[Path, dict], band: Path) -> None:
+    """The diagnosis judges on the fit its rule was calibrated on, the alternation of
+    ``--fit rounds`` (solver/diagnose/judged_fit.py): an output made with it is judged as it
+    is, and on the default (joint fit) output and one made with ``--fit band`` it runs again
+    in a scratch folder, so the three reports are equal, value for value; the user's output
+    keeps its files (only diagnosis.json and the judged fit's cache entry,
     ``.addb_cache/judged_fit/walk``, are added by the first diagnosis)."""
     subject, report = walk
     out = subject / "addb_out"
+    assert (out / ".addb_cache" / "judged_fit" / "walk" / "key.json").is_file()  # the fixture's diagnosis ran the alternation
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     again = diagnose_json(subject, "walk")
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     assert after == before
-    assert not (out / ".addb_cache" / "judged_fit").exists()  # judged as processed: nothing run again
     assert _without_times(again) == _without_times(report)
+    rounds = subject.parent / "rounds"
+    assert cli(["process", str(subject), "--out", str(rounds), "--fit", "rounds"]) == 0
+    on_rounds = diagnose_json(subject, "walk", "--out", str(rounds))
+    assert on_rounds["settings"]["judged_fit"] == {"fit": "rounds", "processed_fit": "rounds", "rebuilt": False}
+    assert not (rounds / ".addb_cache" / "judged_fit").exists()  # judged as processed: nothing run again
+    assert _without_times(on_rounds) == _without_times(report)
     band_files = {p.relative_to(band): p.read_bytes() for p in band.rglob("*") if p.is_file() and p.name != "diagnosis.json"}
     on_band = diagnose_json(subject, "walk", "--out", str(band))
-    assert on_band["settings"]["judged_fit"] == {"direction": "coefficients", "processed_direction": "band", "rebuilt": True}
+    assert on_band["settings"]["judged_fit"] == {"fit": "rounds", "processed_fit": "band", "rebuilt": True}
     assert _without_times(on_band) == _without_times(report)
     kept = {p.relative_to(band): p.read_bytes() for p in band.rglob("*") if p.is_file() and p.name != "diagnosis.json" and ".addb_cache" not in p.parts}
     assert kept == {k: v for k, v in band_files.items() if ".addb_cache" not in k.parts}
+    judged = json.loads((rounds / "walk" / "results.json").read_text())
+    default = json.loads((out / "walk" / "results.json").read_text())
     results = json.loads((band / "walk" / "results.json").read_text())
-    converged = json.loads((out / "walk" / "results.json").read_text())
     for key in ("marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
-        assert report["baseline"][key] == converged[key]
-    assert converged["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
+        assert report["baseline"][key] == judged[key]
+        assert default[key] <= judged[key], key  # the joint fit: at or below the alternation it replaced
+    assert default["linear_residual_rms_N"] < 0.9 * results["linear_residual_rms_N"]
 
 
 def test_a_second_diagnosis_reads_the_judged_fit_from_its_cache(walk: tuple[Path, dict], band: Path, monkeypatch: pytest.MonkeyPatch) -> None:

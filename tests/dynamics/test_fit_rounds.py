@@ -1,4 +1,4 @@
-"""The converged fit's rounds: while the body mass factors move, a round of coordinate steps
+"""The alternating fit's rounds (:func:`~solver.dynamics.fit.alternating_fit`, ``--fit rounds``): while the body mass factors move, a round of coordinate steps
 stops on ``FitSettings.round_tolerance``; the last round runs to ``tolerance``, so the
 result is converged for the masses it returns and lands where stopping every round on
 ``tolerance`` lands, to that tolerance.
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 import solver.dynamics.fit as fit_module
-from solver.dynamics.fit import FitSettings, converged_fit
+from solver.dynamics.fit import FitSettings, alternating_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
 from tests.conftest import SHARED_DATA, writable_copy
@@ -49,17 +49,17 @@ def _run(subject: Path, out: Path, fit: FitSettings, monkeypatch: pytest.MonkeyP
 def test_rounds_stop_early_while_the_masses_move_and_the_last_runs_to_tolerance(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The default (:func:`converged_fit`, ``round_tolerance`` 1e-3): every round but the last
+    """:func:`alternating_fit` (``round_tolerance`` 1e-3): every round but the last
     ends on a step that lowered the cost by less than 1e-3 (relative; or on its step limit),
     at least one of them before reaching ``tolerance`` (1e-4), and the last ends below 1e-4.
     Against the same fit with every round stopped on 1e-4: marker RMS within 0.5 %, linear
     and angular residual RMS within 2 % (measured 2026-11-25: equal to 0.01 mm, +0.1 % and
     +0.2 %), in fewer steps (10 against 14 measured)."""
     subject = writable_copy(WALK, tmp_path / "rajagopal2016_walk")
-    fit = converged_fit()
+    fit = alternating_fit()
     assert fit.round_tolerance == 1e-3 and fit.tolerance == 1e-4
     inexact, a = _run(subject, tmp_path / "inexact", fit, monkeypatch)
-    exact, b = _run(subject, tmp_path / "exact", converged_fit(round_tolerance=None), monkeypatch)
+    exact, b = _run(subject, tmp_path / "exact", alternating_fit(round_tolerance=None), monkeypatch)
     assert len(inexact) >= 2, inexact  # the masses were solved at least once
     for steps in inexact[:-1]:
         assert steps[-1] < fit.round_tolerance or len(steps) == fit.iterations, inexact
