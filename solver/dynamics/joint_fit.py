@@ -76,6 +76,14 @@ TRIES = 10
 #: high for the next steps, the floor halving at each (a step at a third of it, Nielsen's
 #: rule after a good step, raised the cost on the walk and the OpenCap subject at every step).
 FLOOR_DECAY = 0.5
+#: Steps at the start that move the coordinates only. The first step leaves the filtered
+#: IK motion for one near the markers and the residuals, lowering the cost 3-10 fold; mass
+#: changes solved at the IK motion, with that step, led the Camargo circuit's fit to a
+#: minimum with a linear residual 0.9 % above the alternation's (0.631 against 0.626 N),
+#: and with one step of coordinates first it is below it (0.621), as on the other subjects
+#: (2026-11-26; two such steps left the walk's marker RMS and the run's linear residual
+#: above the alternation's).
+COORDINATES_FIRST = 1
 #: Each mass factor stays within these (relative to the masses the fit starts from).
 FACTOR_BOUNDS = (0.5, 2.0)
 
@@ -215,19 +223,24 @@ def fit_dynamics_joint(
     The prior weights are set once, at the first step, on the scale of the data as the
     alternation sets its own: ``w_j² = share_j mean_i(|G_i|²) / (6 mass_sigma²)``, G the
     columns of the weighted residual rows' derivatives with respect to s and share_j the
-    joint's share of the mass. A step that raises the cost is solved again with 4 times the
-    damping, the coordinates it carried past a bound held at the bound, and the damping
-    of the next steps stays at least that high (:data:`FLOOR_DECAY`); after :data:`TRIES`
-    such solves the fit ends where it is.
+    joint's share of the mass. The first :data:`COORDINATES_FIRST` steps move the coordinates
+    only. A factor that a step would carry past :data:`FACTOR_BOUNDS` is held at the bound
+    (:func:`_mass_step`). A step that raises the cost is solved again with 4 times the
+    damping, the coordinates it carried past a bound held at the bound (where they are,
+    after a second such solve), and the damping of the next steps stays at least that high
+    (:data:`FLOOR_DECAY`); after :data:`TRIES` such solves the fit ends where it is.
 
     Raises
     ------
     DynamicsError
-        ``settings.direction`` is not ``"coefficients"``.
+        ``settings.direction`` is not ``"coefficients"``, or ``settings.mass_fit`` is not
+        ``"joint"``.
     """
     st = settings or converged_fit()
     if st.direction != "coefficients":
         raise DynamicsError(f"the joint mass fit needs direction='coefficients', not {st.direction!r}")
+    if st.mass_fit != "joint":
+        raise DynamicsError(f"fit_dynamics_joint runs mass_fit='joint', not {st.mass_fit!r} (the alternation is solver.dynamics.fit.fit_dynamics)")
     sk = build({})
     joints = mass_joints(sk)
     m0 = np.array([sk.model.inertias[j].mass for j in joints])
@@ -271,6 +284,7 @@ def fit_dynamics_joint(
         damp_s = np.maximum(np.diag(c_ss).copy(), 1e-9)
         constraint = m0 * f  # sum_j m_j s_j = 0: the total mass stays
         step, raised = None, False
+        untargeted: list[FloatArray] = [np.empty(0)] * len(systems)  # each gradient before the targets of held coordinates
         for _ in range(TRIES):
             # Schur complement with A = L L^T: S = C - W^T W, W = L^-1 B; da = -L^-T (v + W ds), v = L^-1 g
             schur = c_ss + mu * np.diag(damp_s)
@@ -290,7 +304,7 @@ def fit_dynamics_joint(
             except LinAlgError:
                 mu *= 10
                 continue
-            ds = _mass_step(schur, rhs, constraint, f)
+            ds = _mass_step(schur, rhs, constraint, f) if it >= COORDINATES_FIRST else np.zeros(nj)
             f_new = np.clip(f * (1.0 + ds), *FACTOR_BOUNDS)  # within rounding of the bounds already
             probs_new = problems(build(factors_of(f_new)))
             predicted = float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
@@ -314,14 +328,21 @@ def fit_dynamics_joint(
             # the coordinates the step carried past a bound are held at it for the next solve,
             # as a single trial's step holds them (held where they were instead, the Camargo
             # circuit's fit with the masses frozen stalled above the alternation's cost,
-            # 19297.6 against 19295.5, and left its linear residual 2 % higher; 2026-11-26)
-            for (p, q, bands, grad, held, diag, _), delta in zip(systems, deltas):
+            # 19297.6 against 19295.5, and left its linear residual 2 % higher); if that solve
+            # raises the cost too, every held coordinate is held where it is from then on
+            # (the targets dropped: with them, more damping still moved those coordinates to
+            # their bounds, and the OpenCap subject's fit stalled after 3 steps; 2026-11-26)
+            for i, ((p, q, bands, grad, held, diag, _), delta) in enumerate(zip(systems, deltas)):
                 x = q[:, p.free]
                 lo, hi = p.lo[p.free], p.hi[p.free]
                 over = ((x + delta < lo) | (x + delta > hi)) & ~held
+                if not raised:
+                    untargeted[i] = grad.copy()
                 if over.any():
                     held |= over
-                    p._hold(bands, grad, over, diag, np.clip(x + delta, lo, hi) - x)
+                    p._hold(bands, grad, over, diag, None if raised else np.clip(x + delta, lo, hi) - x)
+                if raised:
+                    grad[:] = untargeted[i]
             mu *= 4
             raised = True
         if step is None or step < st.tolerance:

@@ -1,16 +1,18 @@
-"""``addb diagnose``'s benchmark with the joint mass fit in the pipeline's place (run on demand).
+"""``addb diagnose``'s benchmark with the joint mass fit in the alternation's place (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_diagnose_joint.py [--sigma 0.5] -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/bench_diagnose_joint.py [--sigma 1] -- BENCH_DIAGNOSE_ARGS ...
     .venv/bin/python tests/benchmarks/bench_diagnose_joint.py --compare DEFAULT.json ... --with JOINT.json ...
 
 The first form runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--``
 in this process, with :func:`solver.dynamics.fit.fit_dynamics` replaced in the dynamics
-stage by :func:`solver.dynamics.joint_fit.fit_dynamics_joint` (its ``mass_sigma`` set to
-``--sigma``) wherever the stage runs the fit that converges (the pipeline's default, which
-the diagnosis judges on: the neutral bases, every draw, and the diagnosis' own refits);
-the band fit is left as it is. Everything else is the diagnosis as calibrated on the
-alternation (docs/diagnose/RESULTS.md): the question is what its table becomes on the
-candidate fit, before its rules are re-derived.
+stage by :func:`solver.dynamics.joint_fit.fit_dynamics_joint` (the pipeline's default
+since 2026-11-26, its ``mass_sigma`` set to ``--sigma``, default
+:data:`solver.dynamics.fit.JOINT_MASS_SIGMA`) wherever the stage runs the alternation that
+converges (:func:`solver.dynamics.fit.alternating_fit`, which the diagnosis judges on: the
+neutral bases, every draw, and the diagnosis' own refits); the band fit is left as it is.
+Everything else is the diagnosis as calibrated on the alternation
+(docs/diagnose/RESULTS.md): the question is what its table becomes on the default fit,
+before its rules are re-derived.
 
 The second form compares two sets of ``--json`` results draw by draw: per cause, the draws
 named within tolerance with each, and every draw whose named cause or verdict changed, and
@@ -31,17 +33,17 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 import solver.dynamics.stage as stage_module
-from solver.dynamics.fit import FitOutput, FitSettings, fit_dynamics
+from solver.dynamics.fit import JOINT_MASS_SIGMA, FitOutput, FitSettings, fit_dynamics
 from solver.dynamics.joint_fit import fit_dynamics_joint
 
 
 def joint_in_place(sigma: float) -> Callable[..., FitOutput]:
     """A stand-in for :func:`~solver.dynamics.fit.fit_dynamics`: the joint fit with
-    ``mass_sigma=sigma`` for settings that converge, the alternation (band fit) otherwise."""
+    ``mass_sigma=sigma`` for settings that converge (the judged alternation), the band fit otherwise."""
 
     def fit(build, trials, settings: FitSettings, progress=None) -> FitOutput:  # type: ignore[no-untyped-def]
         if settings.converges:
-            return fit_dynamics_joint(build, trials, replace(settings, mass_sigma=sigma), progress)
+            return fit_dynamics_joint(build, trials, replace(settings, mass_fit="joint", mass_sigma=sigma), progress)
         return fit_dynamics(build, trials, settings, progress)
 
     return fit
@@ -64,7 +66,7 @@ def compare(default: list[Path], joint: list[Path]) -> str:
     if set(a) != set(b):
         raise SystemExit(f"the two sets hold different draws: {sorted(set(a) ^ set(b))[:5]} ...")
     causes = list(dict.fromkeys(k[0] for k in a))
-    lines = ["| cause | draws | within tolerance, alternation (default) | within tolerance, joint fit |", "| --- | ---: | ---: | ---: |"]
+    lines = ["| cause | draws | within tolerance, alternation (judged fit) | within tolerance, joint fit (default) |", "| --- | ---: | ---: | ---: |"]
     for c in causes:
         keys = [k for k in a if k[0] == c]
         lines.append(f"| {c} | {len(keys)} | {sum(bool(a[k]['within_tolerance']) for k in keys)} | {sum(bool(b[k]['within_tolerance']) for k in keys)} |")
@@ -83,7 +85,7 @@ def main() -> None:
     passed = argv[argv.index("--") + 1 :] if "--" in argv else []
     own = argv[: argv.index("--")] if "--" in argv else argv
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sigma", type=float, default=0.5, help="mass_sigma of the joint fit")
+    ap.add_argument("--sigma", type=float, default=JOINT_MASS_SIGMA, help="mass_sigma of the joint fit")
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the default fit")
     ap.add_argument("--with", dest="joint", type=Path, nargs="+", help="--json results of the joint fit")
     args = ap.parse_args(own)

@@ -5,6 +5,8 @@ and its result against the alternation (``addb process --fit rounds``)."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,7 +19,8 @@ from solver.dynamics.joint_fit import _BorderedProblem, fit_dynamics_joint
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
 
-SUBJECTS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "subjects"
+REPO = Path(__file__).resolve().parents[2]
+SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
 WALK = SUBJECTS / "rajagopal2016_walk"
 ALTERNATION = ProcessOptions(dynamics=DynamicsOptions(fit=alternating_fit()))
 
@@ -150,23 +153,28 @@ def test_restarted_from_its_answer_the_joint_fit_finds_little_more(walk: dict[st
     assert out.history[-1] - again.history[-1] < 0.01 * removed
 
 
-@pytest.mark.parametrize(("subject", "n_trials"), [("opencap_uhlrich2023", 2), ("rajagopal2016_run", 1)])
+@pytest.mark.parametrize(("subject", "n_trials"), [("opencap_uhlrich2023", 2), ("rajagopal2016_run", 1), ("camargo2021_levelground", 1)])
 def test_the_joint_fit_ends_on_its_test_at_least_as_good_as_the_alternation(subject: str, n_trials: int, tmp_path: Path) -> None:
-    """The OpenCap subject's two trials (a drop jump and a walk) share the mass factors; the
-    run is the subject where a tighter prior (mass_sigma 0.5) left the linear residual above
-    the alternation's. The fit ends on its convergence test with the total mass kept, and
-    every trial's marker RMS and residuals are at or below the alternation's, measured
-    frames as many (the pipeline's metrics)."""
+    """Issue 29's bar on the other subjects of its table: the OpenCap subject's two trials (a
+    drop jump and a walk) share the mass factors; the run is where a tighter prior
+    (mass_sigma 0.5) left the linear residual above the alternation's; the Camargo circuit
+    (assembled by scripts/make_example_subject.py) is where solving the masses from the
+    first step did (0.631 against 0.626 N). The fit ends on its convergence test with the
+    total mass kept, and every trial's marker RMS and residuals are at or below the
+    alternation's, measured frames as many (the pipeline's metrics)."""
+    if subject.startswith("camargo"):
+        folder = tmp_path / subject
+        subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_subject.py"), subject, str(folder)], check=True, capture_output=True)
+    else:
+        folder = SUBJECTS / subject
     seen: dict[str, object] = {}
-    _process_capturing(SUBJECTS / subject, tmp_path / "joint", seen)
-    process_subject(SUBJECTS / subject, tmp_path / "alternation", options=ALTERNATION)
+    _process_capturing(folder, tmp_path / "joint", seen)
+    process_subject(folder, tmp_path / "alternation", options=ALTERNATION)
     out: FitOutput = seen["joint"]  # type: ignore[assignment]
     st = seen["settings"]
     assert len(seen["trials"]) == n_trials  # type: ignore[arg-type]
     h = out.history
-    # it ends before its cap of steps: on its test, or when no damped step lowers the cost
-    # (Levenberg-Marquardt's other stop; the OpenCap subject's last step lowered it 3e-4, 2026-11-26)
-    assert len(h) - 1 < st.rounds * st.iterations and h[-1] < h[0]  # type: ignore[attr-defined]
+    assert (h[-2] - h[-1]) / h[-2] < st.tolerance and len(h) - 1 < st.rounds * st.iterations  # type: ignore[attr-defined]
     build = seen["build"]
     assert build(out.mass_factors).total_mass == pytest.approx(build({}).total_mass, rel=1e-12)  # type: ignore[operator]
     results = sorted((tmp_path / "alternation").glob("*/results.json"))
