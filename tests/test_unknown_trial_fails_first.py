@@ -48,3 +48,15 @@ def test_a_recording_of_an_unknown_trial_fails_before_processing(tmp_path: Path,
     with pytest.raises(SubjectFolderError, match=r"no trial 'wlk'; the subject's trials are static, walk"):
         record_subject_trial(WALK, "wlk", tmp_path / "walk.rrd", out_dir=tmp_path / "out")
     assert not (tmp_path / "out").exists() and not (tmp_path / "walk.rrd").exists()
+
+
+def test_a_subject_names_its_trials_when_asked_for_one_it_lacks() -> None:
+    """``Subject.trial`` (what ``addb diagnose``, ``addb record`` and the review app's
+    masks ask) raises the folder error that names the subject's trials, not a KeyError."""
+    from solver.io.subject import load_subject
+
+    subject = load_subject(WALK)
+    assert subject.trial("walk").name == "walk"
+    with pytest.raises(SubjectFolderError, match=r"no trial 'wlk'; the subject's trials are static, walk") as err:
+        subject.trial("wlk")
+    assert not isinstance(err.value, KeyError) and err.value.path == str(WALK)

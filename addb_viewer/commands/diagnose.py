@@ -34,10 +34,8 @@ def run(args: argparse.Namespace) -> int:
     if not subject.is_dir():
         raise SubjectFolderError("no such subject folder", path=subject)
     info = load_subject(subject)
-    names = [t.name for t in info.trials]
-    if args.trial not in names:
-        raise SubjectFolderError(f"no trial {args.trial!r}; the subject's trials are {', '.join(names)}", path=subject)
-    if info.disable_dynamics or load_trial(info.trial(args.trial)).forces is None:
+    files = info.trial(args.trial)  # SubjectFolderError naming the trials
+    if info.disable_dynamics or load_trial(files).forces is None:
         raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
     out = Path(args.out) if args.out else default_output_dir(subject)
     record = Path(args.annotations) if args.annotations else annotations_path(subject, out)

@@ -64,9 +64,7 @@ def ensure_processed(
         if not Path(subject_dir).is_dir():
             raise SubjectFolderError("not a folder", path=subject_dir)
         if trial is not None:  # a typo costs no processing
-            names = [t.name for t in load_subject(subject_dir).trials]
-            if trial not in names:
-                raise SubjectFolderError(f"no trial {trial!r}; the subject's trials are {', '.join(names)}", path=subject_dir)
+            load_subject(subject_dir).trial(trial)  # SubjectFolderError naming the trials
         process_subject(subject_dir, out, progress=progress)
     return out
 

@@ -545,6 +545,16 @@ class B3dFile:
             return _decode_frames(self, k, start, n, blob, first)
 
 
+
+def _not_b3d_hint(path: Path, prefix: bytes) -> str:
+    """A hint for a file whose first bytes cannot start a .b3d: what it looks like instead
+    (its suffix, or text), or nothing when it may be a damaged .b3d."""
+    looks_text = bool(prefix) and all(32 <= c < 127 or c in (9, 10, 13) for c in prefix)
+    if path.suffix.lower() != ".b3d" or looks_text:
+        kind = f"a {path.suffix} file" if path.suffix and path.suffix.lower() != ".b3d" else "text"
+        return f"; this looks like {kind}, not an AddBiomechanics .b3d (binary: an 8-byte header length, then protobuf messages)"
+    return ""
+
 def open_b3d(path: str | Path) -> B3dFile:
     """Open a .b3d file: read and check its header (frames are read later, on request).
 
@@ -567,13 +577,14 @@ def open_b3d(path: str | Path) -> B3dFile:
             prefix = fh.read(PREFIX_BYTES)
             if len(prefix) < PREFIX_BYTES:
                 raise B3dFormatError(
-                    f"file has {len(prefix)} bytes, expected at least {PREFIX_BYTES} (the header length)",
+                    f"file has {len(prefix)} bytes, expected at least {PREFIX_BYTES} (the header length)" + _not_b3d_hint(p, prefix),
                     path=p, offset=0,
                 )
             (n,) = struct.unpack("<q", prefix)
             if not 0 < n <= size - PREFIX_BYTES:
                 raise B3dFormatError(
-                    f"header length is {n} bytes, expected 1..{size - PREFIX_BYTES} (the bytes left in the file)",
+                    f"header length is {n} bytes, expected 1..{size - PREFIX_BYTES} (the bytes left in the file)"
+                    + _not_b3d_hint(p, prefix),
                     path=p, offset=0,
                 )
             raw = fh.read(n)

@@ -95,11 +95,17 @@ class Subject:
         return str(self.raw.get("sex", "unknown"))
 
     def trial(self, name: str) -> TrialFiles:
-        """The trial named ``name``; raises ``KeyError`` naming the known trials."""
+        """The trial named ``name``.
+
+        Raises
+        ------
+        SubjectFolderError
+            The subject has no trial ``name`` (the message names its trials).
+        """
         for t in self.trials:
             if t.name == name:
                 return t
-        raise KeyError(f"no trial {name!r} in {self.path}; trials: {[t.name for t in self.trials]}")
+        raise SubjectFolderError(f"no trial {name!r}; the subject's trials are {', '.join(t.name for t in self.trials)}", path=self.path)
 
 
 @dataclass(frozen=True)
