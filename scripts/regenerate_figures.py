@@ -116,7 +116,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("fit-round-tolerance", RESULTS, f"{PY} tests/benchmarks/bench_fit_rounds.py rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 "
            "camargo2021_levelground --direction coefficients --rounds 4 --round-tolerance none 3e-4 1e-3 2e-3",
            "timing", 1.5, fence=False),
-    Figure("joint-fit", RESULTS, f"{PY} tests/benchmarks/bench_joint_fit.py --sigma 0.25 0.5", "timing", 1.5, fence=False),
+    Figure("joint-fit", RESULTS, f"{PY} tests/benchmarks/bench_joint_fit.py --sigma 0.5 1", "timing", 1.5, fence=False),
     Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py", "timing", 0.5, fence=False),
     Figure("growth-band", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit band", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
@@ -141,13 +141,13 @@ FIGURES: tuple[Figure, ...] = (
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_exact_before /tmp/addb_exact_after",
         "accuracy", 4.0),
     Figure("process-against", RESULTS, f"{EXPORT_AGAINST} && {PY} tests/benchmarks/bench_process.py --repeat 5 --against {AGAINST_TREE} "
-           "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023", "timing", 2.0, fence=False),
+           "--fit rounds --against-fit default rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023", "timing", 2.0, fence=False),
     Figure(
         "process-against-exactness", RESULTS,
         f"{EXPORT_AGAINST} && rm -rf /tmp/addb_against_before /tmp/addb_against_after && R=$PWD && "
         "for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do "
         f"(cd /tmp && PYTHONPATH={AGAINST_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_against_before/$s >/dev/null) && "
-        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_against_after/$s >/dev/null; done && "
+        ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_against_after/$s --fit rounds >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_against_before /tmp/addb_against_after && "
         "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after && echo 'every other file byte-identical'",
         "accuracy", 1.0),
@@ -169,9 +169,9 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-results", "docs/diagnose/RESULTS.md",
            f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
            fence=False),
-    Figure("diagnose-joint-draws-0-9", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.5 -- --draws 10 --synthetic 5 "
+    Figure("diagnose-joint-draws-0-9", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py -- --draws 10 --synthetic 5 "
            "--json docs/diagnose/joint_fit_draws_0_9.json", "accuracy", 20.0),
-    Figure("diagnose-joint-draws-10-19", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.5 -- --first 10 --draws 10 "
+    Figure("diagnose-joint-draws-10-19", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py -- --first 10 --draws 10 "
            "--synthetic 0 --json docs/diagnose/joint_fit_draws_10_19.json", "accuracy", 15.0),
     Figure("diagnose-joint-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --compare docs/diagnose/results_draws_0_9.json "
            "docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_draws_0_9.json docs/diagnose/joint_fit_draws_10_19.json",

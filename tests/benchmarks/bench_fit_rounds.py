@@ -1,4 +1,4 @@
-"""Rounds and step direction of the dynamics fit: what other settings than the default change (run on demand).
+"""Rounds and step direction of the alternating dynamics fit: what other settings change (run on demand).
 
     .venv/bin/python tests/benchmarks/bench_fit_rounds.py [--rounds 4 6 8] [--direction band exact coefficients]
         [--round-tolerance default none 1e-3 ...] [SUBJECT ...]
@@ -10,10 +10,11 @@ body mass factors, and stops early on a relative cost decrease under
 (default; the derivative operators truncated to ``band`` frames in the Jacobian and its
 gradient), ``exact`` (the exact gradient and Gauss-Newton system, by preconditioned
 conjugate gradients) or ``coefficients`` (exact banded steps in the spline's coefficients,
-run as ``converged_fit(rounds=R)``: R is then the most rounds, which stop when the mass
-factors settle; what ``addb process`` runs by default, with R = 4). ``--round-tolerance``
-gives the ``coefficients`` rows' ``FitSettings.round_tolerance`` (the looser stop of the
-rounds while the masses move): ``default`` is :func:`converged_fit`'s, ``none`` stops every
+run as ``alternating_fit(rounds=R)``: R is then the most rounds, which stop when the mass
+factors settle; what ``addb process --fit rounds`` runs, with R = 4, and ``addb process``
+by default until 2026-11-26, when the joint fit replaced it: tests/benchmarks/bench_joint_fit.py).
+``--round-tolerance`` gives the ``coefficients`` rows' ``FitSettings.round_tolerance`` (the
+looser stop of the rounds while the masses move): ``default`` is :func:`alternating_fit`'s, ``none`` stops every
 round on ``tolerance``; one row per value. For each subject (default: the Rajagopal walk and run of
 ../shared/data/subjects and the Camargo circuit, assembled by
 ``scripts/make_example_subject.py camargo2021_levelground``) and each pair of round count
@@ -38,7 +39,7 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 import solver.dynamics.fit as fit_module
-from solver.dynamics.fit import FitSettings, converged_fit
+from solver.dynamics.fit import FitSettings, alternating_fit
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
 from tests.benchmarks.example_subjects import subject_folder
@@ -79,9 +80,9 @@ def main() -> None:
                 if direction != "coefficients":
                     fit = FitSettings(rounds=rounds, direction=direction)
                 elif rtol == "default":
-                    fit = converged_fit(rounds=rounds)
+                    fit = alternating_fit(rounds=rounds)
                 else:
-                    fit = converged_fit(rounds=rounds, round_tolerance=None if rtol == "none" else float(rtol))
+                    fit = alternating_fit(rounds=rounds, round_tolerance=None if rtol == "none" else float(rtol))
                 rt = "-" if fit.round_tolerance is None else f"{fit.round_tolerance:g}"
                 options = ProcessOptions(dynamics=DynamicsOptions(fit=fit))
                 steps[0] = 0

@@ -1,6 +1,6 @@
 """End-to-end ``addb process`` timing on the shared subjects (run on demand).
 
-    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR | --against DIR] [--fit band] [SUBJECT ...]
+    .venv/bin/python tests/benchmarks/bench_process.py [--repeat N] [--src DIR | --against DIR [--against-fit NAME]] [--fit NAME] [SUBJECT ...]
 
 Runs the command in a fresh process per subject (as a user would), ``--repeat`` times each
 (default 3; the table shows the median and the range of the wall times), and prints the
@@ -11,14 +11,17 @@ does not count in it), the per-stage times of the median run from subject.json /
 and the quality metrics. ``--src DIR`` runs another source tree's ``solver`` package (e.g.
 an export of an earlier commit) with this venv, for before/after figures on one machine.
 addb's bytecode is compiled first, outside the timed runs, as an install has it
-(``user_env.py``). ``--fit band`` passes ``--fit band`` to ``addb process`` (the older fixed-rounds dynamics
-fit; the default runs it to convergence). SUBJECT is a folder of ../shared/data/subjects or
+(``user_env.py``). ``--fit NAME`` passes ``--fit NAME`` to ``addb process`` (``band``: the
+older fixed-rounds dynamics fit; ``rounds``: the alternation, the default until 2026-11-26;
+the default runs the joint fit to convergence). SUBJECT is a folder of ../shared/data/subjects or
 ``camargo2021_levelground`` (the Camargo circuit, assembled once into the temporary folder
 by scripts/make_example_subject.py, outside the timed runs).
 ``--against DIR`` times this tree and DIR's (as ``--src``) alternately, run by run (which
 runs first alternates too), and prints their CPU times side by side: on a host whose speed
 drifts 10-30 % from one hour to the next, the way to see a change of a few per cent (both
-trees meet the same drift).
+trees meet the same drift). ``--against-fit NAME`` gives the other tree's ``addb process``
+its own ``--fit`` (default: ``--fit``'s), so that the same fit runs in both when the
+default changed between them (``default`` passes no option, which an older tree may not know).
 ``--host-reference`` also times OpenSim's IK tool on the walk as ``bench_kinematics.py`` does
 (a whole process, best of ``--repeat``, before and after the subjects): code that does not
 change between two blocks, so the ratio of two blocks' references says how much faster or
@@ -85,7 +88,7 @@ def _interleaved(args: argparse.Namespace) -> None:
             for i in range(args.repeat):
                 for src in list(cpus)[:: 1 if i % 2 == 0 else -1]:  # the order alternates too
                     out = Path(tmp) / f"{name}_{i}_{'other' if src else 'this'}"
-                    cpus[src].append(_run(folder, out, src, args.fit)[1])
+                    cpus[src].append(_run(folder, out, src, args.fit if src is None else (args.against_fit or args.fit))[1])
             frames = sum(int(json.loads(r.read_text()).get("n_frames", 0)) for r in out.glob("*/results.json"))
             this, other = (statistics.median(v) for v in cpus.values())
             cells = [f"{statistics.median(v):.2f} [{min(v):.2f}-{max(v):.2f}]" for v in cpus.values()]
@@ -100,6 +103,7 @@ def main() -> None:
     ap.add_argument("--fit", default="default", choices=["default", "converged", "rounds", "band"], help="addb process --fit")
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     ap.add_argument("--against", default=None, help="source tree to time alternately with this one (CPU side by side)")
+    ap.add_argument("--against-fit", default=None, choices=["default", "converged", "rounds", "band"], help="the other tree's addb process --fit (default: --fit's)")
     args = ap.parse_args()
     if args.src and args.against:
         ap.error("--src and --against exclude each other (--against times this tree against DIR)")
