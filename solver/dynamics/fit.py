@@ -189,9 +189,10 @@ CONVERGED_WEIGHTS = {"accel_sigma": 120.0, "force_sigma": 4.0, "moment_sigma": 4
 
 
 #: Prior deviation of the joint mass fit's factors (:func:`converged_fit`). At 0.5 the fit
-#: left the run's linear residual above the alternation's (1.26 N against 1.20); at 1 it is
-#: at or below it on the walk, the run and the OpenCap subject (tests/benchmarks/RESULTS.md,
-#: block ``joint-fit``).
+#: leaves the run's linear residual above the alternation's; at 1 its marker RMS and
+#: residuals are at or below the alternation's on every trial of the walk, the run, the
+#: OpenCap subject and the Camargo circuit (tests/benchmarks/RESULTS.md, block ``joint-fit``;
+#: tests/dynamics/test_joint_fit.py).
 JOINT_MASS_SIGMA = 1.0
 
 
