@@ -261,22 +261,13 @@ def fit_dynamics_joint(
     history = [cost]
     mu, floor = 1e-6, 0.0
     steps = st.rounds * st.iterations
+    # the per-trial work is done in helpers, so that no loop variable keeps a trial's normal
+    # matrix or factor (64 MB each for 2,000 frames) alive while the next one is made
     for it in range(steps):
         if progress:
             progress(f"dynamics fit: step {it + 1}", it / steps)
-        systems, solved = [], []  # the last step's normal matrices and factors go before new ones are made
-        c_ss = np.zeros((nj, nj))
-        g_s = np.zeros(nj)
-        for p, q in zip(probs, qs):
-            bands, grad, g_q, diag = p.coefficient_equations(q)
-            x = q[:, p.free]
-            held = ((x <= p.lo[p.free]) & (g_q > 0)) | ((x >= p.hi[p.free]) & (g_q < 0))
-            grad = grad.copy()
-            if held.any():
-                p._hold(bands, grad, held, diag)
-            c_ss += np.einsum("krj,kri->ji", p.rows, p.rows)
-            g_s += np.einsum("krj,kr->j", p.rows, p.res)
-            systems.append((p, q, bands, grad, held, diag, p.border.reshape(-1, nj)))
+        systems = None  # the last step's normal matrices go before new ones are made
+        systems, c_ss, g_s = _linearized(probs, qs, nj)
         if it == 0:
             w2 = (m0 / m0.sum()) * np.mean(np.diag(c_ss)) / (6.0 * st.mass_sigma**2)
         c_ss += np.diag(w2 * f**2)
@@ -286,34 +277,19 @@ def fit_dynamics_joint(
         step, raised = None, False
         untargeted: list[FloatArray] = [np.empty(0)] * len(systems)  # each gradient before the targets of held coordinates
         for _ in range(TRIES):
-            # Schur complement with A = L L^T: S = C - W^T W, W = L^-1 B; da = -L^-T (v + W ds), v = L^-1 g
-            schur = c_ss + mu * np.diag(damp_s)
-            rhs = -g_s.copy()
-            solved = []
+            solved = None  # the last try's factors go before new ones are made
             try:
-                for p, q, bands, grad, held, diag, border in systems:
-                    ab = bands.lower_band_storage()  # a fresh copy: the bands stay for another try
-                    damp = np.maximum(diag.reshape(-1), 1e-9)
-                    ab[0] += mu * damp
-                    chol = banded_cholesky(ab, overwrite=True)
-                    wv = _triangular_solve(chol, np.column_stack([border, grad.reshape(-1)]))
-                    w_b, v = wv[:, :nj], wv[:, nj]
-                    schur -= w_b.T @ w_b
-                    rhs += w_b.T @ v
-                    solved.append((chol, w_b, v, damp))
+                solved, schur, rhs = _reduced(systems, mu, nj)
             except LinAlgError:
                 mu *= 10
                 continue
+            schur += c_ss + mu * np.diag(damp_s)
+            rhs -= g_s
             ds = _mass_step(schur, rhs, constraint, f) if it >= COORDINATES_FIRST else np.zeros(nj)
             f_new = np.clip(f * (1.0 + ds), *FACTOR_BOUNDS)  # within rounding of the bounds already
             probs_new = problems(build(factors_of(f_new)))
-            predicted = float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
-            q_new, deltas = [], []
-            for (p, q, _, grad, _, _, _), (chol, w_b, v, damp), pn in zip(systems, solved, probs_new):
-                da = -_triangular_solve(chol, v + w_b @ ds, transpose=True)
-                predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
-                deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
-                q_new.append(pn._take(q, deltas[-1]))
+            q_new, deltas, predicted = _coordinate_steps(systems, solved, probs_new, ds, mu)
+            predicted += float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
             cost_new = sum(pn.cost(qn) for pn, qn in zip(probs_new, q_new)) + float(np.sum(w2 * (f_new - 1.0) ** 2))
             if cost_new < cost:
                 rho = (cost - cost_new) / max(predicted, 1e-300)
@@ -325,26 +301,97 @@ def fit_dynamics_joint(
                 f, probs, qs, cost = f_new, probs_new, q_new, cost_new
                 history.append(cost)
                 break
-            # the coordinates the step carried past a bound are held at it for the next solve,
-            # as a single trial's step holds them (held where they were instead, the Camargo
-            # circuit's fit with the masses frozen stalled above the alternation's cost,
-            # 19297.6 against 19295.5, and left its linear residual 2 % higher); if that solve
-            # raises the cost too, every held coordinate is held where it is from then on
-            # (the targets dropped: with them, more damping still moved those coordinates to
-            # their bounds, and the OpenCap subject's fit stalled after 3 steps; 2026-11-26)
-            for i, ((p, q, bands, grad, held, diag, _), delta) in enumerate(zip(systems, deltas)):
-                x = q[:, p.free]
-                lo, hi = p.lo[p.free], p.hi[p.free]
-                over = ((x + delta < lo) | (x + delta > hi)) & ~held
-                if not raised:
-                    untargeted[i] = grad.copy()
-                if over.any():
-                    held |= over
-                    p._hold(bands, grad, over, diag, None if raised else np.clip(x + delta, lo, hi) - x)
-                if raised:
-                    grad[:] = untargeted[i]
+            _hold_past_bounds(systems, deltas, untargeted, raised)
             mu *= 4
             raised = True
         if step is None or step < st.tolerance:
             break
     return FitOutput(tuple(qs), factors_of(f), tuple(history))
+
+
+#: One trial's linearized system: (problem, q, normal-matrix bands, gradient, held, diagonal, border).
+_System = tuple
+
+
+def _linearized(probs: Sequence[_BorderedProblem], qs: Sequence[FloatArray], nj: int) -> tuple[list[_System], FloatArray, FloatArray]:
+    """Every trial's coefficient system at its q (coordinates at a bound that the gradient
+    pushes out held there), and the trials' ``(J, J)`` mass block C and ``(J,)`` mass gradient."""
+    systems = []
+    c_ss = np.zeros((nj, nj))
+    g_s = np.zeros(nj)
+    for p, q in zip(probs, qs):
+        bands, grad, g_q, diag = p.coefficient_equations(q)
+        x = q[:, p.free]
+        held = ((x <= p.lo[p.free]) & (g_q > 0)) | ((x >= p.hi[p.free]) & (g_q < 0))
+        grad = grad.copy()
+        if held.any():
+            p._hold(bands, grad, held, diag)
+        c_ss += np.einsum("krj,kri->ji", p.rows, p.rows)
+        g_s += np.einsum("krj,kr->j", p.rows, p.res)
+        systems.append((p, q, bands, grad, held, diag, p.border.reshape(-1, nj)))
+    return systems, c_ss, g_s
+
+
+def _reduced(systems: Sequence[_System], mu: float, nj: int) -> tuple[list[tuple[FloatArray, ...]], FloatArray, FloatArray]:
+    """The Schur complement of every trial's damped coefficient block, A = L L^T: per trial
+    ``(L, W, v, damping)`` with W = L^-1 B and v = L^-1 g, and the sums ``-W^T W`` and
+    ``W^T v`` (the mass block and right-hand side then add C + mu D and -g_s).
+
+    Raises
+    ------
+    LinAlgError
+        A damped block is not positive definite (more damping is needed).
+    """
+    solved = []
+    schur = np.zeros((nj, nj))
+    rhs = np.zeros(nj)
+    for _, _, bands, grad, _, diag, border in systems:
+        ab = bands.lower_band_storage()  # a fresh copy: the bands stay for another try
+        damp = np.maximum(diag.reshape(-1), 1e-9)
+        ab[0] += mu * damp
+        chol = banded_cholesky(ab, overwrite=True)
+        wv = _triangular_solve(chol, np.column_stack([border, grad.reshape(-1)]))
+        w_b, v = wv[:, :nj], wv[:, nj]
+        schur -= w_b.T @ w_b
+        rhs += w_b.T @ v
+        solved.append((chol, w_b, v, damp))
+    return solved, schur, rhs
+
+
+def _coordinate_steps(
+    systems: Sequence[_System], solved: Sequence[tuple[FloatArray, ...]], probs_new: Sequence[_BorderedProblem], ds: FloatArray, mu: float
+) -> tuple[list[FloatArray], list[FloatArray], float]:
+    """For the mass step ``ds``, each trial's coordinate step da = -L^-T (v + W ds): the new
+    ``(T, n)`` coordinates (taken by the problems of the new masses), the ``(T, nf)`` steps of
+    the free coordinates, and the model's predicted decrease of the trials' terms."""
+    q_new, deltas, predicted = [], [], 0.0
+    for (p, q, _, grad, _, _, _), (chol, w_b, v, damp), pn in zip(systems, solved, probs_new):
+        da = -_triangular_solve(chol, v + w_b @ ds, transpose=True)
+        predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
+        deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
+        q_new.append(pn._take(q, deltas[-1]))
+    return q_new, deltas, predicted
+
+
+def _hold_past_bounds(systems: Sequence[_System], deltas: Sequence[FloatArray], untargeted: list[FloatArray], raised: bool) -> None:
+    """After a rejected step: hold the coordinates it carried past a bound, in place in each
+    trial's system, for the next solve.
+
+    They are held at the bound, as a single trial's step holds them (held where they were
+    instead, the Camargo circuit's fit with the masses frozen stalled above the
+    alternation's cost, 19297.6 against 19295.5, and left its linear residual 2 % higher);
+    after a second rejected solve (``raised``), every held coordinate is held where it is
+    (the targets dropped: ``untargeted`` keeps each gradient from before them; with them,
+    more damping still moved those coordinates to their bounds, and the OpenCap subject's
+    fit stalled after 3 steps; 2026-11-26)."""
+    for i, ((p, q, bands, grad, held, diag, _), delta) in enumerate(zip(systems, deltas)):
+        x = q[:, p.free]
+        lo, hi = p.lo[p.free], p.hi[p.free]
+        over = ((x + delta < lo) | (x + delta > hi)) & ~held
+        if not raised:
+            untargeted[i] = grad.copy()
+        if over.any():
+            held |= over
+            p._hold(bands, grad, over, diag, None if raised else np.clip(x + delta, lo, hi) - x)
+        if raised:
+            grad[:] = untargeted[i]
