@@ -205,13 +205,21 @@ def stamp(fig: Figure, seconds: float) -> str:
     """The first line of a block: command, date, commit and duration; "plus uncommitted
     changes to the measured code" when the working tree differs from HEAD in
     :func:`measured_paths` (the one definition :func:`stale` reads too), a file not yet
-    committed included."""
+    committed included, by more than what :func:`_same_code` allows (a docstring or a
+    comment edited while a figure runs is no change of its code, as for :func:`stale`)."""
     commit = _git("rev-parse", "--short", "HEAD")
-    dirty = bool(_git("status", "--porcelain", "--untracked-files=all", "--", *measured_paths(fig)))  # new files too
+    dirty = bool(_dirty_code(measured_paths(fig)))
     minutes, secs = divmod(round(seconds), 60)
     took = f"{minutes} min {secs} s" if minutes else f"{secs} s"
     note = " plus uncommitted changes to the measured code" if dirty else ""
     return f"Made by `{fig.command}` on {_dt.date.today().isoformat()}, commit {commit}{note} ({took})."
+
+
+def _dirty_code(paths: list[str]) -> list[str]:
+    """Of ``paths``, the files whose working-tree code differs from HEAD's (new files
+    included; :func:`_same_code` with the working tree)."""
+    changed = _git("diff", "--name-only", "HEAD", "--", *paths).split() + _git("ls-files", "--others", "--exclude-standard", "--", *paths).split()
+    return [path for path in changed if not _same_code("HEAD", path, None)]
 
 
 def block_text(fig: Figure, head: str, output: str) -> str:
@@ -563,22 +571,30 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[F
     return out
 
 
-def _same_code(commit: str, path: str) -> bool:
-    """Whether the Python file ``path`` runs the same code at ``commit`` and at HEAD: its
-    syntax trees without docstrings and command-line help texts (the string of a ``help=``
-    keyword) are equal (comments, docstrings, help and layout may differ). False for any
-    other file, one missing at either commit, or one that does not parse."""
+def _same_code(commit: str, path: str, against: str | None = "HEAD") -> bool:
+    """Whether the Python file ``path`` runs the same code at ``commit`` and at ``against``
+    (a revision; None: the working tree): its syntax trees without docstrings and
+    command-line help texts (the string of a ``help=`` keyword) are equal (comments,
+    docstrings, help and layout may differ). False for any other file, one missing at
+    either, or one that does not parse."""
     import ast
 
     if not path.endswith(".py"):
         return False
     trees = []
-    for rev in (commit, "HEAD"):
-        shown = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=REPO, capture_output=True, text=True, check=False)
-        if shown.returncode != 0:
-            return False
+    for rev in (commit, against):
+        if rev is None:
+            try:
+                text = (REPO / path).read_text()
+            except OSError:
+                return False
+        else:
+            shown = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=REPO, capture_output=True, text=True, check=False)
+            if shown.returncode != 0:
+                return False
+            text = shown.stdout
         try:
-            tree = ast.parse(shown.stdout)
+            tree = ast.parse(text)
         except SyntaxError:
             return False
         for owner in _docstring_owners(tree):

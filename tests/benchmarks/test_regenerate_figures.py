@@ -172,6 +172,12 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     runs_new = rf.Figure("new", "doc.md", "python scripts/new.py", "accuracy", 0.0)
     assert rf.stamp(runs_new, 1.0).endswith(f"commit {head} plus uncommitted changes to the measured code (1 s).")
     assert rf.stamp(runs_tool, 1.0).endswith(f"commit {head} (1 s).")
+    # an edit of a docstring or a comment while a figure runs is no change of its code (as for stale())
+    (tmp_path / "scripts" / "new.py").unlink()
+    (tmp_path / "solver" / "fit.py").write_text('"""What x is."""\n\nx = 2  # the measured value\n')
+    assert rf.stamp(fig, 1.0).endswith(f"commit {head} (1 s).")
+    (tmp_path / "solver" / "fit.py").write_text('"""What x is."""\n\nx = 4\n')
+    assert rf.stamp(fig, 1.0).endswith(f"commit {head} plus uncommitted changes to the measured code (1 s).")
     # a script named in the command counts as measured code
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
 
