@@ -13,8 +13,9 @@ on the forces are also chosen on the motion the markers alone decide (a plate's 
 The pipeline's default is now the joint mass fit (:func:`~solver.dynamics.fit.converged_fit`,
 :mod:`solver.dynamics.joint_fit`). Its freer body masses take up part of a hidden mass or
 plate error before the diagnosis looks: with it in the alternation's place and the rules
-unchanged, three rows of docs/diagnose/RESULTS.md fell by one or two draws of 20
-(tests/benchmarks/RESULTS.md, block ``diagnose-joint-compare``). Until the rules are
+unchanged, the segment-mass row of docs/diagnose/RESULTS.md falls from 17 to 2 draws of 20
+within tolerance and the plate-position row from 17 to 14 (tests/benchmarks/RESULTS.md,
+block ``diagnose-joint-compare``). Until the rules are
 re-derived on it, the diagnosis judges every trial on the alternation: an output made with
 it (``--fit rounds``, or an older default output) is judged as it is; when the trial's
 output was made with another fit (the default, ``--fit band``), the dynamics stage is run

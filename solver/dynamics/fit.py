@@ -210,8 +210,8 @@ def converged_fit(**changes: object) -> FitSettings:
     walk, within a few degrees of angle the markers allow), and the walk's leg joint torques
     are 0.72 N·m/kg RMS from OpenSim's ID; the joint fit with them, 0.23 (2026-11-26). A
     tighter acceleration prior and looser residuals (accelerations 120 rad/s², residuals 4 N
-    and 4 N·m) keep the torques at 0.15-0.16 N·m/kg (the band fit: 0.17), and give a marker RMS at or below the band fit's and lower residuals on every
-    trial measured. The acceleration sigma sits below an edge where the fit has two minima:
+    and 4 N·m) keep the torques at 0.15-0.16 N·m/kg (the band fit: 0.17), and give a marker
+    RMS at or below the band fit's and lower residuals on every trial measured. The acceleration sigma sits below an edge where the fit has two minima:
     at 200 rad/s² the walk's torques were 0.5 N·m/kg from OpenSim's with every round run to
     ``tolerance`` (2026-11-24) and 0.16 with ``round_tolerance`` (the path decides which
     minimum it reaches); at 170 and below, 0.15 either way (tests/benchmarks/RESULTS.md,

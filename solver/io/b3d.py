@@ -545,7 +545,6 @@ class B3dFile:
             return _decode_frames(self, k, start, n, blob, first)
 
 
-
 def _not_b3d_hint(path: Path, prefix: bytes) -> str:
     """A hint for a file whose first bytes cannot start a .b3d: what it looks like instead
     (its suffix, or text), or nothing when it may be a damaged .b3d."""
@@ -554,6 +553,7 @@ def _not_b3d_hint(path: Path, prefix: bytes) -> str:
         kind = f"a {path.suffix} file" if path.suffix and path.suffix.lower() != ".b3d" else "text"
         return f"; this looks like {kind}, not an AddBiomechanics .b3d (binary: an 8-byte header length, then protobuf messages)"
     return ""
+
 
 def open_b3d(path: str | Path) -> B3dFile:
     """Open a .b3d file: read and check its header (frames are read later, on request).
