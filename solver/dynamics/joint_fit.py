@@ -19,14 +19,16 @@ factor L, J + 1 forward substitutions W = L^-1 [B, g], the J x J system S = C - 
 back-substitution for the coordinates' step; Triggs et al. 2000, "Bundle adjustment - a
 modern synthesis", §6.1, the same reduction with cameras and points). The
 total mass, set by the centre-of-mass fit, is held: each step keeps ``sum_j m_j s_j = 0``
-(a Lagrange multiplier on the J x J system). The fit stops when a step lowers the cost by
-less than ``FitSettings.tolerance`` (relative): a convergence test on one cost. It is met
-in a slow tail: restarted from its answer, the walk's fit lowers the cost by a further
-fraction of a per cent (tests/dynamics/test_joint_fit.py), and run on to 48 steps (a
-one-off run of the fit with ``mass_sigma`` 0.5, 2026-11-26) the walk's cost fell 0.3 %
-further, the OpenCap subject's 0.5 %, the Camargo circuit's 0.3 % and still falling: the
-Gauss-Newton model drops the second derivative of the nonlinear joint functions (the knee
-splines), so the steps crawl there.
+(a Lagrange multiplier on the J x J system). A step that would carry coordinates past
+their bounds is solved again with them held at the bound before its cost is evaluated
+(:data:`PROJECTIONS`). The fit stops when a step lowers the cost by less than
+``FitSettings.tolerance`` (relative; :data:`~solver.dynamics.fit.JOINT_TOLERANCE` for the
+pipeline): a convergence test on one cost, met in 4 steps on the walk, the run and the
+OpenCap subject and 7 on the Camargo circuit (tests/benchmarks/RESULTS.md, block
+``joint-fit``). Restarted from its answer, the fit still lowers the cost by a fraction of a
+per cent (tests/dynamics/test_joint_fit.py): the coordinates held at a bound change from
+step to step, and the Gauss-Newton model drops the second derivative of the nonlinear
+joint functions (the knee splines).
 
 The root residual wrench is linear in each joint's inertia. With F_j and N_j the rate of
 linear momentum of joint j's bodies and of their angular momentum about the ground origin
@@ -72,6 +74,14 @@ from solver.model.skeleton import Skeleton
 FloatArray = np.ndarray
 #: Solves of one step (the damping grows 4-fold after each that raises the cost).
 TRIES = 10
+#: Solves of one step, besides :data:`TRIES`, that hold at the bound the coordinates the
+#: step would carry past one before its cost is evaluated (same damping). Clipped to the
+#: bound after the step instead, those frames' kinks raised the cost up to 12-fold (the
+#: walk's first step), each rejection raised the damping, and the coordinates held at a
+#: bound grew by a few frames a step: the OpenCap subject's fit took 12 steps, crawling
+#: 2-3e-4 a step with gain ratios near 1, and 4 with one such solve (2026-11-26; more than
+#: one changed nothing there and cost the Camargo circuit a factorization a step).
+PROJECTIONS = 1
 #: After a step that needed more damping than the last, the damping stays at least that
 #: high for the next steps, the floor halving at each (a step at a third of it, Nielsen's
 #: rule after a good step, raised the cost on the walk and the OpenCap subject at every step).
@@ -225,7 +235,8 @@ def fit_dynamics_joint(
     columns of the weighted residual rows' derivatives with respect to s and share_j the
     joint's share of the mass. The first :data:`COORDINATES_FIRST` steps move the coordinates
     only. A factor that a step would carry past :data:`FACTOR_BOUNDS` is held at the bound
-    (:func:`_mass_step`). A step that raises the cost is solved again with 4 times the
+    (:func:`_mass_step`), and so are the coordinates a step would carry past theirs, solved
+    again before the step's cost is evaluated (:data:`PROJECTIONS`). A step that raises the cost is solved again with 4 times the
     damping, the coordinates it carried past a bound held at the bound (where they are,
     after a second such solve), and the damping of the next steps stays at least that high
     (:data:`FLOOR_DECAY`); after :data:`TRIES` such solves the fit ends where it is.
@@ -275,20 +286,27 @@ def fit_dynamics_joint(
         damp_s = np.maximum(np.diag(c_ss).copy(), 1e-9)
         constraint = m0 * f  # sum_j m_j s_j = 0: the total mass stays
         step, raised = None, False
-        untargeted: list[FloatArray] = [np.empty(0)] * len(systems)  # each gradient before the targets of held coordinates
-        for _ in range(TRIES):
+        untargeted = [s[3].copy() for s in systems]  # each gradient before the targets of held coordinates
+        tries, projections = 0, PROJECTIONS
+        while tries < TRIES:
             solved = None  # the last try's factors go before new ones are made
             try:
                 solved, schur, rhs = _reduced(systems, mu, nj)
             except LinAlgError:
                 mu *= 10
+                tries += 1
                 continue
             schur += c_ss + mu * np.diag(damp_s)
             rhs -= g_s
             ds = _mass_step(schur, rhs, constraint, f) if it >= COORDINATES_FIRST else np.zeros(nj)
+            deltas, predicted = _coordinate_steps(systems, solved, untargeted, ds, mu)
+            if projections and not raised and _hold_past_bounds(systems, deltas, untargeted, raised):
+                projections -= 1
+                continue
+            tries += 1
             f_new = np.clip(f * (1.0 + ds), *FACTOR_BOUNDS)  # within rounding of the bounds already
             probs_new = problems(build(factors_of(f_new)))
-            q_new, deltas, predicted = _coordinate_steps(systems, solved, probs_new, ds, mu)
+            q_new = [pn._take(s[1], d) for s, pn, d in zip(systems, probs_new, deltas)]
             predicted += float(-g_s @ ds + mu * np.sum(damp_s * ds**2))
             cost_new = sum(pn.cost(qn) for pn, qn in zip(probs_new, q_new)) + float(np.sum(w2 * (f_new - 1.0) ** 2))
             if cost_new < cost:
@@ -359,23 +377,26 @@ def _reduced(systems: Sequence[_System], mu: float, nj: int) -> tuple[list[tuple
 
 
 def _coordinate_steps(
-    systems: Sequence[_System], solved: Sequence[tuple[FloatArray, ...]], probs_new: Sequence[_BorderedProblem], ds: FloatArray, mu: float
-) -> tuple[list[FloatArray], list[FloatArray], float]:
-    """For the mass step ``ds``, each trial's coordinate step da = -L^-T (v + W ds): the new
-    ``(T, n)`` coordinates (taken by the problems of the new masses), the ``(T, nf)`` steps of
-    the free coordinates, and the model's predicted decrease of the trials' terms."""
-    q_new, deltas, predicted = [], [], 0.0
-    for (p, q, _, grad, _, _, _), (chol, w_b, v, damp), pn in zip(systems, solved, probs_new):
+    systems: Sequence[_System], solved: Sequence[tuple[FloatArray, ...]], untargeted: Sequence[FloatArray], ds: FloatArray, mu: float
+) -> tuple[list[FloatArray], float]:
+    """For the mass step ``ds``, each trial's coordinate step da = -L^-T (v + W ds): the
+    ``(T, nf)`` steps of the free coordinates, and the model's predicted decrease of the
+    trials' terms (Nielsen's ``-g da + mu da^T D da``, with each trial's gradient from before
+    the targets of its held coordinates, ``untargeted``: with them, the hold rows' stiff pull
+    made the prediction up to 1e8 for a decrease of 10, which the gain ratio then read as a
+    poor model; the hold rows' own work is left out)."""
+    deltas, predicted = [], 0.0
+    for (p, _, _, _, _, _, _), (chol, w_b, v, damp), grad in zip(systems, solved, untargeted):
         da = -_triangular_solve(chol, v + w_b @ ds, transpose=True)
         predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
         deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
-        q_new.append(pn._take(q, deltas[-1]))
-    return q_new, deltas, predicted
+    return deltas, predicted
 
 
-def _hold_past_bounds(systems: Sequence[_System], deltas: Sequence[FloatArray], untargeted: list[FloatArray], raised: bool) -> None:
-    """After a rejected step: hold the coordinates it carried past a bound, in place in each
-    trial's system, for the next solve.
+def _hold_past_bounds(systems: Sequence[_System], deltas: Sequence[FloatArray], untargeted: Sequence[FloatArray], raised: bool) -> bool:
+    """Before a step's cost is evaluated (:data:`PROJECTIONS`) or after a rejected step:
+    hold the coordinates it carried past a bound, in place in each trial's system, for the
+    next solve; returns whether there were any.
 
     They are held at the bound, as a single trial's step holds them (held where they were
     instead, the Camargo circuit's fit with the masses frozen stalled above the
@@ -384,14 +405,15 @@ def _hold_past_bounds(systems: Sequence[_System], deltas: Sequence[FloatArray], 
     (the targets dropped: ``untargeted`` keeps each gradient from before them; with them,
     more damping still moved those coordinates to their bounds, and the OpenCap subject's
     fit stalled after 3 steps; 2026-11-26)."""
-    for i, ((p, q, bands, grad, held, diag, _), delta) in enumerate(zip(systems, deltas)):
+    found = False
+    for (p, q, bands, grad, held, diag, _), delta, plain in zip(systems, deltas, untargeted):
         x = q[:, p.free]
         lo, hi = p.lo[p.free], p.hi[p.free]
         over = ((x + delta < lo) | (x + delta > hi)) & ~held
-        if not raised:
-            untargeted[i] = grad.copy()
         if over.any():
+            found = True
             held |= over
             p._hold(bands, grad, over, diag, None if raised else np.clip(x + delta, lo, hi) - x)
         if raised:
-            grad[:] = untargeted[i]
+            grad[:] = plain
+    return found

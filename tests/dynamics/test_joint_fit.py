@@ -141,9 +141,8 @@ def test_the_joint_fit_is_at_least_as_good_as_the_alternation_on_the_walk(walk: 
 def test_restarted_from_its_answer_the_joint_fit_finds_little_more(walk: dict[str, object]) -> None:
     """One fixed cost, so a restart from the coordinates the fit ended on (the masses back
     at the start's) is comparable: it lowers the cost by less than 1 % of what the first
-    fit removed. (It can lower it: the test on one step's decrease stops in a slow tail;
-    run on to 48 steps, a one-off run with mass_sigma 0.5, the walk's cost fell 0.3 %
-    further, OpenCap's 0.5 %.)"""
+    fit removed. (It can lower it: the test on one step's decrease, JOINT_TOLERANCE, stops
+    where the walk's steps still lower the cost by a few 1e-4: 0.1 % more in 4 steps.)"""
     out: FitOutput = walk["joint"]  # type: ignore[assignment]
     st = walk["settings"]
     trials = [replace(tr, q=q) for tr, q in zip(walk["trials"], out.q)]  # type: ignore[call-overload]
@@ -175,6 +174,11 @@ def test_the_joint_fit_ends_on_its_test_at_least_as_good_as_the_alternation(subj
     assert len(seen["trials"]) == n_trials  # type: ignore[arg-type]
     h = out.history
     assert (h[-2] - h[-1]) / h[-2] < st.tolerance and len(h) - 1 < st.rounds * st.iterations  # type: ignore[attr-defined]
+    if subject.startswith("opencap"):
+        # the coordinates a step would carry past a bound are held at it before the step is
+        # judged (joint_fit.PROJECTIONS): clipped after it, the fit took 12 steps here,
+        # crawling 2-3e-4 a step; with it, 4
+        assert len(h) - 1 <= 6, len(h) - 1
     build = seen["build"]
     assert build(out.mass_factors).total_mass == pytest.approx(build({}).total_mass, rel=1e-12)  # type: ignore[operator]
     results = sorted((tmp_path / "alternation").glob("*/results.json"))
