@@ -130,7 +130,7 @@ def judged_output(
     with tempfile.TemporaryDirectory(prefix="addb_judged_fit_") as tmp:
         base = Path(tmp) / "out"
         if _copy_entry(entry, base, key):
-            say("the diagnosis' fit (converged): reused from the cache (same inputs, options and flags)", 1.0)
+            say("the diagnosis' fit (--fit rounds): reused from the cache (same inputs, options and flags)", 1.0)
             yield base
             return
         cache = Path(out_dir) / CACHE_DIR
@@ -139,7 +139,7 @@ def judged_output(
             shutil.copy2(cache / KINEMATICS_CACHE, base / CACHE_DIR / KINEMATICS_CACHE)
         reprocess_dynamics(
             subject_dir, base, [trial], dict(unmeasured_force or {}) or None,
-            lambda m, f: say(f"the diagnosis' fit (converged): {m}", f), options=options, warm_start=False,
+            lambda m, f: say(f"the diagnosis' fit (--fit rounds): {m}", f), options=options, warm_start=False,
         )  # fmt: skip
         shutil.rmtree(base / CACHE_DIR, ignore_errors=True)  # the kinematics cache stays in OUT only
         _store(base, entry, key)

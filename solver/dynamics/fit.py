@@ -727,6 +727,28 @@ class _TrialProblem:
                 for b in range(a, cm.width):
                     blocks[(s + a)[:, None], b - a, idx, idx] += (w0[frames, a] * w0[frames, b])[:, None] * h
 
+    def held_at_bounds(self, q: FloatArray, g_q: FloatArray) -> NDArray[np.bool_]:
+        """``(T, nf)``: the free coordinates of ``q`` at a bound that the gradient ``g_q``
+        (``(T, nf)``, of the cost in q) pushes out, which a step holds there."""
+        x = q[:, self.free]
+        return ((x <= self.lo[self.free]) & (g_q > 0)) | ((x >= self.hi[self.free]) & (g_q < 0))
+
+    def hold_past_bounds(
+        self, q: FloatArray, delta: FloatArray, bands: BlockBands, grad: FloatArray, held: NDArray[np.bool_], diag: FloatArray, at_bound: bool = True
+    ) -> bool:
+        """Hold the free coordinates that the step ``delta`` (``(T, nf)``) carries from ``q``
+        past a bound, in the coefficient system (``bands``, ``grad``, ``diag`` of
+        :meth:`coefficient_equations`, in place; :meth:`_hold`): at the bound, or where they
+        are (``at_bound=False``). They join ``held`` (in place); returns whether there were any."""
+        x = q[:, self.free]
+        lo, hi = self.lo[self.free], self.hi[self.free]
+        over = ((x + delta < lo) | (x + delta > hi)) & ~held
+        if not over.any():
+            return False
+        held |= over
+        self._hold(bands, grad, over, diag, np.clip(x + delta, lo, hi) - x if at_bound else None)
+        return True
+
     def _take(self, q: FloatArray, delta: FloatArray) -> FloatArray:
         """q with ``(T, nf)`` delta added to the free coordinates, clipped to the bounds,
         locked coordinates at their defaults and dependent ones completed."""
@@ -747,10 +769,9 @@ class _TrialProblem:
         4-fold, the coordinates the step carried past a bound are stopped at it, and the
         system is solved again (at most 6 solves).
         """
-        free, nf = self.free, self.nf
-        x = q[:, free]
+        nf = self.nf
         bands, grad, g_q, diag = self.coefficient_equations(q)
-        held = ((x <= self.lo[free]) & (g_q > 0)) | ((x >= self.hi[free]) & (g_q < 0))
+        held = self.held_at_bounds(q, g_q)
         grad = grad.copy()
         if held.any():
             self._hold(bands, grad, held, diag)
@@ -771,10 +792,7 @@ class _TrialProblem:
                 predicted = float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
                 rho = (cost0 - cost1) / max(predicted, 1e-300)
                 return q_new, cost1, max(mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12)
-            over = ((x + delta < self.lo[free]) | (x + delta > self.hi[free])) & ~held
-            if over.any():
-                held |= over
-                self._hold(bands, grad, over, diag, np.clip(x + delta, self.lo[free], self.hi[free]) - x)
+            self.hold_past_bounds(q, delta, bands, grad, held, diag)
             mu *= 4
         return q, cost0, mu
 
@@ -787,11 +805,10 @@ class _TrialProblem:
         cost0 = self.cost(q) if cost0 is None else cost0
         if self.st.direction == "coefficients":
             return self._coefficient_step(q, mu, cost0)
-        free, nf = self.free, self.nf
-        x = q[:, free]
+        nf = self.nf
         ab, grad = self.normal_equations(q)
         g2 = grad.reshape(-1, nf)
-        held = ((x <= self.lo[free]) & (g2 > 0)) | ((x >= self.hi[free]) & (g2 < 0))
+        held = self.held_at_bounds(q, g2)
         keep = (~held).astype(float)
         diag = np.maximum(ab[0].copy(), 1e-9)
         base = ab[0] + held.reshape(-1) * 1e12

@@ -54,7 +54,6 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
-import pinocchio as pin
 from scipy.linalg import LinAlgError
 from scipy.linalg.lapack import dtbtrs
 
@@ -158,22 +157,16 @@ class _BorderedProblem(_TrialProblem):
         self.border: FloatArray | None = None  # (nc, nf, J) J_a^T rows
         self.keep_subtree_rates = True
 
-    def mass_rows(self, q: FloatArray, ofs: FloatArray | None = None) -> FloatArray:
+    def mass_rows(self, q: FloatArray, ofs: FloatArray) -> FloatArray:
         """``(T, 6, J)`` derivatives of the unweighted root residual wrench [force, moment
         about the centre of mass] (N, N·m; ground frame) with respect to s_j, the relative
         change of the mass and inertia of joint ``joints[j]`` (module docstring).
 
         ``ofs``: ``(T, njoints, 6)`` pinocchio's ``data.of`` at q of every frame (each
         subtree's momentum rate, world frame, about the origin), as the linearization keeps
-        them (``subtree_rates``); computed here when not given."""
-        qp, vp, ap, hdot, com = self._dynamics_state(q)
-        model, data = self.sk.model, self.sk.data
-        t = self.t
-        if ofs is None:
-            ofs = np.empty((t, model.njoints, 6))
-            for k in range(t):
-                pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-                ofs[k] = [f.vector for f in data.of]
+        them (``subtree_rates``)."""
+        _, _, _, hdot, com = self._dynamics_state(q)
+        model = self.sk.model
         own = ofs.copy()
         for j in range(model.njoints - 1, 0, -1):
             own[:, model.parents[j]] -= ofs[:, j]
@@ -339,8 +332,7 @@ def _linearized(probs: Sequence[_BorderedProblem], qs: Sequence[FloatArray], nj:
     g_s = np.zeros(nj)
     for p, q in zip(probs, qs):
         bands, grad, g_q, diag = p.coefficient_equations(q)
-        x = q[:, p.free]
-        held = ((x <= p.lo[p.free]) & (g_q > 0)) | ((x >= p.hi[p.free]) & (g_q < 0))
+        held = p.held_at_bounds(q, g_q)
         grad = grad.copy()
         if held.any():
             p._hold(bands, grad, held, diag)
@@ -407,13 +399,7 @@ def _hold_past_bounds(systems: Sequence[_System], deltas: Sequence[FloatArray], 
     fit stalled after 3 steps; 2026-11-26)."""
     found = False
     for (p, q, bands, grad, held, diag, _), delta, plain in zip(systems, deltas, untargeted):
-        x = q[:, p.free]
-        lo, hi = p.lo[p.free], p.hi[p.free]
-        over = ((x + delta < lo) | (x + delta > hi)) & ~held
-        if over.any():
-            found = True
-            held |= over
-            p._hold(bands, grad, over, diag, None if raised else np.clip(x + delta, lo, hi) - x)
+        found |= p.hold_past_bounds(q, delta, bands, grad, held, diag, at_bound=not raised)
         if raised:
             grad[:] = plain
     return found

@@ -547,12 +547,18 @@ class B3dFile:
 
 def _not_b3d_hint(path: Path, prefix: bytes) -> str:
     """A hint for a file whose first bytes cannot start a .b3d: what it looks like instead
-    (its suffix, or text), or nothing when it may be a damaged .b3d."""
-    looks_text = bool(prefix) and all(32 <= c < 127 or c in (9, 10, 13) for c in prefix)
-    if path.suffix.lower() != ".b3d" or looks_text:
-        kind = f"a {path.suffix} file" if path.suffix and path.suffix.lower() != ".b3d" else "text"
-        return f"; this looks like {kind}, not an AddBiomechanics .b3d (binary: an 8-byte header length, then protobuf messages)"
-    return ""
+    (its suffix, text, or a binary file without the suffix), or nothing when it may be a
+    damaged .b3d."""
+    suffix = path.suffix.lower()
+    if suffix and suffix != ".b3d":
+        kind = f"a {path.suffix} file"
+    elif bool(prefix) and all(32 <= c < 127 or c in (9, 10, 13) for c in prefix):
+        kind = "text"
+    elif not suffix:
+        kind = "a binary file without the .b3d suffix"
+    else:
+        return ""
+    return f"; this looks like {kind}, not an AddBiomechanics .b3d (binary: an 8-byte header length, then protobuf messages)"
 
 
 def open_b3d(path: str | Path) -> B3dFile:

@@ -71,7 +71,8 @@ def test_mass_rows_are_the_residual_derivatives_by_finite_differences(walk: dict
     joints = mass_joints(sk)
     prob = _BorderedProblem(sk, trial, st, joints)
     q = trial.q
-    rows = prob.mass_rows(q) * prob.w_res[:, :, None]
+    prob.coefficient_equations(q)  # the linearization the fit uses: its weighted mass rows
+    rows = prob.rows
     r0 = _residual(prob, q)
     bodies = {j: [b for b, bj in zip(sk.body_names, sk.body_joint) if int(bj) == j] for j in joints}
     total = sk.total_mass

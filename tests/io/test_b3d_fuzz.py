@@ -123,7 +123,8 @@ def test_damaged_frame_names_its_offset(tmp_path: Path) -> None:
 
 def test_a_file_that_is_not_a_b3d_is_named_as_such(tmp_path: Path) -> None:
     """A TRC (text) given where a .b3d is expected, as ``addb convert`` may be: the message
-    says what the file looks like; a damaged .b3d (binary, .b3d suffix) gets no such hint."""
+    says what the file looks like (a suffix, text, a binary file without the suffix); a
+    damaged .b3d (binary, .b3d suffix) gets no such hint."""
     trc = B3D.parents[1] / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "markers.trc"
     with pytest.raises(B3dFormatError, match=r"this looks like a \.trc file, not an AddBiomechanics \.b3d"):
         open_b3d(trc)
@@ -131,6 +132,10 @@ def test_a_file_that_is_not_a_b3d_is_named_as_such(tmp_path: Path) -> None:
     text.write_text("subject 01 notes\n")
     with pytest.raises(B3dFormatError, match=r"this looks like text, not an AddBiomechanics \.b3d"):
         open_b3d(text)
+    binary = tmp_path / "capture"
+    binary.write_bytes(struct.pack("<q", 10**12) + ORIGINAL[8:])
+    with pytest.raises(B3dFormatError, match=r"this looks like a binary file without the \.b3d suffix"):
+        open_b3d(binary)
     damaged = tmp_path / "damaged.b3d"
     damaged.write_bytes(struct.pack("<q", 10**12) + ORIGINAL[8:])
     with pytest.raises(B3dFormatError) as info:
