@@ -220,9 +220,9 @@ def converged_fit(**changes: object) -> FitSettings:
     (accelerations 500 rad/s², residuals 2 N and 2 N·m) the alternation's minimum buys ~1 N
     residuals with the motion's accelerations (hip rotation 660 rad/s² RMS over 0.4 s of the
     walk, within a few degrees of angle the markers allow), and the walk's leg joint torques
-    are 0.72 N·m/kg RMS from OpenSim's ID; the joint fit with them, 0.23 (2026-11-26). A
+    are 0.72 N·m/kg RMS from OpenSim's ID; the joint fit with them, 0.67 (2026-11-27). A
     tighter acceleration prior and looser residuals (accelerations 120 rad/s², residuals 4 N
-    and 4 N·m) keep the torques at 0.15-0.16 N·m/kg (the band fit: 0.17), and give a marker
+    and 4 N·m) keep the torques at 0.16-0.18 N·m/kg (the band fit: 0.17), and give a marker
     RMS at or below the band fit's and lower residuals on every trial measured. The acceleration sigma sits below an edge where the fit has two minima:
     at 200 rad/s² the walk's torques were 0.5 N·m/kg from OpenSim's with every round run to
     ``tolerance`` (2026-11-24) and 0.16 with ``round_tolerance`` (the path decides which
