@@ -176,6 +176,12 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-joint-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --compare docs/diagnose/results_draws_0_9.json "
            "docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_draws_0_9.json docs/diagnose/joint_fit_draws_10_19.json",
            "accuracy", 0.1, fence=False),
+    Figure("diagnose-joint-sigma-draws", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
+           "plate_position_offset,marker_offset,segment_mass_distribution --draws 20 --synthetic 5 "
+           "--json docs/diagnose/joint_fit_sigma_0_1_draws.json", "accuracy", 15.0),
+    Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
+           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_sigma_0_1_draws.json",
+           "accuracy", 0.1, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

@@ -16,7 +16,8 @@ before its rules are re-derived.
 
 The second form compares two sets of ``--json`` results draw by draw: per cause, the draws
 named within tolerance with each, and every draw whose named cause or verdict changed, and
-the false alarms on the consistent synthetic trials.
+the false alarms on the consistent synthetic trials. The second set may hold some of the
+causes only (``--causes``), all their draws; ``--sigma`` then names its fit's prior.
 """
 
 from __future__ import annotations
@@ -59,14 +60,27 @@ def _rows(paths: list[Path]) -> tuple[dict[tuple[str, str, int], dict[str, Any]]
     return rows, synthetic
 
 
-def compare(default: list[Path], joint: list[Path]) -> str:
-    """Markdown: per cause, draws within tolerance on each fit; the draws that changed."""
+def compare(default: list[Path], joint: list[Path], sigma: float = JOINT_MASS_SIGMA) -> str:
+    """Markdown: per cause, draws within tolerance on each fit; the draws that changed.
+
+    ``joint`` may hold a subset of the causes of ``default`` (all their draws): the
+    comparison is then on those causes alone. ``sigma`` names the joint fit's
+    ``mass_sigma`` in the table's heading.
+
+    Raises
+    ------
+    SystemExit
+        ``joint`` holds a draw ``default`` has not, or leaves out a draw of a cause it holds.
+    """
     a, a_syn = _rows(default)
     b, b_syn = _rows(joint)
+    causes_b = {k[0] for k in b}
+    a = {k: v for k, v in a.items() if k[0] in causes_b}
     if set(a) != set(b):
         raise SystemExit(f"the two sets hold different draws: {sorted(set(a) ^ set(b))[:5]} ...")
     causes = list(dict.fromkeys(k[0] for k in a))
-    lines = ["| cause | draws | within tolerance, alternation (judged fit) | within tolerance, joint fit (default) |", "| --- | ---: | ---: | ---: |"]
+    joint_name = "joint fit (default)" if sigma == JOINT_MASS_SIGMA else f"joint fit, mass_sigma {sigma:g}"
+    lines = [f"| cause | draws | within tolerance, alternation (judged fit) | within tolerance, {joint_name} |", "| --- | ---: | ---: | ---: |"]
     for c in causes:
         keys = [k for k in a if k[0] == c]
         lines.append(f"| {c} | {len(keys)} | {sum(bool(a[k]['within_tolerance']) for k in keys)} | {sum(bool(b[k]['within_tolerance']) for k in keys)} |")
@@ -85,12 +99,12 @@ def main() -> None:
     passed = argv[argv.index("--") + 1 :] if "--" in argv else []
     own = argv[: argv.index("--")] if "--" in argv else argv
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sigma", type=float, default=JOINT_MASS_SIGMA, help="mass_sigma of the joint fit")
+    ap.add_argument("--sigma", type=float, default=JOINT_MASS_SIGMA, help="mass_sigma of the joint fit (with --compare: the one the --with results were made with, for the heading)")
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the default fit")
     ap.add_argument("--with", dest="joint", type=Path, nargs="+", help="--json results of the joint fit")
     args = ap.parse_args(own)
     if args.compare:
-        print(compare(args.compare, args.joint or []))
+        print(compare(args.compare, args.joint or [], args.sigma))
         return
     import bench_diagnose  # this folder
 
