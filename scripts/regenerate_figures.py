@@ -544,7 +544,8 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[F
     draws) is read against the stamp of the first of ``readers`` that pools its ``.json``
     output (:func:`_reader`), with its own measured code: when the code changes after that
     block was made, the writer is listed beside it (re-making the pooling block alone would
-    stamp the old data with the new code). A writer no block reads is left out.
+    stamp the old data with the new code); while that block is empty (registered, not yet
+    made), the writer is listed with it. A writer no block reads is left out.
 
     Raises
     ------
@@ -560,6 +561,9 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[F
         found = stamp_of(fig)
         if found is None:
             reader = _reader(fig, readers)
+            if reader is not None and _unmade(reader):
+                out.append((fig, "", [f"block {reader.name!r}, which reads its data, is empty"]))
+                continue
             found = stamp_of(reader) if reader is not None else None
         if found is None:
             continue

@@ -186,7 +186,8 @@ def test_a_data_writer_is_stale_with_the_block_that_pools_its_output(rf, tmp_pat
     """A figure that writes only a data file (the diagnosis' draws) has no stamp of its own:
     it is read against the stamp of the block whose command reads that file, with its own
     measured code, so a change to that code after the block was made lists the writer too
-    (and a change to the pooling script alone does not); a writer no block reads is left out."""
+    (and a change to the pooling script alone does not); a writer no block reads is left out;
+    while the pooling block is empty (registered, not made), the writer is listed with it."""
     git = partial(git_in, tmp_path)
     repository_of(tmp_path, {"solver/fit.py": "x = 1\n", "scripts/draws.py": "from solver.fit import x\n", "scripts/pool.py": "y = 1\n"})
     made = git("rev-parse", "--short", "HEAD")
@@ -205,6 +206,11 @@ def test_a_data_writer_is_stale_with_the_block_that_pools_its_output(rf, tmp_pat
     assert [(f.name, c, p) for f, c, p in rf.stale(figs, readers=figs)] == [
         ("draws", made, ["solver/fit.py"]),
         ("pool", made, ["scripts/pool.py"]),
+    ]
+    (tmp_path / "doc.md").write_text("<!-- begin: pool -->\n<!-- end: pool -->\n")
+    assert [(f.name, c, p) for f, c, p in rf.stale(figs, readers=figs)] == [
+        ("draws", "", ["block 'pool', which reads its data, is empty"]),
+        ("pool", "", ["its block is empty"]),
     ]
 
 
