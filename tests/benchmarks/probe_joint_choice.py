@@ -70,7 +70,7 @@ def probe(fit_name: str, seeds: list[int], top: int, work: Path) -> list[str]:
     try:
         with contextlib.redirect_stderr(io.StringIO()):
             base = neutral_base("walk", work / "base")
-        lines = [f"### {fit_name}", ""]
+        lines = [f"**{fit_name}**", ""]
         for seed in seeds:
             cause = _cause_of(seed)
             seen.clear()
