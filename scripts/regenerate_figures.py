@@ -182,8 +182,8 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
            "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_sigma_0_1_draws.json",
            "accuracy", 0.1, fence=False),
-    Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006",
-           "accuracy", 3.5, fence=False),
+    Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
+           "accuracy", 5.0, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

@@ -1,14 +1,15 @@
-"""Why the joint fit loses walk draws the alternation names: the contenders of each draw on
-the fitted motion and on the marker-only motion, with each fit in the diagnosis' place.
+"""Why the joint fit loses draws the alternation names: the contenders of each draw on the
+fitted motion and on the marker-only motion, with each fit in the diagnosis' place.
 
-For each ``--seeds`` draw of the diagnosis benchmark (walk draws:
-:func:`tests.diagnose.harness.draw`; the hidden cause follows from the seed, ``1000 x
-(cause's index + 1) + draw``), hidden in a copy of the walk's neutral base and diagnosed
-(``addb diagnose --no-refit``: naming does not depend on the refit), once with the
+For each ``--seeds`` draw of the diagnosis benchmark (:func:`tests.diagnose.harness.draw`:
+the hidden cause and the trial follow from the seed, ``1000 x (cause's index + 1) + draw``,
+even draws on the walk and odd ones on the run, a marker offset's all on the walk), hidden
+in a copy of its trial's neutral base and diagnosed (``addb diagnose --no-refit``: naming
+does not depend on the refit), once with the
 alternation the diagnosis judges on (:func:`solver.dynamics.fit.alternating_fit`) and once
 per ``--sigma`` with the joint mass fit in its place
 (:func:`bench_diagnose_joint.joint_in_place`, as ``bench_diagnose_joint.py``; the neutral
-base is built again with each fit). For each it prints the cause named and the strongest
+bases are built again with each fit). For each it prints the cause named and the strongest
 contenders on the fitted motion (score, relative held-out gain, fraction of the held-out folds
 improved: the report's candidates) and, where the diagnosis compares the force-side causes on
 the marker-only motion (:func:`solver.diagnose.core.choice_on_marker_motion`, read as it runs),
@@ -35,17 +36,25 @@ from bench_diagnose_joint import joint_in_place  # this folder
 import solver.dynamics.stage as stage_module
 from solver.diagnose import core
 from tests.diagnose.effects import CAUSES, copy_subject, hide
-from tests.diagnose.harness import diagnose_json, neutral_base
+from tests.diagnose.harness import Base, diagnose_json, draw, neutral_base
 
 Row = tuple[str, float, float, float]
 
 
-def _cause_of(seed: int) -> str:
-    """The hidden cause of a benchmark seed (:func:`tests.diagnose.harness.draw`)."""
+def _draw_of(seed: int) -> tuple[str, str]:
+    """(hidden cause, trial key) of a benchmark seed (:func:`tests.diagnose.harness.draw`).
+
+    Raises
+    ------
+    SystemExit
+        ``seed`` is no seed of the benchmark's draws.
+    """
     index = seed // 1000 - 1
-    if not 0 <= index < len(CAUSES) or (seed % 1000) % 2:
-        raise SystemExit(f"seed {seed} is no walk draw of the benchmark (1000 x (cause + 1) + an even draw)")
-    return CAUSES[index]
+    if not 0 <= index < len(CAUSES):
+        raise SystemExit(f"seed {seed} is no draw of the benchmark (1000 x (cause's index + 1) + draw)")
+    key, again = draw(CAUSES[index], seed % 1000)
+    assert again == seed
+    return CAUSES[index], key
 
 
 def _table(title: str, rows: list[Row]) -> list[str]:
@@ -55,7 +64,7 @@ def _table(title: str, rows: list[Row]) -> list[str]:
 
 
 def probe(fit_name: str, seeds: list[int], top: int, work: Path) -> list[str]:
-    """Markdown lines for ``seeds`` with the fit in place (a neutral base built with it)."""
+    """Markdown lines for ``seeds`` with the fit in place (each trial's neutral base built with it)."""
     seen: list[tuple[str | None, list[Row], str | None]] = []
     original = core.choice_on_marker_motion
 
@@ -68,17 +77,20 @@ def probe(fit_name: str, seeds: list[int], top: int, work: Path) -> list[str]:
 
     core.choice_on_marker_motion = spy  # type: ignore[assignment]
     try:
-        with contextlib.redirect_stderr(io.StringIO()):
-            base = neutral_base("walk", work / "base")
+        bases: dict[str, Base] = {}
         lines = [f"**{fit_name}**", ""]
         for seed in seeds:
-            cause = _cause_of(seed)
+            cause, key = _draw_of(seed)
+            if key not in bases:
+                with contextlib.redirect_stderr(io.StringIO()):
+                    bases[key] = neutral_base(key, work / f"base-{key}")
+            base = bases[key]
             seen.clear()
             subject = copy_subject(base.subject, work / f"draw-{seed}")
             hide(cause, subject, base.trial, seed, base.processed)
             with contextlib.redirect_stderr(io.StringIO()):
                 report: dict[str, Any] = diagnose_json(subject, base.trial, "--no-refit")
-            lines += [f"Draw {seed} (hidden: {cause}): named {report['chosen'] or 'none'}.", ""]
+            lines += [f"Draw {seed} ({key}, hidden: {cause}): named {report['chosen'] or 'none'}.", ""]
             best = sorted(report["candidates"], key=lambda c: -c["score"])[:top]
             rows = [(f"{c['cause']} {c['choice'] or ''}".strip(), c["score"], c["gain"], c["folds_improved"]) for c in best]
             lines += _table("on the fitted motion", rows)
