@@ -18,8 +18,8 @@ within tolerance, the plate-position row from 17 to 14 and the marker-offset row
 13 (tests/benchmarks/RESULTS.md, block ``diagnose-joint-compare``, 2026-11-27). A tighter mass
 prior is not enough: at ``mass_sigma`` 0.1 the marker-offset row comes back, while plate
 position and segment masses stay two draws short each (block ``diagnose-joint-sigma-compare``).
-Until the rules are re-derived on it, the diagnosis judges every trial on the alternation: an output made with
-it (``--fit rounds``, or an older default output) is judged as it is; when the trial's
+Until the rules are re-derived on it, the diagnosis judges every trial on the alternation: an
+output made with it (``--fit rounds``, or an older default output) is judged as it is; when the trial's
 output was made with another fit (the default, ``--fit band``), the dynamics stage is run
 again with :func:`~solver.dynamics.fit.alternating_fit` (the recorded ``derivative`` kept)
 into a scratch folder, from the output's cached kinematics

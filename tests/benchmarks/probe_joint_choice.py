@@ -13,7 +13,8 @@ bases are built again with each fit). For each it prints the cause named and the
 contenders on the fitted motion (score, relative held-out gain, fraction of the held-out folds
 improved: the report's candidates) and, where the diagnosis compares the force-side causes on
 the marker-only motion (:func:`solver.diagnose.core.choice_on_marker_motion`, read as it runs),
-the same for them there and what that comparison returns. The choice rule is
+the strongest contenders evaluated there (every cause judged on that motion; the comparison
+takes the force-side ones among them) and what that comparison returns. The choice rule is
 :class:`solver.diagnose.selection.ChoiceRule` (a contender must improve 80 % of the folds).
 
     .venv/bin/python tests/benchmarks/probe_joint_choice.py [--sigma 0.1 ...] [--seeds 5006 5014 7006] [--top 5]
