@@ -184,6 +184,14 @@ FIGURES: tuple[Figure, ...] = (
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
+    Figure("diagnose-currency-draws-0-9", "", f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals -- --draws 10 "
+           "--synthetic 5 --json docs/diagnose/motion_currency_draws_0_9.json", "accuracy", 25.0),
+    Figure("diagnose-currency-draws-10-19", "", f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals -- --first 10 "
+           "--draws 10 --synthetic 0 --json docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 25.0),
+    Figure("diagnose-currency-compare", RESULTS, f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals --compare "
+           "docs/diagnose/results_draws_0_9.json "
+           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/motion_currency_draws_0_9.json "
+           "docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
