@@ -18,9 +18,9 @@ solver/diagnose/judged_fit.py), not a change of ``addb diagnose``. The first for
   What a cause's Gauss-Newton step then measures is the joint refit of the cause and the
   whole motion that the converged fit would make; the translation profile lets only a
   translation of the whole body take part, while the converged fit also turns the body to
-  balance a shifted centre of pressure (probe ``diagnose-joint-choice-probe``: on the joint
-  fit a hidden shift of the walk's right plate leaves a trace under the left plate too, and
-  the plates' registration explains both).
+  balance a shifted centre of pressure (block ``diagnose-joint-choice-probe``: on the joint
+  fit the plates' registration outscores a hidden shift of the walk's right plate, which
+  improves too few folds).
 * The relative gain of those causes is measured against the reference cost of their own
   channels (the residual rows and the idle plates' rows), not of every row of the profile
   (which carries every marker's error and the fit's acceleration prior).
