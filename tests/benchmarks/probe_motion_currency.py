@@ -195,33 +195,26 @@ def _delay_alternatives(self: Any, ctx: Context, full: Any) -> list[Any]:
     return [alt]
 
 
-def _segment_alternatives(self: Any, ctx: Context, full: Any) -> list[Any]:
-    """``segment_mass_distribution`` on the motion currency (as its own module, on the
-    reference rows at the stated mass with the idle plates' rows)."""
-    d = ctx.data
-    groups = [g for g in d.groups if d.group_mass[g] > 0]
-    if "legs" not in groups or len(groups) < 2:
-        return []
-    masses = np.array([d.group_mass[g] for g in groups])
-    cols = np.stack([d.groups[g] / d.group_mass[g] for g in groups], axis=2)
-    ref = reference_rows(ctx)
-    legs = np.array([grp == "legs" for grp in groups], dtype=float)
-    rest = np.where(legs > 0, 0.0, masses)
-    basis = (legs - rest / rest.sum())[:, None]
+def _on_residual_channels(cls: Any) -> None:
+    """Move ``segment_mass_distribution``'s alternatives onto the motion currency and the
+    residual channels: its own alternatives' columns (already on the whole-motion profile's
+    rows, the idle plates' rows zero) over the reference rows at the stated mass."""
+    own = cls.alternatives
 
-    def physical(theta: FloatArray) -> dict[str, Any]:
-        moved = {grp: float(v) for grp, v in zip(groups, theta)}
-        return {
-            "value": moved["legs"],
-            "mass_change_kg": moved,
-            "group_mass_kg": dict(zip(groups, masses.tolist())),
-        }
+    def alternatives(self: Any, ctx: Context, full: Any) -> list[Any]:
+        ref = reference_rows(ctx)
+        out = []
+        for alt in own(self, ctx, full):
+            idle = np.zeros((alt.g.shape[0], ref.shape[1] - alt.g.shape[1], alt.n_params))
+            g = np.concatenate([alt.g, idle], axis=1)
+            moved = LinearAlternative(alt.cause, alt.choice, ref, g, alt.physical, alt.names)
+            moved.channel_costs = channel_costs(ctx, ref)  # type: ignore[attr-defined]
+            out.append(moved)
+        return out
 
-    alt = LinearAlternative(
-        self.name, None, ref, motion_columns(ctx, cols), physical, ("legs_kg",), basis
-    )
-    alt.channel_costs = channel_costs(ctx, ref)  # type: ignore[attr-defined]
-    return [alt]
+    cls.alternatives = alternatives
+    cls.channel = "residuals"
+    cls.held_out_figures = held_out_figures
 
 
 def _cross_validate(alt: Any, folds: NDArray[np.intp]) -> selection.Evaluation:
@@ -252,10 +245,7 @@ def apply(segment_on_residuals: bool = False) -> None:
     selection.cross_validate = _cross_validate
     core.cross_validate = _cross_validate  # type: ignore[attr-defined]
     if segment_on_residuals:
-        cls = type(segment_mass_distribution.CAUSE)
-        cls.alternatives = _segment_alternatives
-        cls.channel = "residuals"
-        cls.held_out_figures = held_out_figures
+        _on_residual_channels(type(segment_mass_distribution.CAUSE))
 
 
 def main() -> None:
