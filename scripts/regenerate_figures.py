@@ -192,6 +192,14 @@ FIGURES: tuple[Figure, ...] = (
            "docs/diagnose/results_draws_0_9.json "
            "docs/diagnose/results_draws_10_19.json --with docs/diagnose/motion_currency_draws_0_9.json "
            "docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
+    Figure("diagnose-hybrid-draws-0-9", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain -- --draws 10 "
+           "--synthetic 5 --json docs/diagnose/hybrid_currency_draws_0_9.json", "accuracy", 25.0),
+    Figure("diagnose-hybrid-draws-10-19", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain -- --first 10 "
+           "--draws 10 --synthetic 0 --json docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 25.0),
+    Figure("diagnose-hybrid-compare", RESULTS, f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --compare "
+           "docs/diagnose/results_draws_0_9.json "
+           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/hybrid_currency_draws_0_9.json "
+           "docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
