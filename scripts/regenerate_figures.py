@@ -192,11 +192,11 @@ FIGURES: tuple[Figure, ...] = (
            "docs/diagnose/results_draws_0_9.json "
            "docs/diagnose/results_draws_10_19.json --with docs/diagnose/motion_currency_draws_0_9.json "
            "docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
-    Figure("diagnose-hybrid-draws-0-9", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain -- --draws 10 "
+    Figure("diagnose-hybrid-draws-0-9", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only -- --draws 10 "
            "--synthetic 5 --json docs/diagnose/hybrid_currency_draws_0_9.json", "accuracy", 25.0),
-    Figure("diagnose-hybrid-draws-10-19", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain -- --first 10 "
+    Figure("diagnose-hybrid-draws-10-19", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only -- --first 10 "
            "--draws 10 --synthetic 0 --json docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 25.0),
-    Figure("diagnose-hybrid-compare", RESULTS, f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --compare "
+    Figure("diagnose-hybrid-compare", RESULTS, f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only --compare "
            "docs/diagnose/results_draws_0_9.json "
            "docs/diagnose/results_draws_10_19.json --with docs/diagnose/hybrid_currency_draws_0_9.json "
            "docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 0.1, fence=False),

@@ -1,7 +1,7 @@
 """Probe: the diagnosis on the joint fit with some force-side causes on the whole-motion profile.
 
-    .venv/bin/python tests/benchmarks/probe_hybrid_currency.py [--sigma 0.1] [--motion-causes NAME ...] [--segment-on-residuals] [--channel-gain] -- BENCH_DIAGNOSE_ARGS ...
-    .venv/bin/python tests/benchmarks/probe_hybrid_currency.py [--sigma 0.1] [--motion-causes NAME ...] [--segment-on-residuals] [--channel-gain] --compare DEFAULT.json ... --with PROBE.json ...
+    .venv/bin/python tests/benchmarks/probe_hybrid_currency.py [--sigma 0.1] [--motion-causes NAME ...] [--segment-on-residuals] [--channel-gain] [--fitted-motion-only] -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_hybrid_currency.py [--sigma 0.1] [--motion-causes NAME ...] [--segment-on-residuals] [--channel-gain] [--fitted-motion-only] --compare DEFAULT.json ... --with PROBE.json ...
 
 A probe for issue 29's second gap (the diagnosis' rules re-derived on the joint mass fit,
 solver/diagnose/judged_fit.py), not a change of ``addb diagnose``. It is
@@ -19,7 +19,11 @@ residual channels, so a plate's shift and a mass redistribution are fitted toget
 ``--channel-gain`` a moved cause's relative gain is the held-out decrease of its channels'
 own rows (the residual and idle plates' rows, after the joint refit of the cause and the
 motion) over their reference cost (:class:`ChannelEvaluation`), a share of at most 1 as on
-the translation profile; its score stays the whole profiled cost's decrease.
+the translation profile; its score stays the whole profiled cost's decrease. With
+``--fitted-motion-only`` the moved causes are scored on the whole-motion rows on the fitted
+motion only; on the marker-only motion (:func:`solver.diagnose.core.choice_on_marker_motion`,
+the motion the markers alone decide) they keep the translation profile, since re-optimizing
+the whole motion there would let the forces reshape it.
 
 Why that split (tests/benchmarks/RESULTS.md, block ``diagnose-currency-compare``): with every
 force-side cause on the whole-motion profile, the plates' rows gain on the treadmill run
@@ -120,10 +124,46 @@ def _cross_validate(alt, folds: NDArray[np.intp]) -> selection.Evaluation:  # ty
     return ev
 
 
+#: Whether :func:`solver.diagnose.core.evaluate` is evaluating the marker-only motion.
+_MARKER_MOTION = {"now": False}
+
+
+def _evaluate(data, options, unmeasured=None, sigmas=None):  # type: ignore[no-untyped-def]
+    """:func:`solver.diagnose.core.evaluate`, noting when it evaluates the marker-only
+    motion (called with the fitted motion's frames U)."""
+    _MARKER_MOTION["now"] = unmeasured is not None
+    try:
+        return _own_evaluate(data, options, unmeasured, sigmas)
+    finally:
+        _MARKER_MOTION["now"] = False
+
+
+_own_evaluate = core.evaluate
+
+
+def _fitted_motion_only(cls: type, translation_alternatives, translation_figures) -> None:  # type: ignore[no-untyped-def]
+    """Keep ``cls``'s whole-motion alternatives for the fitted motion: on the marker-only
+    motion (the motion the markers alone decide, which no force may reshape) its
+    translation-profile alternatives, and their held-out figures."""
+    motion_alternatives, motion_figures = cls.alternatives, cls.held_out_figures
+
+    def alternatives(self, ctx: Context, full):  # type: ignore[no-untyped-def]
+        own = translation_alternatives if _MARKER_MOTION["now"] else motion_alternatives
+        return own(self, ctx, full)
+
+    def held_out_figures(self, ctx, alt, folds, frames):  # type: ignore[no-untyped-def]
+        own = motion_figures if hasattr(alt, "channel_costs") else translation_figures
+        return own(self, ctx, alt, folds, frames)
+
+    cls.alternatives = alternatives
+    cls.held_out_figures = held_out_figures
+
+
 def apply(
     motion_causes: tuple[str, ...] = DEFAULT_MOTION_CAUSES,
     segment_on_residuals: bool = False,
     channel_gain: bool = False,
+    fitted_motion_only: bool = False,
 ) -> None:
     """Move ``motion_causes`` (and with ``segment_on_residuals`` the mass redistribution) onto
     the whole-motion rows in this process (the module docstring).
@@ -136,6 +176,10 @@ def apply(
     unknown = sorted(set(motion_causes) - set(MOVABLE))
     if unknown:
         raise SystemExit(f"--motion-causes: {', '.join(unknown)} not one of {', '.join(MOVABLE)}")
+    translation = {
+        name: (type(MOVABLE[name].CAUSE).alternatives, type(MOVABLE[name].CAUSE).held_out_figures)
+        for name in motion_causes
+    }
     for name in motion_causes:
         if name == force_time_offset.CAUSE.name:
             cls = type(force_time_offset.CAUSE)
@@ -152,6 +196,10 @@ def apply(
             _channel_rows(type(MOVABLE[name].CAUSE))
         if segment_on_residuals:
             _channel_rows(type(segment_mass_distribution.CAUSE))
+    if fitted_motion_only:
+        for name in motion_causes:
+            _fitted_motion_only(type(MOVABLE[name].CAUSE), *translation[name])
+        core.evaluate = _evaluate
 
 
 def main() -> None:
@@ -181,6 +229,11 @@ def main() -> None:
         action="store_true",
         help="relative gain: the held-out decrease of the channels' own rows",
     )
+    ap.add_argument(
+        "--fitted-motion-only",
+        action="store_true",
+        help="the moved causes on the whole-motion rows on the fitted motion only",
+    )
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the judged fit")
     ap.add_argument(
         "--with", dest="probe", type=Path, nargs="+", help="--json results of this probe"
@@ -197,12 +250,18 @@ def main() -> None:
             else ""
         )
         gain = ", relative gain of their channels' own rows" if args.channel_gain else ""
+        gain += ", on the fitted motion only" if args.fitted_motion_only else ""
         print(
             f"**{', '.join(args.motion_causes)} on the whole-motion profile{segment}{gain}; joint fit, mass_sigma {args.sigma:g}**\n"
         )
         print(bench_diagnose_joint.compare(args.compare, args.probe, args.sigma))
         return
-    apply(tuple(args.motion_causes), args.segment_on_residuals, args.channel_gain)
+    apply(
+        tuple(args.motion_causes),
+        args.segment_on_residuals,
+        args.channel_gain,
+        args.fitted_motion_only,
+    )
     sys.argv = [str(Path(bench_diagnose_joint.__file__)), "--sigma", str(args.sigma), *passed]
     bench_diagnose_joint.main()
 
