@@ -94,6 +94,22 @@ AGAINST_TREE = f"/tmp/addb_{AGAINST}"
 EXPORT_AGAINST = f"rm -rf {AGAINST_TREE} && mkdir -p {AGAINST_TREE} && git archive {AGAINST} solver addb_viewer annotations | tar -x -C {AGAINST_TREE}"
 DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
 
+
+def _probe_table(name: str, probe: str, stem: str) -> tuple[Figure, Figure, Figure]:
+    """The diagnosis' table with a probe of tests/benchmarks in its place (``probe``: the
+    script and its switches): draws 0-9 with the synthetic trials and draws 10-19 (two halves
+    to run side by side) into ``docs/diagnose/<stem>_draws_*.json``, then their comparison
+    with the table's own draws in RESULTS."""
+    cmd = f"{PY} tests/benchmarks/{probe}"
+    halves = [f"docs/diagnose/{stem}_draws_{part}.json" for part in ("0_9", "10_19")]
+    table = "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json"
+    return (
+        Figure(f"{name}-draws-0-9", "", f"{cmd} -- --draws 10 --synthetic 5 --json {halves[0]}", "accuracy", 25.0),
+        Figure(f"{name}-draws-10-19", "", f"{cmd} -- --first 10 --draws 10 --synthetic 0 --json {halves[1]}", "accuracy", 25.0),
+        Figure(f"{name}-compare", RESULTS, f"{cmd} --compare {table} --with {' '.join(halves)}", "accuracy", 0.1, fence=False),
+    )
+
+
 FIGURES: tuple[Figure, ...] = (
     # ---- tests/benchmarks/RESULTS.md, in the document's order
     Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.2),
@@ -184,22 +200,8 @@ FIGURES: tuple[Figure, ...] = (
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
-    Figure("diagnose-currency-draws-0-9", "", f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals -- --draws 10 "
-           "--synthetic 5 --json docs/diagnose/motion_currency_draws_0_9.json", "accuracy", 25.0),
-    Figure("diagnose-currency-draws-10-19", "", f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals -- --first 10 "
-           "--draws 10 --synthetic 0 --json docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 25.0),
-    Figure("diagnose-currency-compare", RESULTS, f"{PY} tests/benchmarks/probe_motion_currency.py --segment-on-residuals --compare "
-           "docs/diagnose/results_draws_0_9.json "
-           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/motion_currency_draws_0_9.json "
-           "docs/diagnose/motion_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
-    Figure("diagnose-hybrid-draws-0-9", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only -- --draws 10 "
-           "--synthetic 5 --json docs/diagnose/hybrid_currency_draws_0_9.json", "accuracy", 25.0),
-    Figure("diagnose-hybrid-draws-10-19", "", f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only -- --first 10 "
-           "--draws 10 --synthetic 0 --json docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 25.0),
-    Figure("diagnose-hybrid-compare", RESULTS, f"{PY} tests/benchmarks/probe_hybrid_currency.py --channel-gain --fitted-motion-only --compare "
-           "docs/diagnose/results_draws_0_9.json "
-           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/hybrid_currency_draws_0_9.json "
-           "docs/diagnose/hybrid_currency_draws_10_19.json", "accuracy", 0.1, fence=False),
+    *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency"),
+    *_probe_table("diagnose-hybrid", "probe_hybrid_currency.py --channel-gain --fitted-motion-only", "hybrid_currency"),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

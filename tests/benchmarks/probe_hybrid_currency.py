@@ -35,6 +35,7 @@ residual rows. Every threshold of :class:`solver.diagnose.selection.ChoiceRule` 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
 
@@ -48,28 +49,21 @@ from numpy.typing import NDArray
 
 from solver.diagnose import core, selection
 from solver.diagnose.candidates import Context
-from solver.diagnose.causes import (
-    body_mass,
-    force_time_offset,
-    plate_force_gain,
-    plate_force_offset,
-    plate_position_offset,
-    plate_registration,
-    segment_mass_distribution,
-)
 
-#: Cause name -> its module, for the causes that may move to the whole-motion rows.
+#: Cause name -> its module (solver/diagnose/causes/<name>.py), for the causes that may move
+#: to the whole-motion rows.
 MOVABLE = {
-    m.CAUSE.name: m
-    for m in (
-        force_time_offset,
-        body_mass,
-        plate_force_offset,
-        plate_force_gain,
-        plate_position_offset,
-        plate_registration,
+    name: importlib.import_module(f"solver.diagnose.causes.{name}")
+    for name in (
+        "force_time_offset",
+        "body_mass",
+        "plate_force_offset",
+        "plate_force_gain",
+        "plate_position_offset",
+        "plate_registration",
     )
 }
+SEGMENTS = importlib.import_module("solver.diagnose.causes.segment_mass_distribution")
 DEFAULT_MOTION_CAUSES = ("plate_position_offset", "plate_registration")
 
 
@@ -181,8 +175,8 @@ def apply(
         for name in motion_causes
     }
     for name in motion_causes:
-        if name == force_time_offset.CAUSE.name:
-            cls = type(force_time_offset.CAUSE)
+        if name == "force_time_offset":
+            cls = type(MOVABLE["force_time_offset"].CAUSE)
             cls.alternatives = currency._delay_alternatives
             cls.held_out_figures = currency.held_out_figures
         else:
@@ -190,80 +184,64 @@ def apply(
     selection.cross_validate = _cross_validate
     core.cross_validate = _cross_validate  # type: ignore[attr-defined]
     if segment_on_residuals:
-        currency._on_residual_channels(type(segment_mass_distribution.CAUSE))
+        currency._on_residual_channels(type(SEGMENTS.CAUSE))
     if channel_gain:
         for name in motion_causes:
             _channel_rows(type(MOVABLE[name].CAUSE))
         if segment_on_residuals:
-            _channel_rows(type(segment_mass_distribution.CAUSE))
+            _channel_rows(type(SEGMENTS.CAUSE))
     if fitted_motion_only:
         for name in motion_causes:
             _fitted_motion_only(type(MOVABLE[name].CAUSE), *translation[name])
         core.evaluate = _evaluate
 
 
+#: The switches of :func:`apply`: flag -> (its help, what the comparison's heading adds).
+SWITCHES = {
+    "--segment-on-residuals": (
+        "score the segment mass redistribution on the same rows, on the residual channels",
+        ", the segment mass redistribution on them, on the residual channels",
+    ),
+    "--channel-gain": (
+        "relative gain: the held-out decrease of the channels' own rows",
+        ", relative gain of their channels' own rows",
+    ),
+    "--fitted-motion-only": (
+        "the moved causes on the whole-motion rows on the fitted motion only",
+        ", on the fitted motion only",
+    ),
+}
+
+
 def main() -> None:
+    """The two forms of the module docstring."""
     argv = sys.argv[1:]
-    passed = argv[argv.index("--") :] if "--" in argv else []
-    own = argv[: argv.index("--")] if "--" in argv else argv
+    cut = argv.index("--") if "--" in argv else len(argv)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument(
-        "--sigma",
-        type=float,
-        default=0.1,
-        help="mass_sigma of the joint fit in the alternation's place",
-    )
-    ap.add_argument(
-        "--motion-causes",
-        nargs="+",
-        default=list(DEFAULT_MOTION_CAUSES),
-        help="causes scored on the whole-motion rows",
-    )
-    ap.add_argument(
-        "--segment-on-residuals",
-        action="store_true",
-        help="score the segment mass redistribution on the same rows, on the residual channels",
-    )
-    ap.add_argument(
-        "--channel-gain",
-        action="store_true",
-        help="relative gain: the held-out decrease of the channels' own rows",
-    )
-    ap.add_argument(
-        "--fitted-motion-only",
-        action="store_true",
-        help="the moved causes on the whole-motion rows on the fitted motion only",
-    )
+    ap.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit")
+    ap.add_argument("--motion-causes", nargs="+", default=list(DEFAULT_MOTION_CAUSES))
+    for flag, (text, _) in SWITCHES.items():
+        ap.add_argument(flag, action="store_true", help=text)
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the judged fit")
-    ap.add_argument(
-        "--with", dest="probe", type=Path, nargs="+", help="--json results of this probe"
-    )
-    args = ap.parse_args(own)
+    ap.add_argument("--with", dest="probe", type=Path, nargs="+", help="--json of this probe")
+    args = ap.parse_args(argv[:cut])
+    on = [vars(args)[flag[2:].replace("-", "_")] for flag in SWITCHES]
     import bench_diagnose_joint  # this folder
 
-    if args.compare:
-        if not args.probe:
-            ap.error("--compare needs --with")
-        segment = (
-            ", the segment mass redistribution on them, on the residual channels"
-            if args.segment_on_residuals
-            else ""
-        )
-        gain = ", relative gain of their channels' own rows" if args.channel_gain else ""
-        gain += ", on the fitted motion only" if args.fitted_motion_only else ""
+    if not args.compare:
+        apply(tuple(args.motion_causes), *on)
+        bench = str(Path(bench_diagnose_joint.__file__))
+        sys.argv = [bench, "--sigma", str(args.sigma), *argv[cut:]]
+        bench_diagnose_joint.main()
+    elif not args.probe:
+        ap.error("--compare needs --with")
+    else:
+        added = "".join(heading for (_, heading), yes in zip(SWITCHES.values(), on) if yes)
+        causes = ", ".join(args.motion_causes)
         print(
-            f"**{', '.join(args.motion_causes)} on the whole-motion profile{segment}{gain}; joint fit, mass_sigma {args.sigma:g}**\n"
+            f"**{causes} on the whole-motion profile{added}; joint fit, mass_sigma {args.sigma:g}**\n"
         )
         print(bench_diagnose_joint.compare(args.compare, args.probe, args.sigma))
-        return
-    apply(
-        tuple(args.motion_causes),
-        args.segment_on_residuals,
-        args.channel_gain,
-        args.fitted_motion_only,
-    )
-    sys.argv = [str(Path(bench_diagnose_joint.__file__)), "--sigma", str(args.sigma), *passed]
-    bench_diagnose_joint.main()
 
 
 if __name__ == "__main__":
