@@ -202,6 +202,9 @@ FIGURES: tuple[Figure, ...] = (
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency"),
     *_probe_table("diagnose-hybrid", "probe_hybrid_currency.py --channel-gain --fitted-motion-only", "hybrid_currency"),
+    Figure("diagnose-fixed-base-run", RESULTS, f"{PY} tests/benchmarks/probe_fixed_base.py --trial run --draws "
+           "segment_mass_distribution:1 segment_mass_distribution:3 segment_mass_distribution:5 segment_mass_distribution:7 "
+           "segment_mass_distribution:13 body_mass:9", "accuracy", 8.0, fence=False),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
