@@ -198,6 +198,18 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
            "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_sigma_0_1_draws.json",
            "accuracy", 0.1, fence=False),
+    # the same comparison on 40 draws of every cause (draws 20-39 and the six causes left out above)
+    Figure("diagnose-draws-20-39", "", f"{DIAG} --first 20 --draws 20 --synthetic 0 --json docs/diagnose/results_draws_20_39.json",
+           "accuracy", 30.0),
+    Figure("diagnose-joint-sigma-draws-20-39", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --first 20 "
+           "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0),
+    Figure("diagnose-joint-sigma-draws-rest", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
+           "force_time_offset,body_mass,plate_force_offset,plate_force_gain,unmeasured_force,plate_registration --draws 20 "
+           "--synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json", "accuracy", 20.0),
+    Figure("diagnose-joint-sigma-compare-40", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
+           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json docs/diagnose/results_draws_20_39.json "
+           "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
+           "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency"),
