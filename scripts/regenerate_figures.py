@@ -210,6 +210,8 @@ FIGURES: tuple[Figure, ...] = (
            "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json docs/diagnose/results_draws_20_39.json "
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
            "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
+    Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
+           "accuracy", 3.0, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency"),
