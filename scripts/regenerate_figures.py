@@ -212,6 +212,13 @@ FIGURES: tuple[Figure, ...] = (
            "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
            "accuracy", 3.0, fence=False),
+    Figure("diagnose-registration-gain-draws-0-19", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --draws 20 "
+           "--synthetic 5 --json docs/diagnose/registration_gain_draws_0_19.json", "accuracy", 30.0),
+    Figure("diagnose-registration-gain-draws-20-39", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --first 20 "
+           "--draws 20 --synthetic 0 --json docs/diagnose/registration_gain_draws_20_39.json", "accuracy", 30.0),
+    Figure("diagnose-registration-gain-compare", RESULTS, f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 --compare "
+           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json docs/diagnose/results_draws_20_39.json --with "
+           "docs/diagnose/registration_gain_draws_0_19.json docs/diagnose/registration_gain_draws_20_39.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency"),
