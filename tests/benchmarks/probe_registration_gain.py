@@ -21,15 +21,15 @@ tolerance, every draw whose named cause or verdict changed, and the false alarms
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_diagnose_joint import _rows  # this folder
 
 from solver.diagnose import core
 
@@ -47,16 +47,6 @@ def apply(gain: float) -> None:
     core.choice_on_marker_motion = on_marker_motion  # type: ignore[assignment]
 
 
-def _load(paths: list[Path]) -> tuple[dict[tuple[str, str, int], dict[str, Any]], list[dict[str, Any]]]:
-    rows: dict[tuple[str, str, int], dict[str, Any]] = {}
-    synthetic: list[dict[str, Any]] = []
-    for p in paths:
-        d = json.loads(p.read_text())
-        rows.update({(r["cause"], r["trial"], r["seed"]): r for r in d["rows"]})
-        synthetic += d.get("synthetic") or []
-    return rows, synthetic
-
-
 def compare(table: list[Path], probe: list[Path], gain: float) -> str:
     """Markdown: the probe's draws against the same draws of the table.
 
@@ -65,8 +55,8 @@ def compare(table: list[Path], probe: list[Path], gain: float) -> str:
     SystemExit
         The probe holds a draw the table has not.
     """
-    a, a_syn = _load(table)
-    b, b_syn = _load(probe)
+    a, a_syn = _rows(table)
+    b, b_syn = _rows(probe)
     if not set(b) <= set(a):
         raise SystemExit(f"draws the table has not: {sorted(set(b) - set(a))[:5]}")
     causes = list(dict.fromkeys(k[0] for k in b))
