@@ -90,7 +90,7 @@ def main() -> None:
         import bench_diagnose  # this folder
 
         apply(args.gain)
-        sys.argv = [str(Path(bench_diagnose.__file__)), *argv[cut:]]
+        sys.argv = [str(Path(bench_diagnose.__file__)), *argv[cut + 1 :]]
         bench_diagnose.main()
     elif not args.probe:
         ap.error("--compare needs --with")
