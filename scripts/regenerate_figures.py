@@ -93,6 +93,9 @@ AGAINST = "ef4449a"
 AGAINST_TREE = f"/tmp/addb_{AGAINST}"
 EXPORT_AGAINST = f"rm -rf {AGAINST_TREE} && mkdir -p {AGAINST_TREE} && git archive {AGAINST} solver addb_viewer annotations | tar -x -C {AGAINST_TREE}"
 DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
+#: The diagnosis table's draws 0-19 (blocks diagnose-draws-0-9 and -10-19), and with draws 20-39: what the comparisons read.
+TABLE = "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json"
+TABLE_40 = f"{TABLE} docs/diagnose/results_draws_20_39.json"
 
 
 def _probe_table(name: str, probe: str, stem: str) -> tuple[Figure, Figure, Figure]:
@@ -102,11 +105,10 @@ def _probe_table(name: str, probe: str, stem: str) -> tuple[Figure, Figure, Figu
     with the table's own draws in RESULTS."""
     cmd = f"{PY} tests/benchmarks/{probe}"
     halves = [f"docs/diagnose/{stem}_draws_{part}.json" for part in ("0_9", "10_19")]
-    table = "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json"
     return (
         Figure(f"{name}-draws-0-9", "", f"{cmd} -- --draws 10 --synthetic 5 --json {halves[0]}", "accuracy", 25.0),
         Figure(f"{name}-draws-10-19", "", f"{cmd} -- --first 10 --draws 10 --synthetic 0 --json {halves[1]}", "accuracy", 25.0),
-        Figure(f"{name}-compare", RESULTS, f"{cmd} --compare {table} --with {' '.join(halves)}", "accuracy", 0.1, fence=False),
+        Figure(f"{name}-compare", RESULTS, f"{cmd} --compare {TABLE} --with {' '.join(halves)}", "accuracy", 0.1, fence=False),
     )
 
 
@@ -183,20 +185,20 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-draws-10-19", "", f"{DIAG} --first 10 --draws 10 --synthetic 0 --json docs/diagnose/results_draws_10_19.json",
            "accuracy", 15.0),
     Figure("diagnose-results", "docs/diagnose/RESULTS.md",
-           f"{DIAG} --pool --from-json docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json", "accuracy", 0.1,
+           f"{DIAG} --pool --from-json {TABLE}", "accuracy", 0.1,
            fence=False),
     Figure("diagnose-joint-draws-0-9", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py -- --draws 10 --synthetic 5 "
            "--json docs/diagnose/joint_fit_draws_0_9.json", "accuracy", 20.0),
     Figure("diagnose-joint-draws-10-19", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py -- --first 10 --draws 10 "
            "--synthetic 0 --json docs/diagnose/joint_fit_draws_10_19.json", "accuracy", 15.0),
-    Figure("diagnose-joint-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --compare docs/diagnose/results_draws_0_9.json "
-           "docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_draws_0_9.json docs/diagnose/joint_fit_draws_10_19.json",
+    Figure("diagnose-joint-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --compare {TABLE} "
+           "--with docs/diagnose/joint_fit_draws_0_9.json docs/diagnose/joint_fit_draws_10_19.json",
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
            "plate_position_offset,marker_offset,segment_mass_distribution --draws 20 --synthetic 5 "
            "--json docs/diagnose/joint_fit_sigma_0_1_draws.json", "accuracy", 15.0),
-    Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
-           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json --with docs/diagnose/joint_fit_sigma_0_1_draws.json",
+    Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare {TABLE} "
+           "--with docs/diagnose/joint_fit_sigma_0_1_draws.json",
            "accuracy", 0.1, fence=False),
     # the same comparison on 40 draws of every cause (draws 20-39 and the six causes left out above)
     Figure("diagnose-draws-20-39", "", f"{DIAG} --first 20 --draws 20 --synthetic 0 --json docs/diagnose/results_draws_20_39.json",
@@ -206,8 +208,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-joint-sigma-draws-rest", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
            "force_time_offset,body_mass,plate_force_offset,plate_force_gain,unmeasured_force,plate_registration --draws 20 "
            "--synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json", "accuracy", 20.0),
-    Figure("diagnose-joint-sigma-compare-40", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
-           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json docs/diagnose/results_draws_20_39.json "
+    Figure("diagnose-joint-sigma-compare-40", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare {TABLE_40} "
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
            "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
@@ -216,8 +217,8 @@ FIGURES: tuple[Figure, ...] = (
            "--synthetic 5 --json docs/diagnose/registration_gain_draws_0_19.json", "accuracy", 30.0),
     Figure("diagnose-registration-gain-draws-20-39", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --first 20 "
            "--draws 20 --synthetic 0 --json docs/diagnose/registration_gain_draws_20_39.json", "accuracy", 30.0),
-    Figure("diagnose-registration-gain-compare", RESULTS, f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 --compare "
-           "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json docs/diagnose/results_draws_20_39.json --with "
+    Figure("diagnose-registration-gain-compare", RESULTS, f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 --compare {TABLE_40} "
+           "--with "
            "docs/diagnose/registration_gain_draws_0_19.json docs/diagnose/registration_gain_draws_20_39.json", "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
