@@ -8,6 +8,7 @@ Run from the repository root::
     .venv/bin/python scripts/regenerate_figures.py --kind timing
     .venv/bin/python scripts/regenerate_figures.py --check      # every figure has its block
     .venv/bin/python scripts/regenerate_figures.py --stale      # blocks made before the code they measure changed
+    .venv/bin/python scripts/regenerate_figures.py --run-stale --jobs 2   # re-make those, two at a time
 
 Every figure is one shell command (run from the repository root with ``bash -c``) and one
 place in a document:
@@ -24,7 +25,16 @@ when the working tree differs from the commit in the code the figure measures
 or run, the packages' modules among them, followed file by file), the stamp says so.
 ``--stale`` lists the blocks made before a change to the code they measure (:func:`stale`;
 a change to docstrings, comments or command-line help alone is none). A failed
-command leaves its block as it was and makes the exit status 1 (the others still run).
+command leaves its block as it was and makes the exit status 1 (the others still run, but
+not those that read its data).
+
+``--jobs N`` runs up to N accuracy figures at a time (:func:`run_all`); a timing figure
+always runs alone, and a figure waits for those that write a file it reads or read a file
+it writes (:func:`prerequisites`: a pooling block after its draws). ``--run-stale`` runs
+only what ``--stale`` lists, so a regeneration longer than one sitting is resumed by running
+it again: each block is written as its command ends. A data writer that finished before
+the interruption is run again when the block that pools it was not yet re-made (its data
+files carry no stamp of their own).
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
 
@@ -571,8 +581,14 @@ def _reader(fig: Figure, figures: tuple[Figure, ...] | list[Figure]) -> Figure |
     return None
 
 
-def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[Figure, ...] | list[Figure] = FIGURES) -> list[tuple[Figure, str, list[str]]]:
+def stale(figures: tuple[Figure, ...] | list[Figure] | None = None, readers: tuple[Figure, ...] | list[Figure] | None = None) -> list[tuple[Figure, str, list[str]]]:
     """Figures whose block was made before a change to the code it measures.
+
+    Parameters
+    ----------
+    figures, readers
+        The figures to judge, and those whose blocks may pool their data; None: the
+        registry :data:`FIGURES` as it is when called.
 
     Returns
     -------
@@ -597,6 +613,8 @@ def stale(figures: tuple[Figure, ...] | list[Figure] = FIGURES, readers: tuple[F
     subprocess.CalledProcessError
         A stamp names a commit this clone does not have.
     """
+    figures = FIGURES if figures is None else figures  # the registry as it is at the call
+    readers = FIGURES if readers is None else readers
     out = []
     same: dict[tuple[str, str], bool] = {}  # (commit, path) -> _same_code, within this call
     for fig in figures:
@@ -663,17 +681,47 @@ def _same_code(commit: str, path: str, against: str | None = "HEAD") -> bool:
 
 def run(fig: Figure) -> bool:
     """Run one figure's command and write its block(s); False when the command failed."""
+    return finish(start(fig))
+
+
+@dataclass
+class Job:
+    """A figure's command started by :func:`start`: its process, its standard output's file
+    and its start time."""
+
+    fig: Figure
+    proc: subprocess.Popen
+    out: object
+    t0: float
+
+
+def start(fig: Figure) -> Job:
+    """Start ``fig``'s command (``bash -c``, from the repository root); its standard output
+    goes to a temporary file, its standard error to the terminal."""
+    import tempfile
+
     print(f"== {fig.name}: {fig.command}", file=sys.stderr, flush=True)
-    t0 = time.perf_counter()
-    proc = subprocess.run(["bash", "-c", fig.command], cwd=REPO, stdout=subprocess.PIPE, text=True, check=False)
-    seconds = time.perf_counter() - t0
-    sys.stdout.write(proc.stdout)
-    if proc.returncode != 0:
-        print(f"!! {fig.name} failed (exit {proc.returncode}) after {seconds:.0f} s; its block is left as it was", file=sys.stderr)
+    out = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 - closed by finish()
+    proc = subprocess.Popen(["bash", "-c", fig.command], cwd=REPO, stdout=out, text=True)
+    return Job(fig, proc, out, time.perf_counter())
+
+
+def finish(job: Job) -> bool:
+    """Wait for ``job`` and write its figure's block(s) from its output; False (the block
+    left as it was) when the command failed."""
+    fig = job.fig
+    code = job.proc.wait()
+    seconds = time.perf_counter() - job.t0
+    job.out.seek(0)
+    output = job.out.read()
+    job.out.close()
+    sys.stdout.write(output)
+    if code != 0:
+        print(f"!! {fig.name} failed (exit {code}) after {seconds:.0f} s; its block is left as it was", file=sys.stderr)
         return False
     head = stamp(fig, seconds)
     if fig.doc:
-        replace_block(REPO / fig.doc, fig, block_text(fig, head, proc.stdout))
+        replace_block(REPO / fig.doc, fig, block_text(fig, head, output))
     for written in fig.writes:
         if written.endswith(".md"):
             replace_block(REPO / written, fig, block_text(fig, head, ""), append=True)
@@ -681,7 +729,80 @@ def run(fig: Figure) -> bool:
     return True
 
 
-def main() -> int:
+#: A scratch folder named in a command (``--work /tmp/addb_bench_benchmark``, a ``git archive``
+#: target): read and written by every command that names it.
+_SCRATCH = re.compile(r"/tmp/[\w.-]+")
+#: A data or document file named in a command, and the switches that name one it writes.
+_DATA = re.compile(r"[\w./-]+\.(?:json|md)\b")
+_WRITTEN = re.compile(r"--(?:json|markdown|md)\s+([\w./-]+)")
+
+
+def _files(fig: Figure) -> tuple[set[str], set[str]]:
+    """``(named, written)``: the data files, documents and scratch folders ``fig``'s command
+    names, and those of them it writes (its ``--json``/``--markdown``/``--md`` outputs, its
+    ``writes``, every scratch folder; its block's document is written by this script, not
+    by the command)."""
+    scratch = set(_SCRATCH.findall(fig.command))
+    written = set(_WRITTEN.findall(fig.command)) | set(fig.writes) | scratch
+    return set(_DATA.findall(fig.command)) | written, written
+
+
+def prerequisites(chosen: list[Figure]) -> dict[str, set[str]]:
+    """For each figure of ``chosen`` (in the registry's order), the earlier ones it must
+    wait for: those that write a file it names (the draws a pooling block reads), and those
+    that name a file it writes (it must not overwrite what they read, or share their scratch
+    folder). Figures that only read the same file do not wait for each other."""
+    files = {f.name: _files(f) for f in chosen}
+    out: dict[str, set[str]] = {}
+    for i, fig in enumerate(chosen):
+        named, written = files[fig.name]
+        out[fig.name] = {e.name for e in chosen[:i] if (files[e.name][1] & named) or (files[e.name][0] & written)}
+    return out
+
+
+def run_all(chosen: list[Figure], jobs: int = 1, poll: float = 0.5) -> list[str]:
+    """Run ``chosen`` (in the registry's order), up to ``jobs`` accuracy figures at a time.
+
+    A figure starts when every figure it waits for (:func:`prerequisites`) has succeeded;
+    one whose prerequisite failed is not run. A timing figure runs alone: while one is
+    ready, no other starts, and it starts when the others have finished (its wall times
+    would otherwise measure the others' load). With ``jobs`` 1 the figures run one after
+    another in the registry's order, as before this option.
+
+    Returns
+    -------
+    The names of the figures that failed or were not run, in the registry's order.
+    """
+    needs = prerequisites(chosen)
+    pending = list(chosen)
+    running: list[Job] = []
+    done: set[str] = set()
+    failed: set[str] = set()
+    while pending or running:
+        for job in [j for j in running if j.proc.poll() is not None]:
+            running.remove(job)
+            (done if finish(job) else failed).add(job.fig.name)
+        for fig in [f for f in pending if needs[f.name] & failed]:
+            pending.remove(fig)
+            failed.add(fig.name)
+            print(f"!! {fig.name} not run: it needs {', '.join(sorted(needs[fig.name] & failed))}, which did not succeed", file=sys.stderr)
+        ready = [f for f in pending if needs[f.name] <= done]
+        if jobs > 1 and any(f.kind == "timing" for f in ready):
+            ready = [next(f for f in ready if f.kind == "timing")]  # it waits for the others to finish
+        for fig in ready:
+            alone = fig.kind == "timing" or jobs == 1
+            if running and (alone or len(running) >= jobs or any(j.fig.kind == "timing" for j in running)):
+                break
+            pending.remove(fig)
+            running.append(start(fig))
+            if alone:
+                break
+        if running:
+            time.sleep(poll)
+    return [f.name for f in chosen if f.name in failed]
+
+
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--list", action="store_true", help="list the figures and exit")
     ap.add_argument("--only", nargs="+", metavar="NAME", help="run only these figures (in the registry's order)")
@@ -689,7 +810,15 @@ def main() -> int:
     ap.add_argument("--skip-diagnose", action="store_true", help="leave out the diagnosis figures (hours)")
     ap.add_argument("--check", action="store_true", help="check that every document has exactly the blocks of the registry")
     ap.add_argument("--stale", action="store_true", help="list the blocks made before a change to the code they measure")
-    args = ap.parse_args()
+    ap.add_argument("--run-stale", action="store_true",
+                    help="run only the figures --stale lists (with --only/--kind/--skip-diagnose: those of them); "
+                         "run again after an interruption, it goes on with the ones still stale")
+    ap.add_argument("--jobs", type=int, default=1, metavar="N",
+                    help="run up to N accuracy figures at a time (timing figures always alone; a figure waits for "
+                         "those whose data it reads)")
+    args = ap.parse_args(argv)
+    if args.jobs < 1:
+        ap.error(f"--jobs must be 1 or more, not {args.jobs}")
     if args.stale:
         found = stale()
         for fig, commit, changed in found:
@@ -712,15 +841,18 @@ def main() -> int:
         chosen = [f for f in chosen if f.kind == args.kind]
     if args.skip_diagnose:
         chosen = [f for f in chosen if not f.name.startswith("diagnose")]
+    if args.run_stale:
+        listed = {fig.name for fig, _, _ in stale()}
+        chosen = [f for f in chosen if f.name in listed]
     if args.list:
         for f in chosen:
             where = f.doc or ", ".join(f.writes) or "(data files named in the command)"
             print(f"{f.name:40s} {f.kind:8s} ~{f.minutes:g} min  {where}\n    {f.command}")
         print(f"{len(chosen)} figures, about {sum(f.minutes for f in chosen) / 60:.1f} h in all")
         return 0
-    failed = [f.name for f in chosen if not run(f)]
+    failed = run_all(chosen, args.jobs)
     if failed:
-        print(f"failed: {', '.join(failed)}", file=sys.stderr)
+        print(f"failed or not run: {', '.join(failed)}", file=sys.stderr)
     return 1 if failed else 0
 
 

@@ -328,3 +328,88 @@ def test_every_module_a_command_loads_is_measured_by_its_figure(rf, figure: str,
     files = {m: [p.relative_to(REPO).as_posix() for p in rf._module_files(m, REPO)][-1:] for m in ours}
     missing = sorted(m for m, f in files.items() if not f or f[0] not in measured)
     assert missing == []
+
+
+def test_a_pooling_block_waits_for_its_draws_and_readers_of_one_file_do_not_wait(rf) -> None:
+    """:func:`prerequisites`: a figure waits for the earlier ones that write a file it names
+    (``--json`` draws pooled by a later block) or that name a file it writes, and for those
+    sharing a scratch folder; two readers of one file, and unrelated figures, do not wait."""
+    fig = partial(rf.Figure, doc="doc.md", kind="accuracy", minutes=0.0)
+    chosen = [
+        fig("draws-a", command="python draws.py --json out/a.json"),
+        fig("draws-b", command="python draws.py --first 10 --json out/b.json"),
+        fig("pool", command="python pool.py --from-json out/a.json out/b.json"),
+        fig("compare", command="python compare.py --compare out/a.json --with out/c.json"),
+        fig("redraw-a", command="python draws.py --json out/a.json"),
+        fig("bench", command="python bench.py --work /tmp/addb_work --fresh"),
+        fig("variants", command="python variants.py --work /tmp/addb_work --fresh"),
+        fig("alone", command="python other.py"),
+    ]
+    assert rf.prerequisites(chosen) == {
+        "draws-a": set(), "draws-b": set(), "pool": {"draws-a", "draws-b"}, "compare": {"draws-a"},
+        "redraw-a": {"draws-a", "pool", "compare"}, "bench": set(), "variants": {"bench"}, "alone": set(),
+    }
+    # the registry: the diagnosis' table pools exactly its two halves of draws
+    assert rf.prerequisites(list(rf.FIGURES))["diagnose-results"] == {"diagnose-draws-0-9", "diagnose-draws-10-19"}
+
+
+def test_run_all_runs_accuracy_figures_side_by_side_timing_ones_alone_and_skips_what_a_failure_feeds(rf, tmp_path, monkeypatch) -> None:
+    """:func:`run_all` with two jobs: two accuracy figures run at the same time (each waits
+    for the other to have started, so run one after the other the first would fail), a
+    timing figure runs with nothing else running, a pooling block starts after its draws
+    end, and a figure whose draws failed is not run (its block left as it was)."""
+    names = ["a", "t", "b", "pool", "bad", "after-bad"]
+    doc = tmp_path / "doc.md"
+    doc.write_text("".join(f"<!-- begin: {n} -->\nold\n<!-- end: {n} -->\n" for n in names))
+    for d in ("started", "running", "ended"):
+        (tmp_path / d).mkdir()
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "stamp", lambda fig, seconds: "stamp")
+
+    def side_by_side(me: str, other: str) -> str:  # an accuracy figure that needs ``other`` running with it
+        return (f": --json out/{me}.json; touch started/{me} running/{me}; "
+                f"for i in $(seq 200); do [ -e started/{other} ] && break; sleep 0.05; done; "
+                f"test -e started/{other} && echo {me} saw {other}; rm running/{me}; touch ended/{me}")
+
+    fig = partial(rf.Figure, doc="doc.md", minutes=0.0)
+    chosen = [
+        fig("a", command=side_by_side("a", "b"), kind="accuracy"),
+        fig("t", command="touch running/t; echo others running: $(ls running | grep -vx t | wc -l); sleep 0.3; rm running/t", kind="timing"),
+        fig("b", command=side_by_side("b", "a"), kind="accuracy"),
+        fig("pool", command=": --from-json out/a.json; test -e ended/a && echo after a", kind="accuracy"),
+        fig("bad", command=": --json out/bad.json; exit 3", kind="accuracy"),
+        fig("after-bad", command=": --from-json out/bad.json; touch ran", kind="accuracy"),
+    ]
+    assert rf.run_all(chosen, jobs=2, poll=0.02) == ["bad", "after-bad"]
+    blocks = {n: rf._pattern(n).findall(doc.read_text())[0].split("\n")[2:-1] for n in names}
+    assert blocks["a"] == ["", "```", "a saw b", "```"]
+    assert blocks["b"] == ["", "```", "b saw a", "```"]
+    assert blocks["t"] == ["", "```", "others running: 0", "```"]
+    assert blocks["pool"] == ["", "```", "after a", "```"]
+    assert blocks["bad"] == blocks["after-bad"] == []  # "old" is line 1: left as it was
+    assert "old" in rf._pattern("bad").findall(doc.read_text())[0]
+    assert not (tmp_path / "ran").exists()
+
+
+def test_run_stale_remakes_only_the_stale_blocks(rf, tmp_path, monkeypatch) -> None:
+    """``--run-stale``: in a repository of its own where one figure's measured code changed
+    after both blocks were made, only that figure runs; its block is re-stamped at HEAD, so
+    ``--stale`` then lists nothing and a second ``--run-stale`` runs nothing."""
+    git = partial(git_in, tmp_path)
+    made = repository_of(tmp_path, {"scripts/one.py": "print(1)\n", "scripts/two.py": "print(2)\n"})
+    (tmp_path / "doc.md").write_text("".join(
+        f"<!-- begin: {n} -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: {n} -->\n" for n in ("one", "two")))
+    git("add", "-A")
+    git("commit", "-q", "-m", "blocks")
+    (tmp_path / "scripts" / "two.py").write_text("print(22)\n")
+    git("commit", "-q", "-am", "the second figure's code changes")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "FIGURES", tuple(rf.Figure(n, "doc.md", f"python3 scripts/{n}.py", "accuracy", 0.0) for n in ("one", "two")))
+    assert [f.name for f, _, _ in rf.stale()] == ["two"]
+    assert rf.main(["--run-stale", "--jobs", "2"]) == 0
+    text = (tmp_path / "doc.md").read_text()
+    assert "old" in rf._pattern("one").findall(text)[0]
+    assert rf._pattern("two").findall(text)[0].split("\n")[3:-1] == ["```", "22", "```"]
+    assert rf.stale() == []
+    assert rf.main(["--run-stale"]) == 0
+    assert (tmp_path / "doc.md").read_text() == text
