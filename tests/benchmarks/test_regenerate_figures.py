@@ -413,3 +413,36 @@ def test_run_stale_remakes_only_the_stale_blocks(rf, tmp_path, monkeypatch) -> N
     assert rf.stale() == []
     assert rf.main(["--run-stale"]) == 0
     assert (tmp_path / "doc.md").read_text() == text
+
+
+def test_a_retired_figure_is_never_stale_and_runs_only_when_named(rf, tmp_path, monkeypatch) -> None:
+    """A retired figure whose measured code changed after its block was made is not listed by
+    ``stale()`` (nor used as the pooling block of a live writer), is left out of a plain run
+    and of ``--run-stale``, and is re-made when named with ``--only``."""
+    git = partial(git_in, tmp_path)
+    made = repository_of(tmp_path, {"scripts/live.py": "print(1)\n", "scripts/probe.py": "print(2)\n"})
+    (tmp_path / "doc.md").write_text("".join(
+        f"<!-- begin: {n} -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: {n} -->\n" for n in ("live", "probe")))
+    git("add", "-A")
+    git("commit", "-q", "-m", "blocks")
+    for name in ("live", "probe"):
+        (tmp_path / "scripts" / f"{name}.py").write_text(f"print('{name} now')\n")
+    git("commit", "-q", "-am", "both figures' code changes")
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    live = rf.Figure("live", "doc.md", "python3 scripts/live.py", "accuracy", 0.0)
+    probe = rf.Figure("probe", "doc.md", "python3 scripts/probe.py", "accuracy", 0.0, retired="2026-01-02: a lead not taken")
+    monkeypatch.setattr(rf, "FIGURES", (live, probe))
+    assert [f.name for f, _, _ in rf.stale()] == ["live"]
+    assert rf.main([]) == 0
+    text = (tmp_path / "doc.md").read_text()
+    assert "live now" in rf._pattern("live").findall(text)[0]
+    assert "old" in rf._pattern("probe").findall(text)[0]
+    assert rf.main(["--run-stale"]) == 0 and (tmp_path / "doc.md").read_text() == text
+    assert rf.main(["--only", "probe"]) == 0
+    assert "probe now" in rf._pattern("probe").findall((tmp_path / "doc.md").read_text())[0]
+    # a live writer is judged by a live pooling block, not by a retired one that reads its data
+    # (here stamped before the writer's code changed: read as a judge, it would list the writer)
+    (tmp_path / "doc.md").write_text(f"<!-- begin: probe -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: probe -->\n")
+    writer = rf.Figure("draws", "", "python3 scripts/live.py --json out/d.json", "accuracy", 0.0)
+    pooled = rf.Figure("probe", "doc.md", "python3 scripts/probe.py --with out/d.json", "accuracy", 0.0, retired="2026-01-02")
+    assert rf.stale([writer, pooled], readers=[writer, pooled]) == []
