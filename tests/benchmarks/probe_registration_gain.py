@@ -1,6 +1,6 @@
 """Probe: the plates' registration judged on the marker-only motion with a smaller share of the cost.
 
-    .venv/bin/python tests/benchmarks/probe_registration_gain.py [--gain 0.05] -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_registration_gain.py [--gain 0.05] [--after-bases] -- BENCH_DIAGNOSE_ARGS ...
     .venv/bin/python tests/benchmarks/probe_registration_gain.py [--gain 0.05] --compare TABLE.json ... --with PROBE.json ...
 
 Not a change of ``addb diagnose``. The first form runs ``tests/benchmarks/bench_diagnose.py``
@@ -16,6 +16,12 @@ stand out from every rival and improve every fold but remove 5.0-8.7 % of the co
 run names nothing in 8 of its 20 registration draws. The second form compares the probe's
 ``--json`` results with the table's draw by draw (the same seeds): per cause the draws within
 tolerance, every draw whose named cause or verdict changed, and the false alarms.
+
+The benchmark builds its neutral bases (each trial with its own findings applied,
+:func:`tests.diagnose.harness.neutral_base`) in the same process, so the changed threshold
+also decides which of the trial's own findings the base applies first; ``--after-bases``
+builds them under the rule as it is (the table's bases) and changes the threshold for the
+draws only.
 """
 
 from __future__ import annotations
@@ -36,8 +42,9 @@ from solver.diagnose import core
 CAUSE = "plate_registration"
 
 
-def apply(gain: float) -> None:
-    """Judge ``CAUSE`` on the marker-only motion with relative gain ``gain`` (this process)."""
+def apply(gain: float, after_bases: bool = False) -> None:
+    """Judge ``CAUSE`` on the marker-only motion with relative gain ``gain`` (this process);
+    with ``after_bases``, not while :func:`bench_diagnose.neutral_base` builds a base."""
     original = core.choice_on_marker_motion
 
     def on_marker_motion(chosen, evaluations_ik, rule, blocks, kept=None, own_noise=None):  # type: ignore[no-untyped-def]
@@ -45,6 +52,19 @@ def apply(gain: float) -> None:
         return original(chosen, evaluations_ik, rule, blocks, kept, own_noise)
 
     core.choice_on_marker_motion = on_marker_motion  # type: ignore[assignment]
+    if after_bases:
+        import bench_diagnose  # this folder
+
+        build = bench_diagnose.neutral_base
+
+        def neutral_base(*args, **kwargs):  # type: ignore[no-untyped-def]
+            core.choice_on_marker_motion = original
+            try:
+                return build(*args, **kwargs)
+            finally:
+                core.choice_on_marker_motion = on_marker_motion  # type: ignore[assignment]
+
+        bench_diagnose.neutral_base = neutral_base
 
 
 def compare(table: list[Path], probe: list[Path], gain: float) -> str:
@@ -85,11 +105,12 @@ def main() -> None:
     ap.add_argument("--gain", type=float, default=0.05, help="relative gain that names the registration on the marker-only motion")
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the table (bench_diagnose.py)")
     ap.add_argument("--with", dest="probe", type=Path, nargs="+", help="--json results of this probe")
+    ap.add_argument("--after-bases", action="store_true", help="build the neutral bases under the rule as it is; the gain for the draws only")
     args = ap.parse_args(argv[:cut])
     if not args.compare:
         import bench_diagnose  # this folder
 
-        apply(args.gain)
+        apply(args.gain, args.after_bases)
         sys.argv = [str(Path(bench_diagnose.__file__)), *argv[cut + 1 :]]
         bench_diagnose.main()
     elif not args.probe:
