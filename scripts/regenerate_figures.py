@@ -257,6 +257,10 @@ FIGURES: tuple[Figure, ...] = (
            "--with "
            "docs/diagnose/registration_gain_draws_0_19.json docs/diagnose/registration_gain_draws_20_39.json", "accuracy", 0.1, fence=False,
            retired=RETIRED),
+    # the run's body-mass draw 2009 that the probe above lost: on the run's base built with and without the changed threshold
+    Figure("diagnose-registration-gain-base", RESULTS, " && echo && ".join(
+        f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05{flag} -- --trials run --causes body_mass --first 9 --draws 1 --synthetic 0"
+        for flag in ("", " --after-bases")), "accuracy", 5.0),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency", RETIRED),
