@@ -260,7 +260,7 @@ FIGURES: tuple[Figure, ...] = (
     # the run's body-mass draw 2009 that the probe above lost: on the run's base built with and without the changed threshold
     Figure("diagnose-registration-gain-base", RESULTS, " && echo && ".join(
         f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05{flag} -- --trials run --causes body_mass --first 9 --draws 1 --synthetic 0"
-        for flag in ("", " --after-bases")), "accuracy", 5.0),
+        for flag in ("", " --after-bases")), "accuracy", 1.5),
     Figure("diagnose-joint-choice-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 5006 5014 7006 5007 7007",
            "accuracy", 5.0, fence=False),
     *_probe_table("diagnose-currency", "probe_motion_currency.py --segment-on-residuals", "motion_currency", RETIRED),
