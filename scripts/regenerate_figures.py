@@ -36,7 +36,7 @@ it again: each block is written as its command ends. A data writer that finished
 the interruption is run again when the block that pools it was not yet re-made (its data
 files carry no stamp of their own).
 
-A *retired* figure (:attr:`Figure.retired`: the diagnosis' probes of leads it did not take)
+A *retired* figure (:attr:`Figure.retired`: the diagnosis' probes of leads it has not taken)
 keeps its block as the record of the code at its stamp's commit: ``--stale`` does not list
 it, a plain run or ``--run-stale`` leaves it out, and ``--only NAME`` re-makes it with the
 current code. To reproduce it as it was, run its command in a worktree of that commit
@@ -48,6 +48,7 @@ beside this one, with this checkout's virtual environment::
 (``../shared`` is beside the worktree too, and the benchmark scripts put the worktree's root
 first on ``sys.path``; done so for block ``diagnose-currency-compare`` on 2026-11-27, its
 output identical to the block.)
+
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
 
@@ -69,6 +70,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 REPO = Path(__file__).resolve().parents[1]
 PY = ".venv/bin/python"
@@ -143,7 +145,7 @@ def _probe_table(name: str, probe: str, stem: str, retired: str = "") -> tuple[F
 
 
 #: Why the diagnosis' probes of leads not taken were retired (:attr:`Figure.retired`).
-RETIRED = ("2026-11-27: a lead for the diagnosis' rules that addb diagnose did not take; re-made with every change of "
+RETIRED = ("2026-11-27: a lead for the diagnosis' rules that addb diagnose has not taken; re-made with every change of "
            "the code it reaches it cost 50-60 min of runs per probe (a change to any solver module stales about 7 h "
            "of figures), so its block is kept as the record of the code at its stamp's commit")
 
@@ -722,8 +724,8 @@ class Job:
     and its start time."""
 
     fig: Figure
-    proc: subprocess.Popen
-    out: object
+    proc: subprocess.Popen[str]
+    out: IO[str]
     t0: float
 
 
