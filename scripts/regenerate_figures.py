@@ -149,6 +149,10 @@ RETIRED = ("2026-11-27: a lead for the diagnosis' rules that addb diagnose has n
            "the code it reaches it cost 50-60 min of runs per probe (a change to any solver module stales about 7 h "
            "of figures), so its block is kept as the record of the code at its stamp's commit")
 
+#: Probes recorded once and retired as they were made (:attr:`Figure.retired`).
+RECORDED = ("2026-11-27: a probe recorded once to close a question (is the joint fit's mass prior the lever for the "
+            "diagnosis?), retired as it was made: its block is the record of the code at its stamp's commit")
+
 
 FIGURES: tuple[Figure, ...] = (
     # ---- tests/benchmarks/RESULTS.md, in the document's order
@@ -249,6 +253,14 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-joint-sigma-compare-40", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare {TABLE_40} "
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
            "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
+    # the two rows the joint fit loses, with its mass prior a third and three times 0.1 (recorded once, retired as made)
+    *(fig for sigma in ("0.03", "0.3") for fig in (
+        Figure(f"diagnose-joint-sigma-{sigma.replace('.', '-')}-draws", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma {sigma} -- "
+               "--causes plate_position_offset,segment_mass_distribution --draws 40 --synthetic 0 "
+               f"--json docs/diagnose/joint_fit_sigma_{sigma.replace('.', '_')}_two_rows.json", "accuracy", 12.0, retired=RECORDED),
+        Figure(f"diagnose-joint-sigma-{sigma.replace('.', '-')}-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma {sigma} "
+               f"--compare {TABLE_40} --with docs/diagnose/joint_fit_sigma_{sigma.replace('.', '_')}_two_rows.json", "accuracy", 0.1,
+               fence=False, retired=RECORDED))),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
            "accuracy", 3.0, fence=False),
     Figure("diagnose-registration-gain-draws-0-19", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --draws 20 "
