@@ -446,3 +446,14 @@ def test_a_retired_figure_is_never_stale_and_runs_only_when_named(rf, tmp_path, 
     writer = rf.Figure("draws", "", "python3 scripts/live.py --json out/d.json", "accuracy", 0.0)
     pooled = rf.Figure("probe", "doc.md", "python3 scripts/probe.py --with out/d.json", "accuracy", 0.0, retired="2026-01-02")
     assert rf.stale([writer, pooled], readers=[writer, pooled]) == []
+
+
+def test_no_live_figure_reads_what_a_retired_one_writes(rf) -> None:
+    """A retired figure's data files are a record of old code: a live figure that read them
+    would pool them with data made by the current code (:func:`_files`)."""
+    retired_writes = {path: f.name for f in rf.FIGURES if f.retired for path in rf._files(f)[1]}
+    assert retired_writes  # the registry has retired writers (their draws)
+    for fig in rf.FIGURES:
+        if not fig.retired:
+            named = rf._files(fig)[0]
+            assert not named & set(retired_writes), (fig.name, sorted(named & set(retired_writes)))
