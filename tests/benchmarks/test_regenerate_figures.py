@@ -35,6 +35,18 @@ def repository_of(root: Path, files: dict[str, str]) -> str:
     return git_in(root, "rev-parse", "--short", "HEAD")
 
 
+def stamped_repository(root: Path, scripts: dict[str, str]) -> str:
+    """A new git repository in ``root`` holding ``scripts/NAME.py`` for each ``NAME -> code`` of
+    ``scripts`` and ``doc.md`` with one block per name, stamped at the commit of the scripts
+    (returned), "old" inside; both committed."""
+    made = repository_of(root, {f"scripts/{name}.py": code for name, code in scripts.items()})
+    (root / "doc.md").write_text("".join(
+        f"<!-- begin: {n} -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: {n} -->\n" for n in scripts))
+    git_in(root, "add", "-A")
+    git_in(root, "commit", "-q", "-m", "blocks")
+    return made
+
+
 @pytest.fixture(scope="module")
 def rf():
     spec = importlib.util.spec_from_file_location("regenerate_figures", REPO / "scripts" / "regenerate_figures.py")
@@ -396,11 +408,7 @@ def test_run_stale_remakes_only_the_stale_blocks(rf, tmp_path, monkeypatch) -> N
     after both blocks were made, only that figure runs; its block is re-stamped at HEAD, so
     ``--stale`` then lists nothing and a second ``--run-stale`` runs nothing."""
     git = partial(git_in, tmp_path)
-    made = repository_of(tmp_path, {"scripts/one.py": "print(1)\n", "scripts/two.py": "print(2)\n"})
-    (tmp_path / "doc.md").write_text("".join(
-        f"<!-- begin: {n} -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: {n} -->\n" for n in ("one", "two")))
-    git("add", "-A")
-    git("commit", "-q", "-m", "blocks")
+    stamped_repository(tmp_path, {"one": "print(1)\n", "two": "print(2)\n"})
     (tmp_path / "scripts" / "two.py").write_text("print(22)\n")
     git("commit", "-q", "-am", "the second figure's code changes")
     monkeypatch.setattr(rf, "REPO", tmp_path)
@@ -420,11 +428,7 @@ def test_a_retired_figure_is_never_stale_and_runs_only_when_named(rf, tmp_path, 
     ``stale()`` (nor used as the pooling block of a live writer), is left out of a plain run
     and of ``--run-stale``, and is re-made when named with ``--only``."""
     git = partial(git_in, tmp_path)
-    made = repository_of(tmp_path, {"scripts/live.py": "print(1)\n", "scripts/probe.py": "print(2)\n"})
-    (tmp_path / "doc.md").write_text("".join(
-        f"<!-- begin: {n} -->\nMade by `cmd` on 2026-01-01, commit {made} (1 s).\n\nold\n<!-- end: {n} -->\n" for n in ("live", "probe")))
-    git("add", "-A")
-    git("commit", "-q", "-m", "blocks")
+    made = stamped_repository(tmp_path, {"live": "print(1)\n", "probe": "print(2)\n"})
     for name in ("live", "probe"):
         (tmp_path / "scripts" / f"{name}.py").write_text(f"print('{name} now')\n")
     git("commit", "-q", "-am", "both figures' code changes")
