@@ -146,8 +146,8 @@ def _probe_table(name: str, probe: str, stem: str, retired: str = "") -> tuple[F
 
 #: Why the diagnosis' probes of leads not taken were retired (:attr:`Figure.retired`).
 RETIRED = ("2026-11-27: a lead for the diagnosis' rules that addb diagnose has not taken; re-made with every change of "
-           "the code it reaches it cost 50-60 min of runs per probe (a change to any solver module stales about 7 h "
-           "of figures), so its block is kept as the record of the code at its stamp's commit")
+           "the code it reaches it cost 50-60 min of runs per probe (a change to any solver module staled about 7 h "
+           "of figures before these were retired), so its block is kept as the record of the code at its stamp's commit")
 
 #: Probes recorded once and retired as they were made (:attr:`Figure.retired`).
 RECORDED = ("2026-11-27: a probe recorded once to close a question (is the joint fit's mass prior the lever for the "
