@@ -66,6 +66,7 @@ import re
 import shlex
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -152,6 +153,20 @@ RETIRED = ("2026-11-27: a lead for the diagnosis' rules that addb diagnose has n
 #: Probes recorded once and retired as they were made (:attr:`Figure.retired`).
 RECORDED = ("2026-11-27: a probe recorded once to close a question (is the joint fit's mass prior the lever for the "
             "diagnosis?), retired as it was made: its block is the record of the code at its stamp's commit")
+
+
+def _joint_two_rows(sigma: str) -> tuple[Figure, Figure]:
+    """The two rows the joint fit loses (plate position, segment masses; 40 draws) with its
+    mass prior at ``sigma`` into ``docs/diagnose/joint_fit_sigma_<sigma>_two_rows.json``, then
+    their comparison with the table's 40 draws in RESULTS (recorded once, :data:`RECORDED`)."""
+    cmd = f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma {sigma}"
+    name = f"diagnose-joint-sigma-{sigma.replace('.', '-')}"
+    data = f"docs/diagnose/joint_fit_sigma_{sigma.replace('.', '_')}_two_rows.json"
+    return (
+        Figure(f"{name}-draws", "", f"{cmd} -- --causes plate_position_offset,segment_mass_distribution --draws 40 --synthetic 0 "
+               f"--json {data}", "accuracy", 12.0, retired=RECORDED),
+        Figure(f"{name}-compare", RESULTS, f"{cmd} --compare {TABLE_40} --with {data}", "accuracy", 0.1, fence=False, retired=RECORDED),
+    )
 
 
 FIGURES: tuple[Figure, ...] = (
@@ -254,13 +269,8 @@ FIGURES: tuple[Figure, ...] = (
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
            "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
     # the two rows the joint fit loses, with its mass prior a third and three times 0.1 (recorded once, retired as made)
-    *(fig for sigma in ("0.03", "0.3") for fig in (
-        Figure(f"diagnose-joint-sigma-{sigma.replace('.', '-')}-draws", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma {sigma} -- "
-               "--causes plate_position_offset,segment_mass_distribution --draws 40 --synthetic 0 "
-               f"--json docs/diagnose/joint_fit_sigma_{sigma.replace('.', '_')}_two_rows.json", "accuracy", 12.0, retired=RECORDED),
-        Figure(f"diagnose-joint-sigma-{sigma.replace('.', '-')}-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma {sigma} "
-               f"--compare {TABLE_40} --with docs/diagnose/joint_fit_sigma_{sigma.replace('.', '_')}_two_rows.json", "accuracy", 0.1,
-               fence=False, retired=RECORDED))),
+    *_joint_two_rows("0.03"),
+    *_joint_two_rows("0.3"),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
            "accuracy", 3.0, fence=False),
     Figure("diagnose-registration-gain-draws-0-19", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --draws 20 "
@@ -744,8 +754,6 @@ class Job:
 def start(fig: Figure) -> Job:
     """Start ``fig``'s command (``bash -c``, from the repository root); its standard output
     goes to a temporary file, its standard error to the terminal."""
-    import tempfile
-
     print(f"== {fig.name}: {fig.command}", file=sys.stderr, flush=True)
     out = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 - closed by finish()
     proc = subprocess.Popen(["bash", "-c", fig.command], cwd=REPO, stdout=out, text=True)
@@ -865,13 +873,13 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.jobs < 1:
         ap.error(f"--jobs must be 1 or more, not {args.jobs}")
+    retired = sum(f.retired != "" for f in FIGURES)
     if args.stale:
         found = stale()
         for fig, commit, changed in found:
             shown = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
             made = f"made at {commit}; changed since: {shown}" if commit else f"not made: {shown}"
             print(f"{fig.name:40s} {fig.kind:8s} {made}")
-        retired = sum(f.retired != "" for f in FIGURES)
         print(f"{len(found)} of {len(FIGURES) - retired} figures made before a change to the code they measure "
               f"({retired} retired ones not judged)")
         return 0
@@ -901,7 +909,7 @@ def main(argv: list[str] | None = None) -> int:
             if f.retired:
                 print(f"    retired {f.retired}")
         print(f"{len(chosen)} figures, about {sum(f.minutes for f in chosen) / 60:.1f} h in all"
-              + ("" if args.only else f" (and {sum(f.retired != '' for f in FIGURES)} retired ones, run only when named)"))
+              + ("" if args.only else f" (and {retired} retired ones, run only when named)"))
         return 0
     failed = run_all(chosen, args.jobs)
     if failed:
