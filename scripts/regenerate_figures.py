@@ -155,6 +155,14 @@ RECORDED = ("2026-11-27: a probe recorded once to close a question (is the joint
             "diagnosis?), retired as it was made: its block is the record of the code at its stamp's commit")
 
 
+#: The thresholds' replay, recorded once and retired as made (:attr:`Figure.retired`).
+RECORDED_RULE = ("2026-11-27: a probe recorded once to close a question (can the choice rule's thresholds, re-derived on "
+                 "the joint fit, give back the rows the alternation names?), retired as it was made: its block is the record "
+                 "of the code at its stamp's commit")
+#: Where the replay's captures are kept (one folder each, so that the two run side by side).
+REPLAY = "/tmp/addb_rule_replay_{}/capture.pkl"
+
+
 def _joint_two_rows(sigma: str) -> tuple[Figure, Figure]:
     """The two rows the joint fit loses (plate position, segment masses; 40 draws) with its
     mass prior at ``sigma`` into ``docs/diagnose/joint_fit_sigma_<sigma>_two_rows.json``, then
@@ -292,6 +300,14 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-fixed-base-run", RESULTS, f"{PY} tests/benchmarks/probe_fixed_base.py --trial run --draws "
            "segment_mass_distribution:1 segment_mass_distribution:3 segment_mass_distribution:5 segment_mass_distribution:7 "
            "segment_mass_distribution:13 body_mass:9", "accuracy", 8.0, fence=False),
+    # the choice rule's thresholds re-derived on the joint fit: every draw's candidates captured once, the choice replayed
+    Figure("diagnose-rule-replay-capture-0-19", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 "
+           f"--out {REPLAY.format('0_19')} -- --draws 20 --synthetic 10", "accuracy", 45.0, retired=RECORDED_RULE),
+    Figure("diagnose-rule-replay-capture-20-39", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 "
+           f"--out {REPLAY.format('20_39')} -- --first 20 --draws 20 --synthetic 0", "accuracy", 45.0, retired=RECORDED_RULE),
+    Figure("diagnose-rule-replay", RESULTS, f"{PY} tests/benchmarks/probe_rule_replay.py replay --derive {REPLAY.format('0_19')} "
+           f"--table {TABLE} --check {REPLAY.format('20_39')} --table-check docs/diagnose/results_draws_20_39.json",
+           "accuracy", 1.0, fence=False, retired=RECORDED_RULE),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

@@ -1,0 +1,442 @@
+"""Can the choice rule's thresholds, re-derived on the joint fit, give back what the
+alternation names? Capture every draw's candidates once, then replay the choice under
+other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
+
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py replay CAPTURE.pkl ... [--search] [--against TABLE.json ...]
+
+``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
+this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
+``bench_diagnose_joint.py`` does), and records for each draw and each consistent synthetic
+trial what :func:`solver.diagnose.core._diagnose` hands to the choice: every alternative's
+cross-validated :class:`~solver.diagnose.selection.Evaluation` on the fitted motion, on the
+marker-only motion and on the marker-only motion whitened with its own noise (the last
+computed for every trial here, where the diagnosis computes it only when it needs it), the
+blocks of frames, and the share of its held-out gain each alternative keeps on top of
+another (:meth:`~solver.diagnose.selection.JointGains.kept_share`) for every ordered pair of
+the best alternatives of the causes on one channel group, on each motion, and on the
+marker-only motion for the pairs of the fitted motion (the tie-break). Each record is
+pickled with the hidden effect's truth and the base's report as soon as its draw ends.
+
+``replay`` runs the choice again on the records (:func:`solver.diagnose.selection.choose`,
+:func:`~solver.diagnose.selection.best_per_cause`, :func:`solver.diagnose.core.choice_on_marker_motion`,
+the product's own functions) with a :class:`~solver.diagnose.selection.ChoiceRule`, and
+scores each draw with the benchmark's own check (:func:`tests.diagnose.effects.check`).
+With the rule as it is, every draw must come out as the capture's live run named it (the
+replay says how many do not). A kept share the capture did not compute counts as not
+computed (the rule then decides by scores and blocks); the replay counts such lookups.
+The neutral bases stay those of the capture (built with the rule as it is): a rule that
+the product took would build its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import pickle
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))
+
+from solver.diagnose import core
+from solver.diagnose.report import _params
+from solver.diagnose.selection import ChoiceRule, Evaluation, best_per_cause, channels, choose
+
+Key = tuple[str, str | None]
+
+
+def _key(ev: Evaluation) -> Key:
+    return (ev.cause, ev.choice)
+
+
+@dataclass
+class Record:
+    """What one diagnosis handed to its choice, and what its live run chose."""
+
+    fitted: list[Evaluation]
+    marker_only: list[Evaluation]
+    own_noise: list[Evaluation] | None
+    blocks: Any
+    kept: dict[tuple[str, Key, Key], float | None] = field(default_factory=dict)
+    chosen: Key | None = None
+    kind: str = ""  # "draw" or "synthetic"
+    trial: str = ""
+    seed: int = 0
+    hidden: Any = None  # (cause, choice, truth)
+    report: dict[str, Any] | None = None  # the live run's report (its settings, candidates)
+    base_report: dict[str, Any] | None = None
+
+
+def _pairs(evaluations: list[Evaluation]) -> Iterator[tuple[Evaluation, Evaluation]]:
+    """Ordered pairs of the best alternatives of the causes (by score) on one channel group."""
+    best = best_per_cause(evaluations)
+    for a, b in itertools.permutations(best, 2):
+        if channels(a.cause) == channels(b.cause):
+            yield a, b
+
+
+class _Capture:
+    """The wrappers put in :mod:`solver.diagnose.core`'s place while the benchmark runs."""
+
+    def __init__(self) -> None:
+        self.current: Record | None = None
+        self._inside = False
+        self._choose = core.choose
+        self._on_markers = core.choice_on_marker_motion
+
+    def choose(self, ranked, rule=None, blocks=None, alternatives=None, kept=None, tie_break=None):  # type: ignore[no-untyped-def]
+        if self._inside:  # the calls of choice_on_marker_motion: recorded there
+            return self._choose(ranked, rule, blocks, alternatives, kept, tie_break)
+        rec = Record(fitted=list(alternatives or []), marker_only=[], own_noise=None, blocks=blocks)
+        self.current = rec
+        for a, b in _pairs(rec.fitted):
+            rec.kept["fitted", _key(a), _key(b)] = kept(a, b) if kept else None
+            rec.kept["tie", _key(a), _key(b)] = tie_break(a, b) if tie_break else None
+        return self._choose(ranked, rule, blocks, alternatives, kept, tie_break)
+
+    def choice_on_marker_motion(self, chosen, evaluations_ik, rule, blocks, kept=None, own_noise=None):  # type: ignore[no-untyped-def]
+        rec = self.current
+        assert rec is not None, "choice_on_marker_motion before choose"
+        rec.marker_only = list(evaluations_ik)
+        force = [e for e in evaluations_ik if core.cause(e.cause).acts_on_forces]
+        for a, b in _pairs(force):
+            rec.kept["marker-only", _key(a), _key(b)] = kept(a, b) if kept else None
+        own = own_noise() if own_noise is not None else None
+        if own is not None:
+            rec.own_noise = list(own[0])
+            force_own = [e for e in own[0] if core.cause(e.cause).acts_on_forces]
+            for a, b in _pairs(force_own):
+                rec.kept["own", _key(a), _key(b)] = own[1](a, b)
+        self._inside = True
+        try:
+            out = self._on_markers(chosen, evaluations_ik, rule, blocks, kept, (lambda: own) if own is not None else None)
+        finally:
+            self._inside = False
+        rec.chosen = _key(out[0]) if out is not None else (_key(chosen) if chosen is not None else None)
+        return out
+
+
+def capture(sigma: float, out: Path, passed: list[str]) -> None:
+    """Run the benchmark with the joint fit and pickle a :class:`Record` per draw and
+    synthetic trial to ``out`` (one pickle after another, as each ends)."""
+    import bench_diagnose  # this folder
+    import bench_diagnose_joint  # this folder
+
+    import solver.dynamics.stage as stage_module
+    from tests.diagnose.effects import check as live_check
+
+    stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    cap = _Capture()
+    core.choose = cap.choose  # type: ignore[assignment]
+    core.choice_on_marker_motion = cap.choice_on_marker_motion  # type: ignore[assignment]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    sink = out.open("wb")
+    seeds: dict[str, int] = {}
+
+    def check(hidden, report, base_report):  # type: ignore[no-untyped-def]
+        res = live_check(hidden, report, base_report)
+        rec = cap.current
+        if rec is not None:
+            rec.kind, rec.hidden, rec.report, rec.base_report = "draw", (hidden.cause, hidden.choice, hidden.truth), report, base_report
+            pickle.dump(rec, sink)
+            sink.flush()
+        cap.current = None
+        return res
+
+    live_diagnose_json = bench_diagnose.diagnose_json
+
+    def diagnose_json(subject, trial, *extra):  # type: ignore[no-untyped-def]
+        report = live_diagnose_json(subject, trial, *extra)
+        rec = cap.current
+        if rec is not None:
+            rec.kind, rec.trial, rec.report = "synthetic", trial, report
+            rec.seed = seeds[trial] = seeds.get(trial, -1) + 1
+            pickle.dump(rec, sink)
+            sink.flush()
+        cap.current = None
+        return report
+
+    bench_diagnose.check = check  # type: ignore[assignment]
+    bench_diagnose.diagnose_json = diagnose_json  # type: ignore[assignment]
+    if "--json" not in passed:  # the replay labels each draw from it
+        passed = [*passed, "--json", str(out.with_suffix(".json"))]
+    elif Path(passed[passed.index("--json") + 1]) != out.with_suffix(".json"):
+        raise SystemExit(f"--json must be {out.with_suffix('.json')} (beside the capture), or left out")
+    sys.argv = [str(Path(bench_diagnose.__file__)), *passed]
+    try:
+        bench_diagnose.main()
+    finally:
+        sink.close()
+
+
+class _Unpickler(pickle.Unpickler):
+    """Reads records pickled by ``capture`` run as a script (class ``__main__.Record``)."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        if name == "Record" and module in ("__main__", __name__):
+            return Record
+        return super().find_class(module, name)
+
+
+def load(paths: list[Path]) -> list[Record]:
+    """Every record of the capture files, in order (a file cut short by a capture still
+    running, or stopped, gives the records before the cut), each draw labelled with its
+    trial and seed from the benchmark's ``--json`` beside it (``CAPTURE.json``: the row of
+    the same cause and truth).
+
+    Raises
+    ------
+    SystemExit
+        A draw whose row the ``--json`` beside its capture does not hold.
+    """
+    import json
+
+    out: list[Record] = []
+    for p in paths:
+        rows = json.loads(p.with_suffix(".json").read_text())["rows"] if p.with_suffix(".json").exists() else []
+        with p.open("rb") as f:
+            while True:
+                try:
+                    rec = _Unpickler(f).load()
+                except (EOFError, pickle.UnpicklingError):
+                    break
+                if rec.kind == "draw":
+                    row = next((r for r in rows if r["cause"] == rec.hidden[0] and r.get("truth") == json.loads(json.dumps(rec.hidden[2], default=str))), None)
+                    if row is None:
+                        raise SystemExit(f"{p.with_suffix('.json')}: no row of {rec.hidden[0]} with truth {rec.hidden[2]}")
+                    rec.trial, rec.seed = row["trial"], row["seed"]
+                out.append(rec)
+    return out
+
+
+class Lookup:
+    """Kept shares from a record; a pair it has not counts as not computed."""
+
+    def __init__(self, rec: Record, motion: str, misses: list[int]) -> None:
+        self.rec, self.motion, self.misses = rec, motion, misses
+
+    def __call__(self, a: Evaluation, b: Evaluation) -> float | None:
+        k = (self.motion, _key(a), _key(b))
+        if k not in self.rec.kept:
+            self.misses[0] += 1
+            return None
+        return self.rec.kept[k]
+
+
+def replay(rec: Record, rule: ChoiceRule, misses: list[int]) -> Evaluation | None:
+    """The evaluation :func:`solver.diagnose.core._diagnose`'s choice names under ``rule``."""
+    twins = {_key(e): e for e in rec.marker_only}
+    tie = Lookup(rec, "tie", misses)
+
+    def on_marker_motion(best: Evaluation, rival: Evaluation) -> float | None:
+        if _key(best) not in twins or _key(rival) not in twins:
+            return None
+        return tie(best, rival)
+
+    chosen, _ = choose(best_per_cause(rec.fitted, rule), rule, rec.blocks, rec.fitted, Lookup(rec, "fitted", misses), on_marker_motion)
+    own = rec.own_noise
+    on_markers = core.choice_on_marker_motion(
+        chosen, rec.marker_only, rule, rec.blocks, Lookup(rec, "marker-only", misses),
+        (lambda: (own, Lookup(rec, "own", misses))) if own is not None else None,
+    )
+    return on_markers[0] if on_markers is not None else chosen
+
+
+def score(records: list[Record], rule: ChoiceRule) -> dict[str, Any]:
+    """Per cause, draws within tolerance; false alarms; replayed choices unlike the live run's."""
+    from tests.diagnose.effects import Hidden, check
+
+    within: dict[str, int] = {}
+    draws: dict[str, int] = {}
+    alarms = 0
+    unlike = 0
+    misses = [0]
+    verdicts: dict[tuple[str, str, int], tuple[Key | None, bool]] = {}
+    for rec in records:
+        got = replay(rec, rule, misses)
+        key = _key(got) if got is not None else None
+        if rec.kind == "synthetic":
+            alarms += got is not None
+            unlike += key != rec.chosen
+            continue
+        cause_name, choice, truth = rec.hidden
+        modified = dict(rec.report or {})
+        modified["chosen"] = got.cause if got is not None else None
+        modified["chosen_parameters"] = _params(got.parameters) if got is not None else None
+        res = check(Hidden(cause_name, choice, truth), modified, rec.base_report or {})
+        draws[cause_name] = draws.get(cause_name, 0) + 1
+        within[cause_name] = within.get(cause_name, 0) + bool(res["within_tolerance"])
+        unlike += key != rec.chosen
+        verdicts[cause_name, rec.trial, rec.seed] = (key, bool(res["within_tolerance"]))
+    return {"within": within, "draws": draws, "alarms": alarms, "unlike": unlike, "misses": misses[0], "verdicts": verdicts}
+
+
+#: The statistical thresholds searched (:class:`~solver.diagnose.selection.ChoiceRule`), each
+#: over these values; the sizes worth naming (``min_effect``, ``max_effect``) are physical
+#: and stay. ``registration_gain`` and ``shift_gain`` are the plates' registration's and a
+#: plate shift's own ``min_relative_gain`` (the rule's default for them).
+SEARCH: dict[str, tuple[float, ...]] = {
+    "min_relative_gain": (0.05, 0.075, 0.1, 0.125, 0.15, 0.2),
+    "registration_gain": (0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3),
+    "shift_gain": (0.03, 0.05, 0.075, 0.1, 0.15, 0.2),
+    "min_folds_improved": (0.6, 0.8, 1.0),
+    "runner_up_ratio": (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9),
+    "paired_t": (1.0, 1.5, 2.0, 2.5, 3.0, 4.0),
+    "paired_fraction": (0.5, 0.6, 0.7, 0.8),
+    "min_t": (1.5, 2.0, 2.5, 3.0, 4.0),
+    "kept_share": (0.5, 0.6, 0.7, 0.8, 0.9),
+    "contained_share": (0.0, 0.05, 0.1, 0.2, 0.3),
+}
+
+
+def rule_of(values: dict[str, float]) -> ChoiceRule:
+    """A :class:`ChoiceRule` with ``values`` (names of :data:`SEARCH`) set, the rest as it is."""
+    base = ChoiceRule()
+    own = dict(base.relative_gain_of)
+    kw = {k: v for k, v in values.items() if k not in ("registration_gain", "shift_gain")}
+    if "registration_gain" in values:
+        own["plate_registration"] = values["registration_gain"]
+    if "shift_gain" in values:
+        own["plate_position_offset"] = values["shift_gain"]
+    return replace(base, relative_gain_of=own, **kw)
+
+
+def current_values() -> dict[str, float]:
+    """The values of :data:`SEARCH`'s names in the rule as it is."""
+    r = ChoiceRule()
+    out = {k: float(getattr(r, k)) for k in SEARCH if hasattr(r, k)}
+    out["registration_gain"] = r.relative_gain_needed("plate_registration")
+    out["shift_gain"] = r.relative_gain_needed("plate_position_offset")
+    return out
+
+
+def table_rows(paths: list[Path], records: list[Record]) -> dict[str, int]:
+    """Per cause, the draws of ``records`` within tolerance in the benchmark's ``--json``
+    files (the alternation's results of the same draws).
+
+    Raises
+    ------
+    SystemExit
+        A draw of ``records`` the files do not hold.
+    """
+    import json
+
+    rows = {}
+    for p in paths:
+        rows.update({(r["cause"], r["trial"], r["seed"]): bool(r["within_tolerance"]) for r in json.loads(p.read_text())["rows"]})
+    out: dict[str, int] = {}
+    for rec in records:
+        if rec.kind != "draw":
+            continue
+        k = (rec.hidden[0], rec.trial, rec.seed)
+        if k not in rows:
+            raise SystemExit(f"{', '.join(map(str, paths))}: no row of {k}")
+        out[k[0]] = out.get(k[0], 0) + rows[k]
+    return out
+
+
+def objective(s: dict[str, Any], target: dict[str, int]) -> tuple[int, int, int]:
+    """What the search maximizes, in order: no false alarm, the rows' shortfall against
+    ``target`` (0 when every row reaches it), the draws within tolerance."""
+    short = sum(min(0, s["within"].get(c, 0) - n) for c, n in target.items())
+    return (-s["alarms"], short, sum(s["within"].values()))
+
+
+def search(records: list[Record], target: dict[str, int], sweeps: int = 4, say: Callable[[str], None] = print) -> dict[str, float]:
+    """Coordinate ascent of :func:`objective` over :data:`SEARCH` from the rule as it is:
+    each sweep tries every value of each threshold in turn with the others held, keeps the
+    best (the earlier value on a tie), until a sweep changes nothing."""
+    values = current_values()
+    best = objective(score(records, rule_of(values)), target)
+    say(f"rule as it is: {best}")
+    for sweep in range(sweeps):
+        changed = False
+        for name, grid in SEARCH.items():
+            for v in grid:
+                if v == values[name]:
+                    continue
+                trial = {**values, name: v}
+                got = objective(score(records, rule_of(trial)), target)
+                if got > best:
+                    best, values, changed = got, trial, True
+                    say(f"sweep {sweep + 1}: {name} = {v}: {got}")
+        if not changed:
+            break
+    return values
+
+
+def _report(parts: list[tuple[str, dict[str, int], dict[str, int], int | None]]) -> str:
+    causes = list(parts[0][2])
+    head = "| cause | draws | " + " | ".join(p[0] for p in parts) + " |"
+    lines = [head, "| --- | ---: |" + " ---: |" * len(parts)]
+    for c in causes:
+        lines.append(f"| {c} | {parts[0][2][c]} | " + " | ".join(str(p[1].get(c, 0)) for p in parts) + " |")
+    lines.append("| false alarms (consistent trials) | | " + " | ".join("—" if p[3] is None else str(p[3]) for p in parts) + " |")
+    return "\n".join(lines)
+
+
+def _named(key: Key | None) -> str:
+    return "None" if key is None else key[0] + (f" {key[1]}" if key[1] else "")
+
+
+def _flips(now: dict[str, Any], new: dict[str, Any]) -> str:
+    """The draws whose named cause or verdict the re-derived thresholds change."""
+    out = []
+    for k, (a, ok_a) in sorted(now["verdicts"].items(), key=lambda kv: (kv[0][0], kv[0][2])):
+        b, ok_b = new["verdicts"][k]
+        if (a, ok_a) != (b, ok_b):
+            out.append(f"- {k[0]}, {k[1]} draw {k[2]}: {_named(a)} ({'yes' if ok_a else 'no'}) -> {_named(b)} ({'yes' if ok_b else 'no'})")
+    return "\n".join(out) if out else "(none)"
+
+
+def main() -> None:
+    argv = sys.argv[1:]
+    passed = argv[argv.index("--") + 1 :] if "--" in argv else []
+    own = argv[: argv.index("--")] if "--" in argv else argv
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    c = sub.add_parser("capture")
+    c.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
+    c.add_argument("--out", type=Path, required=True, help="capture file (pickles)")
+    r = sub.add_parser("replay")
+    r.add_argument("--derive", type=Path, nargs="+", required=True, help="captures the thresholds are derived on")
+    r.add_argument("--table", type=Path, nargs="+", required=True, help="the alternation's --json results of the same draws (the rows to reach)")
+    r.add_argument("--check", type=Path, nargs="*", default=[], help="captures of other draws, to check the derived thresholds on")
+    r.add_argument("--table-check", type=Path, nargs="*", default=[], help="the alternation's --json results of the --check draws")
+    args = ap.parse_args(own)
+    if args.command == "capture":
+        capture(args.sigma, args.out, passed)
+        return
+    derive, check = load(args.derive), load(args.check)
+    target, target_check = table_rows(args.table, derive), table_rows(args.table_check, check)
+    for name, recs in (("derive", derive), ("check", check)):
+        if recs:
+            s = score(recs, ChoiceRule())
+            print(f"{name}: {len(recs)} records; the rule as it is: {s['unlike']} replayed choices unlike the live run's, {s['misses']} kept shares not captured")
+    values = search(derive, target, say=lambda m: print("  " + m))
+    print("\nthresholds: " + ", ".join(f"{k} {current_values()[k]:g} -> {v:g}" if v != current_values()[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
+    d_now, d_new = score(derive, ChoiceRule()), score(derive, rule_of(values))
+    parts = [("alternation (the table)", target, d_now["draws"], 0), ("joint fit, rule as it is", d_now["within"], d_now["draws"], d_now["alarms"]),
+             ("joint fit, re-derived", d_new["within"], d_now["draws"], d_new["alarms"])]
+    print("**draws the thresholds are derived on**\n")
+    print(_report(parts))
+    print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
+    print(_flips(d_now, d_new))
+    if check:
+        c_now, c_new = score(check, ChoiceRule()), score(check, rule_of(values))
+        syn = [r for r in check if r.kind == "synthetic"]
+        parts = [("alternation", target_check, c_now["draws"], None), ("joint fit, rule as it is", c_now["within"], c_now["draws"], c_now["alarms"] if syn else None),
+                 ("joint fit, re-derived", c_new["within"], c_now["draws"], c_new["alarms"] if syn else None)]
+        print("\n**other draws (checked, not derived on)**\n")
+        print(_report(parts))
+        print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
+        print(_flips(c_now, c_new))
+
+
+if __name__ == "__main__":
+    main()
