@@ -198,7 +198,7 @@ def load(paths: list[Path]) -> list[Record]:
 
     out: list[Record] = []
     for p in paths:
-        rows = json.loads(p.with_suffix(".json").read_text())["rows"] if p.with_suffix(".json").exists() else []
+        bench = json.loads(p.with_suffix(".json").read_text()) if p.with_suffix(".json").exists() else {"rows": [], "complete": True}
         with p.open("rb") as f:
             while True:
                 try:
@@ -206,7 +206,10 @@ def load(paths: list[Path]) -> list[Record]:
                 except (EOFError, pickle.UnpicklingError):
                     break
                 if rec.kind == "draw":
-                    row = next((r for r in rows if r["cause"] == rec.hidden[0] and r.get("truth") == json.loads(json.dumps(rec.hidden[2], default=str))), None)
+                    truth = json.loads(json.dumps(rec.hidden[2], default=str))
+                    row = next((r for r in bench["rows"] if r["cause"] == rec.hidden[0] and r.get("truth") == truth), None)
+                    if row is None and not bench.get("complete", True):
+                        break  # a capture still running: its row is not written yet
                     if row is None:
                         raise SystemExit(f"{p.with_suffix('.json')}: no row of {rec.hidden[0]} with truth {rec.hidden[2]}")
                     rec.trial, rec.seed = row["trial"], row["seed"]
@@ -340,6 +343,15 @@ def table_rows(paths: list[Path], records: list[Record]) -> dict[str, int]:
     return out
 
 
+def table_alarms(paths: list[Path]) -> str | None:
+    """False alarms of the consistent synthetic trials in the ``--json`` files, "N of M"
+    (None: none ran)."""
+    import json
+
+    trials = [t for p in paths for t in json.loads(p.read_text()).get("synthetic") or []]
+    return f"{sum(t['chosen'] is not None for t in trials)} of {len(trials)}" if trials else None
+
+
 def objective(s: dict[str, Any], target: dict[str, int]) -> tuple[int, int, int]:
     """What the search maximizes, in order: no false alarm, the rows' shortfall against
     ``target`` (0 when every row reaches it), the draws within tolerance."""
@@ -349,28 +361,37 @@ def objective(s: dict[str, Any], target: dict[str, int]) -> tuple[int, int, int]
 
 def search(records: list[Record], target: dict[str, int], sweeps: int = 4, say: Callable[[str], None] = print) -> dict[str, float]:
     """Coordinate ascent of :func:`objective` over :data:`SEARCH` from the rule as it is:
-    each sweep tries every value of each threshold in turn with the others held, keeps the
-    best (the earlier value on a tie), until a sweep changes nothing."""
+    each sweep tries every value of each threshold with the others held, then every pair of
+    values of every two thresholds, keeping each change that raises the objective (the
+    earlier one on a tie), until a sweep changes nothing (at most ``sweeps``)."""
     values = current_values()
     best = objective(score(records, rule_of(values)), target)
     say(f"rule as it is: {best}")
-    for sweep in range(sweeps):
-        changed = False
+
+    def tries() -> Iterator[dict[str, float]]:
         for name, grid in SEARCH.items():
             for v in grid:
-                if v == values[name]:
-                    continue
-                trial = {**values, name: v}
-                got = objective(score(records, rule_of(trial)), target)
-                if got > best:
-                    best, values, changed = got, trial, True
-                    say(f"sweep {sweep + 1}: {name} = {v}: {got}")
+                yield {name: v}
+        for (a, ga), (b, gb) in itertools.combinations(SEARCH.items(), 2):
+            for va, vb in itertools.product(ga, gb):
+                yield {a: va, b: vb}
+
+    for sweep in range(sweeps):
+        changed = False
+        for change in tries():
+            trial = {**values, **change}
+            if trial == values:
+                continue
+            got = objective(score(records, rule_of(trial)), target)
+            if got > best:
+                best, values, changed = got, trial, True
+                say(f"sweep {sweep + 1}: " + ", ".join(f"{k} = {v:g}" for k, v in change.items()) + f": {got}")
         if not changed:
             break
     return values
 
 
-def _report(parts: list[tuple[str, dict[str, int], dict[str, int], int | None]]) -> str:
+def _report(parts: list[tuple[str, dict[str, int], dict[str, int], str | None]]) -> str:
     causes = list(parts[0][2])
     head = "| cause | draws | " + " | ".join(p[0] for p in parts) + " |"
     lines = [head, "| --- | ---: |" + " ---: |" * len(parts)]
@@ -421,8 +442,9 @@ def main() -> None:
     values = search(derive, target, say=lambda m: print("  " + m))
     print("\nthresholds: " + ", ".join(f"{k} {current_values()[k]:g} -> {v:g}" if v != current_values()[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
     d_now, d_new = score(derive, ChoiceRule()), score(derive, rule_of(values))
-    parts = [("alternation (the table)", target, d_now["draws"], 0), ("joint fit, rule as it is", d_now["within"], d_now["draws"], d_now["alarms"]),
-             ("joint fit, re-derived", d_new["within"], d_now["draws"], d_new["alarms"])]
+    n_syn = sum(r.kind == "synthetic" for r in derive)
+    parts = [("alternation (the table)", target, d_now["draws"], table_alarms(args.table)), ("joint fit, rule as it is", d_now["within"], d_now["draws"], f"{d_now['alarms']} of {n_syn}"),
+             ("joint fit, re-derived", d_new["within"], d_now["draws"], f"{d_new['alarms']} of {n_syn}")]
     print("**draws the thresholds are derived on**\n")
     print(_report(parts))
     print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
@@ -430,8 +452,8 @@ def main() -> None:
     if check:
         c_now, c_new = score(check, ChoiceRule()), score(check, rule_of(values))
         syn = [r for r in check if r.kind == "synthetic"]
-        parts = [("alternation", target_check, c_now["draws"], None), ("joint fit, rule as it is", c_now["within"], c_now["draws"], c_now["alarms"] if syn else None),
-                 ("joint fit, re-derived", c_new["within"], c_now["draws"], c_new["alarms"] if syn else None)]
+        parts = [("alternation", target_check, c_now["draws"], table_alarms(args.table_check)), ("joint fit, rule as it is", c_now["within"], c_now["draws"], f"{c_now['alarms']} of {len(syn)}" if syn else None),
+                 ("joint fit, re-derived", c_new["within"], c_now["draws"], f"{c_new['alarms']} of {len(syn)}" if syn else None)]
         print("\n**other draws (checked, not derived on)**\n")
         print(_report(parts))
         print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
