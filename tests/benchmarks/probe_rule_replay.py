@@ -3,7 +3,8 @@ alternation names? Capture every draw's candidates once, then replay the choice 
 other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
 
     .venv/bin/python tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
-    .venv/bin/python tests/benchmarks/probe_rule_replay.py replay CAPTURE.pkl ... [--search] [--against TABLE.json ...]
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...]
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py live --sigma 0.1 --values NAME=VALUE ... -- BENCH_DIAGNOSE_ARGS ...
 
 ``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
 this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
@@ -27,6 +28,9 @@ replay says how many do not). A kept share the capture did not compute counts as
 computed (the rule then decides by scores and blocks); the replay counts such lookups.
 The neutral bases stay those of the capture (built with the rule as it is): a rule that
 the product took would build its own.
+
+``live`` runs the benchmark with the joint fit and thresholds given (``--values``) for every
+diagnosis, the neutral bases' included: the derived thresholds measured as the product would.
 """
 
 from __future__ import annotations
@@ -181,6 +185,48 @@ class _Unpickler(pickle.Unpickler):
         if name == "Record" and module in ("__main__", __name__):
             return Record
         return super().find_class(module, name)
+
+
+def live(sigma: float, values: dict[str, float], passed: list[str]) -> None:
+    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``) and the thresholds
+    ``values`` (names of :data:`SEARCH`) in the rule's place for every diagnosis of the run,
+    the neutral bases' included: what a product that took them would measure."""
+    import bench_diagnose  # this folder
+    import bench_diagnose_joint  # this folder
+
+    import solver.dynamics.stage as stage_module
+
+    stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    rule = rule_of(values)
+    diagnose = core._diagnose
+
+    def with_rule(processed, inputs, options, say):  # type: ignore[no-untyped-def]
+        return diagnose(processed, inputs, replace(options, rule=rule), say)
+
+    core._diagnose = with_rule  # type: ignore[assignment]
+    sys.argv = [str(Path(bench_diagnose.__file__)), *passed]
+    bench_diagnose.main()
+
+
+def _values(items: list[str]) -> dict[str, float]:
+    """``NAME=VALUE`` items (names of :data:`SEARCH`) -> values.
+
+    Raises
+    ------
+    SystemExit
+        An item that is not ``NAME=NUMBER`` with a name of :data:`SEARCH`.
+    """
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = None
+        if name not in SEARCH or number is None:
+            raise SystemExit(f"--values: {item!r} is not NAME=NUMBER with NAME one of {', '.join(SEARCH)}")
+        out[name] = number
+    return out
 
 
 def load(paths: list[Path]) -> list[Record]:
@@ -424,6 +470,9 @@ def main() -> None:
     c = sub.add_parser("capture")
     c.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
     c.add_argument("--out", type=Path, required=True, help="capture file (pickles)")
+    v = sub.add_parser("live")
+    v.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
+    v.add_argument("--values", nargs="+", default=[], help="thresholds NAME=VALUE (names of SEARCH), the others as they are")
     r = sub.add_parser("replay")
     r.add_argument("--derive", type=Path, nargs="+", required=True, help="captures the thresholds are derived on")
     r.add_argument("--table", type=Path, nargs="+", required=True, help="the alternation's --json results of the same draws (the rows to reach)")
@@ -432,6 +481,9 @@ def main() -> None:
     args = ap.parse_args(own)
     if args.command == "capture":
         capture(args.sigma, args.out, passed)
+        return
+    if args.command == "live":
+        live(args.sigma, _values(args.values), passed)
         return
     derive, check = load(args.derive), load(args.check)
     target, target_check = table_rows(args.table, derive), table_rows(args.table_check, check)
