@@ -22,7 +22,10 @@ pickled with the hidden effect's truth and the base's report as soon as its draw
 ``replay`` runs the choice again on the records (:func:`solver.diagnose.selection.choose`,
 :func:`~solver.diagnose.selection.best_per_cause`, :func:`solver.diagnose.core.choice_on_marker_motion`,
 the product's own functions) with a :class:`~solver.diagnose.selection.ChoiceRule`, and
-scores each draw with the benchmark's own check (:func:`tests.diagnose.effects.check`).
+scores each draw with the benchmark's own check (:func:`tests.diagnose.effects.check`); the
+thresholds are searched on the ``--derive`` draws (:func:`search`, coordinate ascent over
+one and two thresholds at a time, and with ``--random N`` as many rules drawn at random from
+the same grid) and checked on the ``--check`` draws.
 With the rule as it is, every draw must come out as the capture's live run named it (the
 replay says how many do not). A kept share the capture did not compute counts as not
 computed (the rule then decides by scores and blocks); the replay counts such lookups.
@@ -437,6 +440,26 @@ def search(records: list[Record], target: dict[str, int], sweeps: int = 4, say: 
     return values
 
 
+def random_search(records: list[Record], target: dict[str, int], n: int, seed: int) -> tuple[tuple[int, int, int], dict[str, float], dict[int, int]]:
+    """``n`` rules drawn at random from the grid of :data:`SEARCH` (every threshold's value
+    uniformly, ``random.Random(seed)``): the best :func:`objective` and its thresholds (the
+    first drawn on a tie), and how many rules without a false alarm leave each shortfall."""
+    import random
+
+    rng = random.Random(seed)
+    best: tuple[tuple[int, int, int], dict[str, float]] | None = None
+    shortfalls: dict[int, int] = {}
+    for _ in range(n):
+        values = {k: rng.choice(grid) for k, grid in SEARCH.items()}
+        got = objective(score(records, rule_of(values)), target)
+        if got[0] == 0:
+            shortfalls[got[1]] = shortfalls.get(got[1], 0) + 1
+        if best is None or got > best[0]:
+            best = (got, values)
+    assert best is not None
+    return best[0], best[1], dict(sorted(shortfalls.items(), reverse=True))
+
+
 def _report(parts: list[tuple[str, dict[str, int], dict[str, int], str | None]]) -> str:
     causes = list(parts[0][2])
     head = "| cause | draws | " + " | ".join(p[0] for p in parts) + " |"
@@ -478,6 +501,8 @@ def main() -> None:
     r.add_argument("--table", type=Path, nargs="+", required=True, help="the alternation's --json results of the same draws (the rows to reach)")
     r.add_argument("--check", type=Path, nargs="*", default=[], help="captures of other draws, to check the derived thresholds on")
     r.add_argument("--table-check", type=Path, nargs="*", default=[], help="the alternation's --json results of the --check draws")
+    r.add_argument("--random", type=int, default=0, help="also this many rules drawn at random from the grid")
+    r.add_argument("--seed", type=int, default=1, help="seed of --random")
     args = ap.parse_args(own)
     if args.command == "capture":
         capture(args.sigma, args.out, passed)
@@ -492,6 +517,13 @@ def main() -> None:
             s = score(recs, ChoiceRule())
             print(f"{name}: {len(recs)} records; the rule as it is: {s['unlike']} replayed choices unlike the live run's, {s['misses']} kept shares not captured")
     values = search(derive, target, say=lambda m: print("  " + m))
+    if args.random:
+        got, drawn, shortfalls = random_search(derive, target, args.random, args.seed)
+        print(f"  {args.random} rules drawn at random from the same grid (seed {args.seed}): the best {got}; rules without a false "
+              "alarm by shortfall against the table: " + ", ".join(f"{k}: {v}" for k, v in shortfalls.items()))
+        if got > objective(score(derive, rule_of(values)), target):
+            values = drawn
+            print("  (the random draw's best is taken)")
     print("\nthresholds: " + ", ".join(f"{k} {current_values()[k]:g} -> {v:g}" if v != current_values()[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
     d_now, d_new = score(derive, ChoiceRule()), score(derive, rule_of(values))
     n_syn = sum(r.kind == "synthetic" for r in derive)
