@@ -308,6 +308,15 @@ FIGURES: tuple[Figure, ...] = (
     Figure("diagnose-rule-replay", RESULTS, f"{PY} tests/benchmarks/probe_rule_replay.py replay --derive {REPLAY.format('0_19')} "
            f"--table {TABLE} --check {REPLAY.format('20_39')} --table-check docs/diagnose/results_draws_20_39.json --random 3000",
            "accuracy", 7.0, fence=False, retired=RECORDED_RULE),
+    # the same on the fit the diagnosis judges on: are the table's own thresholds at their best, in and out of sample?
+    Figure("diagnose-rule-replay-alternation-capture-0-19", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --alternation "
+           f"--out {REPLAY.format('alternation_0_19')} -- --draws 20 --synthetic 10", "accuracy", 31.0, retired=RECORDED_RULE),
+    Figure("diagnose-rule-replay-alternation-capture-20-39", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --alternation "
+           f"--out {REPLAY.format('alternation_20_39')} -- --first 20 --draws 20 --synthetic 0", "accuracy", 31.0, retired=RECORDED_RULE),
+    Figure("diagnose-rule-replay-alternation", RESULTS, f"{PY} tests/benchmarks/probe_rule_replay.py replay "
+           f"--derive {REPLAY.format('alternation_0_19')} --table {TABLE} --check {REPLAY.format('alternation_20_39')} "
+           "--table-check docs/diagnose/results_draws_20_39.json --random 3000 --fit-label alternation",
+           "accuracy", 7.0, fence=False, retired=RECORDED_RULE),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

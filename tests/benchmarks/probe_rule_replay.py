@@ -2,13 +2,14 @@
 alternation names? Capture every draw's candidates once, then replay the choice under
 other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
 
-    .venv/bin/python tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py capture [--sigma 0.1 | --alternation] --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
     .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...]
     .venv/bin/python tests/benchmarks/probe_rule_replay.py live --sigma 0.1 --values NAME=VALUE ... -- BENCH_DIAGNOSE_ARGS ...
 
 ``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
 this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
-``bench_diagnose_joint.py`` does), and records for each draw and each consistent synthetic
+``bench_diagnose_joint.py`` does; with ``--alternation`` the fit the diagnosis judges on,
+as it is), and records for each draw and each consistent synthetic
 trial what :func:`solver.diagnose.core._diagnose` hands to the choice: every alternative's
 cross-validated :class:`~solver.diagnose.selection.Evaluation` on the fitted motion, on the
 marker-only motion and on the marker-only motion whitened with its own noise (the last
@@ -128,8 +129,9 @@ class _Capture:
         return out
 
 
-def capture(sigma: float, out: Path, passed: list[str]) -> None:
-    """Run the benchmark with the joint fit and pickle a :class:`Record` per draw and
+def capture(sigma: float | None, out: Path, passed: list[str]) -> None:
+    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``; None: the
+    alternation the diagnosis judges on, as it is) and pickle a :class:`Record` per draw and
     synthetic trial to ``out`` (one pickle after another, as each ends)."""
     import bench_diagnose  # this folder
     import bench_diagnose_joint  # this folder
@@ -137,7 +139,8 @@ def capture(sigma: float, out: Path, passed: list[str]) -> None:
     import solver.dynamics.stage as stage_module
     from tests.diagnose.effects import check as live_check
 
-    stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    if sigma is not None:
+        stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
     cap = _Capture()
     core.choose = cap.choose  # type: ignore[assignment]
     core.choice_on_marker_motion = cap.choice_on_marker_motion  # type: ignore[assignment]
@@ -492,6 +495,7 @@ def main() -> None:
     sub = ap.add_subparsers(dest="command", required=True)
     c = sub.add_parser("capture")
     c.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
+    c.add_argument("--alternation", action="store_true", help="judge on the alternation, as addb diagnose does (no --sigma)")
     c.add_argument("--out", type=Path, required=True, help="capture file (pickles)")
     v = sub.add_parser("live")
     v.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
@@ -502,10 +506,11 @@ def main() -> None:
     r.add_argument("--check", type=Path, nargs="*", default=[], help="captures of other draws, to check the derived thresholds on")
     r.add_argument("--table-check", type=Path, nargs="*", default=[], help="the alternation's --json results of the --check draws")
     r.add_argument("--random", type=int, default=0, help="also this many rules drawn at random from the grid")
+    r.add_argument("--fit-label", default="joint fit", help="the captures' fit, for the columns' headings")
     r.add_argument("--seed", type=int, default=1, help="seed of --random")
     args = ap.parse_args(own)
     if args.command == "capture":
-        capture(args.sigma, args.out, passed)
+        capture(None if args.alternation else args.sigma, args.out, passed)
         return
     if args.command == "live":
         live(args.sigma, _values(args.values), passed)
@@ -527,8 +532,8 @@ def main() -> None:
     print("\nthresholds: " + ", ".join(f"{k} {current_values()[k]:g} -> {v:g}" if v != current_values()[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
     d_now, d_new = score(derive, ChoiceRule()), score(derive, rule_of(values))
     n_syn = sum(r.kind == "synthetic" for r in derive)
-    parts = [("alternation (the table)", target, d_now["draws"], table_alarms(args.table)), ("joint fit, rule as it is", d_now["within"], d_now["draws"], f"{d_now['alarms']} of {n_syn}"),
-             ("joint fit, re-derived", d_new["within"], d_now["draws"], f"{d_new['alarms']} of {n_syn}")]
+    parts = [("alternation (the table)", target, d_now["draws"], table_alarms(args.table)), (f"{args.fit_label}, rule as it is", d_now["within"], d_now["draws"], f"{d_now['alarms']} of {n_syn}"),
+             (f"{args.fit_label}, re-derived", d_new["within"], d_now["draws"], f"{d_new['alarms']} of {n_syn}")]
     print("**draws the thresholds are derived on**\n")
     print(_report(parts))
     print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
@@ -536,8 +541,8 @@ def main() -> None:
     if check:
         c_now, c_new = score(check, ChoiceRule()), score(check, rule_of(values))
         syn = [r for r in check if r.kind == "synthetic"]
-        parts = [("alternation", target_check, c_now["draws"], table_alarms(args.table_check)), ("joint fit, rule as it is", c_now["within"], c_now["draws"], f"{c_now['alarms']} of {len(syn)}" if syn else None),
-                 ("joint fit, re-derived", c_new["within"], c_now["draws"], f"{c_new['alarms']} of {len(syn)}" if syn else None)]
+        parts = [("alternation", target_check, c_now["draws"], table_alarms(args.table_check)), (f"{args.fit_label}, rule as it is", c_now["within"], c_now["draws"], f"{c_now['alarms']} of {len(syn)}" if syn else None),
+                 (f"{args.fit_label}, re-derived", c_new["within"], c_now["draws"], f"{c_new['alarms']} of {len(syn)}" if syn else None)]
         print("\n**other draws (checked, not derived on)**\n")
         print(_report(parts))
         print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
