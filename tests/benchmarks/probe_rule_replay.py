@@ -4,7 +4,7 @@ other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
 
     .venv/bin/python tests/benchmarks/probe_rule_replay.py capture [--sigma 0.1 | --alternation] --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
     .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...]
-    .venv/bin/python tests/benchmarks/probe_rule_replay.py live --sigma 0.1 --values NAME=VALUE ... -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py live [--sigma 0.1 | --alternation] --values NAME=VALUE ... -- BENCH_DIAGNOSE_ARGS ...
 
 ``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
 this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
@@ -33,8 +33,9 @@ computed (the rule then decides by scores and blocks); the replay counts such lo
 The neutral bases stay those of the capture (built with the rule as it is): a rule that
 the product took would build its own.
 
-``live`` runs the benchmark with the joint fit and thresholds given (``--values``) for every
-diagnosis, the neutral bases' included: the derived thresholds measured as the product would.
+``live`` runs the benchmark with the joint fit (or ``--alternation``) and thresholds given
+(``--values``) for every diagnosis, the neutral bases' included: the derived thresholds
+measured as the product would.
 """
 
 from __future__ import annotations
@@ -193,16 +194,18 @@ class _Unpickler(pickle.Unpickler):
         return super().find_class(module, name)
 
 
-def live(sigma: float, values: dict[str, float], passed: list[str]) -> None:
-    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``) and the thresholds
-    ``values`` (names of :data:`SEARCH`) in the rule's place for every diagnosis of the run,
-    the neutral bases' included: what a product that took them would measure."""
+def live(sigma: float | None, values: dict[str, float], passed: list[str]) -> None:
+    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``; None: the alternation
+    the diagnosis judges on, as it is) and the thresholds ``values`` (names of
+    :data:`SEARCH`) in the rule's place for every diagnosis of the run, the neutral bases'
+    included: what a product that took them would measure."""
     import bench_diagnose  # this folder
     import bench_diagnose_joint  # this folder
 
     import solver.dynamics.stage as stage_module
 
-    stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    if sigma is not None:
+        stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
     rule = rule_of(values)
     diagnose = core._diagnose
 
@@ -499,6 +502,7 @@ def main() -> None:
     c.add_argument("--out", type=Path, required=True, help="capture file (pickles)")
     v = sub.add_parser("live")
     v.add_argument("--sigma", type=float, default=0.1, help="mass_sigma of the joint fit judged on")
+    v.add_argument("--alternation", action="store_true", help="judge on the alternation, as addb diagnose does (no --sigma)")
     v.add_argument("--values", nargs="+", default=[], help="thresholds NAME=VALUE (names of SEARCH), the others as they are")
     r = sub.add_parser("replay")
     r.add_argument("--derive", type=Path, nargs="+", required=True, help="captures the thresholds are derived on")
@@ -513,7 +517,7 @@ def main() -> None:
         capture(None if args.alternation else args.sigma, args.out, passed)
         return
     if args.command == "live":
-        live(args.sigma, _values(args.values), passed)
+        live(None if args.alternation else args.sigma, _values(args.values), passed)
         return
     derive, check = load(args.derive), load(args.check)
     target, target_check = table_rows(args.table, derive), table_rows(args.table_check, check)
