@@ -163,6 +163,27 @@ RECORDED_RULE = ("2026-11-27: a probe recorded once to close a question (can the
 REPLAY = "/tmp/addb_rule_replay_{}/capture.pkl"
 
 
+def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figure]:
+    """The choice's thresholds replayed on the fit ``fit`` (the capture's switches) and, with
+    ``label``, its name in the headings (empty: the probe's default, the joint fit): draws
+    0-19 with 10 consistent trials per trial and draws 20-39 captured to :data:`REPLAY`
+    (folders ``[label_]0_19`` and ``[label_]20_39``, side by side), then the replay that
+    derives the thresholds on the first and checks them on the second in RESULTS
+    (recorded once, :data:`RECORDED_RULE`)."""
+    cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
+    stem = f"{label}_" if label else ""
+    first, second = REPLAY.format(f"{stem}0_19"), REPLAY.format(f"{stem}20_39")
+    return (
+        Figure(f"{name}-capture-0-19", "", f"{cmd} capture {fit} --out {first} -- --draws 20 --synthetic 10", "accuracy", 31.0,
+               retired=RECORDED_RULE),
+        Figure(f"{name}-capture-20-39", "", f"{cmd} capture {fit} --out {second} -- --first 20 --draws 20 --synthetic 0", "accuracy",
+               31.0, retired=RECORDED_RULE),
+        Figure(name, RESULTS, f"{cmd} replay --derive {first} --table {TABLE} --check {second} --table-check "
+               "docs/diagnose/results_draws_20_39.json --random 3000" + (f" --fit-label {label}" if label else ""), "accuracy", 7.0,
+               fence=False, retired=RECORDED_RULE),
+    )
+
+
 def _joint_two_rows(sigma: str) -> tuple[Figure, Figure]:
     """The two rows the joint fit loses (plate position, segment masses; 40 draws) with its
     mass prior at ``sigma`` into ``docs/diagnose/joint_fit_sigma_<sigma>_two_rows.json``, then
@@ -301,22 +322,9 @@ FIGURES: tuple[Figure, ...] = (
            "segment_mass_distribution:1 segment_mass_distribution:3 segment_mass_distribution:5 segment_mass_distribution:7 "
            "segment_mass_distribution:13 body_mass:9", "accuracy", 8.0, fence=False),
     # the choice rule's thresholds re-derived on the joint fit: every draw's candidates captured once, the choice replayed
-    Figure("diagnose-rule-replay-capture-0-19", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 "
-           f"--out {REPLAY.format('0_19')} -- --draws 20 --synthetic 10", "accuracy", 31.0, retired=RECORDED_RULE),
-    Figure("diagnose-rule-replay-capture-20-39", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --sigma 0.1 "
-           f"--out {REPLAY.format('20_39')} -- --first 20 --draws 20 --synthetic 0", "accuracy", 31.0, retired=RECORDED_RULE),
-    Figure("diagnose-rule-replay", RESULTS, f"{PY} tests/benchmarks/probe_rule_replay.py replay --derive {REPLAY.format('0_19')} "
-           f"--table {TABLE} --check {REPLAY.format('20_39')} --table-check docs/diagnose/results_draws_20_39.json --random 3000",
-           "accuracy", 7.0, fence=False, retired=RECORDED_RULE),
+    *_rule_replay("diagnose-rule-replay", "--sigma 0.1", ""),
     # the same on the fit the diagnosis judges on: are the table's own thresholds at their best, in and out of sample?
-    Figure("diagnose-rule-replay-alternation-capture-0-19", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --alternation "
-           f"--out {REPLAY.format('alternation_0_19')} -- --draws 20 --synthetic 10", "accuracy", 31.0, retired=RECORDED_RULE),
-    Figure("diagnose-rule-replay-alternation-capture-20-39", "", f"{PY} tests/benchmarks/probe_rule_replay.py capture --alternation "
-           f"--out {REPLAY.format('alternation_20_39')} -- --first 20 --draws 20 --synthetic 0", "accuracy", 31.0, retired=RECORDED_RULE),
-    Figure("diagnose-rule-replay-alternation", RESULTS, f"{PY} tests/benchmarks/probe_rule_replay.py replay "
-           f"--derive {REPLAY.format('alternation_0_19')} --table {TABLE} --check {REPLAY.format('alternation_20_39')} "
-           "--table-check docs/diagnose/results_draws_20_39.json --random 3000 --fit-label alternation",
-           "accuracy", 7.0, fence=False, retired=RECORDED_RULE),
+    *_rule_replay("diagnose-rule-replay-alternation", "--alternation", "alternation"),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",
