@@ -130,18 +130,33 @@ class _Capture:
         return out
 
 
-def capture(sigma: float | None, out: Path, passed: list[str]) -> None:
-    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``; None: the
-    alternation the diagnosis judges on, as it is) and pickle a :class:`Record` per draw and
-    synthetic trial to ``out`` (one pickle after another, as each ends)."""
+def _benchmark_on(sigma: float | None) -> Any:
+    """``tests/benchmarks/bench_diagnose.py`` (the module), with the dynamics stage running the
+    joint fit at ``mass_sigma`` ``sigma`` where it runs the alternation
+    (:func:`bench_diagnose_joint.joint_in_place`); None: the alternation, as it is."""
     import bench_diagnose  # this folder
     import bench_diagnose_joint  # this folder
 
     import solver.dynamics.stage as stage_module
-    from tests.diagnose.effects import check as live_check
 
     if sigma is not None:
         stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    return bench_diagnose
+
+
+def _run(bench_diagnose: Any, passed: list[str]) -> None:
+    """The benchmark's command line with the arguments ``passed``, in this process."""
+    sys.argv = [str(Path(bench_diagnose.__file__)), *passed]
+    bench_diagnose.main()
+
+
+def capture(sigma: float | None, out: Path, passed: list[str]) -> None:
+    """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``; None: the
+    alternation the diagnosis judges on, as it is) and pickle a :class:`Record` per draw and
+    synthetic trial to ``out`` (one pickle after another, as each ends)."""
+    from tests.diagnose.effects import check as live_check
+
+    bench_diagnose = _benchmark_on(sigma)
     cap = _Capture()
     core.choose = cap.choose  # type: ignore[assignment]
     core.choice_on_marker_motion = cap.choice_on_marker_motion  # type: ignore[assignment]
@@ -178,9 +193,8 @@ def capture(sigma: float | None, out: Path, passed: list[str]) -> None:
         passed = [*passed, "--json", str(out.with_suffix(".json"))]
     elif Path(passed[passed.index("--json") + 1]) != out.with_suffix(".json"):
         raise SystemExit(f"--json must be {out.with_suffix('.json')} (beside the capture), or left out")
-    sys.argv = [str(Path(bench_diagnose.__file__)), *passed]
     try:
-        bench_diagnose.main()
+        _run(bench_diagnose, passed)
     finally:
         sink.close()
 
@@ -199,13 +213,7 @@ def live(sigma: float | None, values: dict[str, float], passed: list[str]) -> No
     the diagnosis judges on, as it is) and the thresholds ``values`` (names of
     :data:`SEARCH`) in the rule's place for every diagnosis of the run, the neutral bases'
     included: what a product that took them would measure."""
-    import bench_diagnose  # this folder
-    import bench_diagnose_joint  # this folder
-
-    import solver.dynamics.stage as stage_module
-
-    if sigma is not None:
-        stage_module.fit_dynamics = bench_diagnose_joint.joint_in_place(sigma)  # type: ignore[assignment]
+    bench_diagnose = _benchmark_on(sigma)
     rule = rule_of(values)
     diagnose = core._diagnose
 
@@ -213,8 +221,7 @@ def live(sigma: float | None, values: dict[str, float], passed: list[str]) -> No
         return diagnose(processed, inputs, replace(options, rule=rule), say)
 
     core._diagnose = with_rule  # type: ignore[assignment]
-    sys.argv = [str(Path(bench_diagnose.__file__)), *passed]
-    bench_diagnose.main()
+    _run(bench_diagnose, passed)
 
 
 def _values(items: list[str]) -> dict[str, float]:
@@ -476,6 +483,19 @@ def _report(parts: list[tuple[str, dict[str, int], dict[str, int], str | None]])
     return "\n".join(lines)
 
 
+def _section(title: str, table_label: str, table: dict[str, int], table_alarms: str | None, fit_label: str, records: list[Record],
+             now: dict[str, Any], new: dict[str, Any]) -> str:
+    """One set of draws: the table's rows beside the replay's with the rule as it is (``now``)
+    and re-derived (``new``), and the draws the re-derivation changes (false alarms "N of M",
+    or a dash where no consistent trial was captured)."""
+    n_syn = sum(r.kind == "synthetic" for r in records)
+    cells = [f"{s['alarms']} of {n_syn}" if n_syn else None for s in (now, new)]
+    parts = [(table_label, table, now["draws"], table_alarms), (f"{fit_label}, rule as it is", now["within"], now["draws"], cells[0]),
+             (f"{fit_label}, re-derived", new["within"], now["draws"], cells[1])]
+    return (f"{title}\n\n{_report(parts)}\n\nDraws the re-derived thresholds change (named cause, within tolerance):\n\n"
+            + _flips(now, new))
+
+
 def _named(key: Key | None) -> str:
     return "None" if key is None else key[0] + (f" {key[1]}" if key[1] else "")
 
@@ -520,11 +540,12 @@ def main() -> None:
         live(None if args.alternation else args.sigma, _values(args.values), passed)
         return
     derive, check = load(args.derive), load(args.check)
-    target, target_check = table_rows(args.table, derive), table_rows(args.table_check, check)
+    target = table_rows(args.table, derive)
+    now = {"derive": score(derive, ChoiceRule()), "check": score(check, ChoiceRule())}
     for name, recs in (("derive", derive), ("check", check)):
         if recs:
-            s = score(recs, ChoiceRule())
-            print(f"{name}: {len(recs)} records; the rule as it is: {s['unlike']} replayed choices unlike the live run's, {s['misses']} kept shares not captured")
+            print(f"{name}: {len(recs)} records; the rule as it is: {now[name]['unlike']} replayed choices unlike the live run's, "
+                  f"{now[name]['misses']} kept shares not captured")
     values = search(derive, target, say=lambda m: print("  " + m))
     if args.random:
         got, drawn, shortfalls = random_search(derive, target, args.random, args.seed)
@@ -533,24 +554,14 @@ def main() -> None:
         if got > objective(score(derive, rule_of(values)), target):
             values = drawn
             print("  (the random draw's best is taken)")
-    print("\nthresholds: " + ", ".join(f"{k} {current_values()[k]:g} -> {v:g}" if v != current_values()[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
-    d_now, d_new = score(derive, ChoiceRule()), score(derive, rule_of(values))
-    n_syn = sum(r.kind == "synthetic" for r in derive)
-    parts = [("alternation (the table)", target, d_now["draws"], table_alarms(args.table)), (f"{args.fit_label}, rule as it is", d_now["within"], d_now["draws"], f"{d_now['alarms']} of {n_syn}"),
-             (f"{args.fit_label}, re-derived", d_new["within"], d_now["draws"], f"{d_new['alarms']} of {n_syn}")]
-    print("**draws the thresholds are derived on**\n")
-    print(_report(parts))
-    print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
-    print(_flips(d_now, d_new))
+    start = current_values()
+    print("\nthresholds: " + ", ".join(f"{k} {start[k]:g} -> {v:g}" if v != start[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
+    rule = rule_of(values)
+    print(_section("**draws the thresholds are derived on**", "alternation (the table)", target, table_alarms(args.table),
+                   args.fit_label, derive, now["derive"], score(derive, rule)))
     if check:
-        c_now, c_new = score(check, ChoiceRule()), score(check, rule_of(values))
-        syn = [r for r in check if r.kind == "synthetic"]
-        parts = [("alternation", target_check, c_now["draws"], table_alarms(args.table_check)), (f"{args.fit_label}, rule as it is", c_now["within"], c_now["draws"], f"{c_now['alarms']} of {len(syn)}" if syn else None),
-                 (f"{args.fit_label}, re-derived", c_new["within"], c_now["draws"], f"{c_new['alarms']} of {len(syn)}" if syn else None)]
-        print("\n**other draws (checked, not derived on)**\n")
-        print(_report(parts))
-        print("\nDraws the re-derived thresholds change (named cause, within tolerance):\n")
-        print(_flips(c_now, c_new))
+        print("\n" + _section("**other draws (checked, not derived on)**", "alternation", table_rows(args.table_check, check),
+                                table_alarms(args.table_check), args.fit_label, check, now["check"], score(check, rule)))
 
 
 if __name__ == "__main__":
