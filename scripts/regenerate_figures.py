@@ -162,6 +162,11 @@ RECORDED_RULE = ("2026-11-27: a probe recorded once to close a question (can the
 #: Where the replay's captures are kept (one folder each, so that the two run side by side).
 REPLAY = "/tmp/addb_rule_replay_{}/capture.pkl"
 
+#: The registration confirmed on the marker-only motion, recorded once and retired as made (:attr:`Figure.retired`).
+RECORDED_CONFIRMED = ("2026-11-27: a probe recorded once to close a question (does the registration confirmed on the "
+                      "marker-only motion, with thresholds re-derived on top of it, give the joint fit back the rows the "
+                      "alternation names?), retired as it was made: its block is the record of the code at its stamp's commit")
+
 
 def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figure]:
     """The choice's thresholds replayed on the fit ``fit`` (the capture's switches) and, with
@@ -181,6 +186,31 @@ def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figur
         Figure(name, RESULTS, f"{cmd} replay --derive {first} --table {TABLE} --check {second} --table-check "
                "docs/diagnose/results_draws_20_39.json --random 3000" + (f" --fit-label {label}" if label else ""), "accuracy", 7.0,
                fence=False, retired=RECORDED_RULE),
+    )
+
+
+def _rule_confirmed(values: str) -> tuple[Figure, Figure, Figure, Figure]:
+    """The rule's structure changed on the joint fit at ``mass_sigma`` 0.1: the plates'
+    registration named from the fitted motion only when the marker-only motion confirms it
+    (``--confirm-registration 0``), replayed on the captures of ``diagnose-rule-replay``
+    (which must be in :data:`REPLAY`) with thresholds re-derived on top of it; then run live
+    with those thresholds (``values``, the replay's result) on draws 0-19 with 5 consistent
+    trials per trial and draws 20-39 (side by side, into
+    ``docs/diagnose/joint_fit_confirmed_draws_*.json``), compared with the table's 40 draws
+    (all recorded once, :data:`RECORDED_CONFIRMED`)."""
+    cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
+    live = f"{cmd} live --sigma 0.1 --values {values} --confirm-registration 0 --"
+    data = [f"docs/diagnose/joint_fit_confirmed_draws_{part}.json" for part in ("0_19", "20_39")]
+    return (
+        Figure("diagnose-rule-confirmed", RESULTS, f"{cmd} replay --derive {REPLAY.format('0_19')} --table {TABLE} --check "
+               f"{REPLAY.format('20_39')} --table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0",
+               "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed-live-0-19", "", f"{live} --draws 20 --synthetic 5 --json {data[0]}", "accuracy", 35.0,
+               retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed-live-20-39", "", f"{live} --first 20 --draws 20 --synthetic 0 --json {data[1]}", "accuracy",
+               31.0, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
+               f"{TABLE_40} --with {' '.join(data)}", "accuracy", 0.1, fence=False, retired=RECORDED_CONFIRMED),
     )
 
 
@@ -325,6 +355,8 @@ FIGURES: tuple[Figure, ...] = (
     *_rule_replay("diagnose-rule-replay", "--sigma 0.1", ""),
     # the same on the fit the diagnosis judges on: are the table's own thresholds at their best, in and out of sample?
     *_rule_replay("diagnose-rule-replay-alternation", "--alternation", "alternation"),
+    # a change of the rule's structure instead: the registration confirmed on the marker-only motion (joint fit)
+    *_rule_confirmed("registration_gain=0.03 min_t=2.5"),
     Figure("diagnose-marker-draws", "docs/diagnose/RESULTS.md",
            f"{PY} tests/benchmarks/probe_marker_draws.py --draws 20", "accuracy", 2.5),
     Figure("diagnose-marker-folds", "docs/diagnose/RESULTS.md",

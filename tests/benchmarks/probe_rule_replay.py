@@ -3,8 +3,8 @@ alternation names? Capture every draw's candidates once, then replay the choice 
 other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
 
     .venv/bin/python tests/benchmarks/probe_rule_replay.py capture [--sigma 0.1 | --alternation] --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
-    .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...]
-    .venv/bin/python tests/benchmarks/probe_rule_replay.py live [--sigma 0.1 | --alternation] --values NAME=VALUE ... -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...] [--confirm-registration GAIN]
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py live [--sigma 0.1 | --alternation] --values NAME=VALUE ... [--confirm-registration GAIN] -- BENCH_DIAGNOSE_ARGS ...
 
 ``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
 this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
@@ -36,6 +36,15 @@ the product took would build its own.
 ``live`` runs the benchmark with the joint fit (or ``--alternation``) and thresholds given
 (``--values``) for every diagnosis, the neutral bases' included: the derived thresholds
 measured as the product would.
+
+``--confirm-registration GAIN`` (``replay`` and ``live``) tries one change of the rule's
+structure rather than its thresholds (:func:`unconfirmed_dropped`): the plates' registration
+is named from the fitted motion only when the marker-only motion confirms it, its relative
+gain there at least GAIN (0: it does not make that motion's forces worse). A registration is
+an error of the force recording, which the marker-only motion shows as well; on the joint fit
+a mass misplaced in the model leaves a registration-like residue on the motion the forces
+bent and none on the marker-only one. The replay prints the rule as it is, the rule with the
+confirmation, and the confirmation with thresholds re-derived on top of it.
 """
 
 from __future__ import annotations
@@ -87,6 +96,29 @@ def _pairs(evaluations: list[Evaluation]) -> Iterator[tuple[Evaluation, Evaluati
     for a, b in itertools.permutations(best, 2):
         if channels(a.cause) == channels(b.cause):
             yield a, b
+
+
+#: The cause the confirmation (``--confirm-registration``) applies to.
+CONFIRMED = "plate_registration"
+
+
+def unconfirmed_dropped(fitted: list[Evaluation], marker_only: list[Evaluation], min_gain: float | None) -> list[Evaluation]:
+    """``fitted`` without the plates' registration's alternatives whose twin on the
+    marker-only motion (same cause and choice in ``marker_only``) has a relative gain below
+    ``min_gain`` (:attr:`~solver.diagnose.selection.Evaluation.relative_gain`); None: ``fitted``
+    as it is. An alternative without a twin stays."""
+    if min_gain is None:
+        return fitted
+    twins = {_key(e): e for e in marker_only}
+    return [e for e in fitted if not (e.cause == CONFIRMED and _key(e) in twins and twins[_key(e)].relative_gain < min_gain)]
+
+
+def confirmed(records: list[Record], min_gain: float | None) -> list[Record]:
+    """``records`` with :func:`unconfirmed_dropped` applied to each one's fitted motion
+    (copies; None: ``records`` as they are)."""
+    if min_gain is None:
+        return records
+    return [replace(r, fitted=unconfirmed_dropped(r.fitted, r.marker_only, min_gain)) for r in records]
 
 
 class _Capture:
@@ -208,11 +240,12 @@ class _Unpickler(pickle.Unpickler):
         return super().find_class(module, name)
 
 
-def live(sigma: float | None, values: dict[str, float], passed: list[str]) -> None:
+def live(sigma: float | None, values: dict[str, float], passed: list[str], min_gain: float | None = None) -> None:
     """Run the benchmark with the joint fit (``mass_sigma`` ``sigma``; None: the alternation
     the diagnosis judges on, as it is) and the thresholds ``values`` (names of
     :data:`SEARCH`) in the rule's place for every diagnosis of the run, the neutral bases'
-    included: what a product that took them would measure."""
+    included: what a product that took them would measure. ``min_gain``: the confirmation of
+    the registration on the marker-only motion (:func:`unconfirmed_dropped`; None: none)."""
     bench_diagnose = _benchmark_on(sigma)
     rule = rule_of(values)
     diagnose = core._diagnose
@@ -221,7 +254,36 @@ def live(sigma: float | None, values: dict[str, float], passed: list[str]) -> No
         return diagnose(processed, inputs, replace(options, rule=rule), say)
 
     core._diagnose = with_rule  # type: ignore[assignment]
+    if min_gain is not None:
+        _confirm_in_place(min_gain)
     _run(bench_diagnose, passed)
+
+
+def _confirm_in_place(min_gain: float) -> None:
+    """Put :func:`unconfirmed_dropped` in :mod:`solver.diagnose.core`'s choice on the fitted
+    motion: ``_diagnose`` evaluates the fitted motion, then the marker-only one (each
+    evaluation then marked ``"marker-only"``), then chooses among the fitted motion's
+    alternatives, which the wrapper filters with the latest marker-only evaluations (the
+    ranking rebuilt from what is left). The choices on the marker-only motion, inside
+    :func:`~solver.diagnose.core.choice_on_marker_motion`, pass as they are."""
+    evaluate, choose = core.evaluate, core.choose
+    latest: list[list[Evaluation]] = [[]]
+
+    def evaluating(*args, **kwargs):  # type: ignore[no-untyped-def]
+        out = evaluate(*args, **kwargs)
+        latest[0] = out[2]
+        return out
+
+    def choosing(ranked, rule=None, blocks=None, alternatives=None, kept=None, tie_break=None):  # type: ignore[no-untyped-def]
+        alternatives = list(alternatives or [])
+        if alternatives and all(e.motion == "fitted" for e in alternatives):
+            marker_only = [e for e in latest[0] if e.motion == "marker-only"]
+            alternatives = unconfirmed_dropped(alternatives, marker_only, min_gain)
+            ranked = best_per_cause(alternatives, rule)
+        return choose(ranked, rule, blocks, alternatives, kept, tie_break)
+
+    core.evaluate = evaluating  # type: ignore[assignment]
+    core.choose = choosing  # type: ignore[assignment]
 
 
 def _values(items: list[str]) -> dict[str, float]:
@@ -483,17 +545,18 @@ def _report(parts: list[tuple[str, dict[str, int], dict[str, int], str | None]])
     return "\n".join(lines)
 
 
-def _section(title: str, table_label: str, table: dict[str, int], table_alarms: str | None, fit_label: str, records: list[Record],
-             now: dict[str, Any], new: dict[str, Any]) -> str:
-    """One set of draws: the table's rows beside the replay's with the rule as it is (``now``)
-    and re-derived (``new``), and the draws the re-derivation changes (false alarms "N of M",
-    or a dash where no consistent trial was captured)."""
+def _section(title: str, table_label: str, table: dict[str, int], table_alarms: str | None, records: list[Record],
+             columns: list[tuple[str, dict[str, Any]]]) -> str:
+    """One set of draws: the table's rows beside the replay's ``columns`` (label, :func:`score`;
+    the first the rule as it is, the last the re-derived rule), and the draws the last changes
+    against the first (false alarms "N of M", or a dash where no consistent trial was
+    captured)."""
     n_syn = sum(r.kind == "synthetic" for r in records)
-    cells = [f"{s['alarms']} of {n_syn}" if n_syn else None for s in (now, new)]
-    parts = [(table_label, table, now["draws"], table_alarms), (f"{fit_label}, rule as it is", now["within"], now["draws"], cells[0]),
-             (f"{fit_label}, re-derived", new["within"], now["draws"], cells[1])]
-    return (f"{title}\n\n{_report(parts)}\n\nDraws the re-derived thresholds change (named cause, within tolerance):\n\n"
-            + _flips(now, new))
+    draws = columns[0][1]["draws"]
+    parts = [(table_label, table, draws, table_alarms)]
+    parts += [(label, s["within"], draws, f"{s['alarms']} of {n_syn}" if n_syn else None) for label, s in columns]
+    what = "thresholds change" if len(columns) == 2 else "rule changes against the rule as it is"
+    return f"{title}\n\n{_report(parts)}\n\nDraws the re-derived {what} (named cause, within tolerance):\n\n" + _flips(columns[0][1], columns[-1][1])
 
 
 def _named(key: Key | None) -> str:
@@ -532,20 +595,27 @@ def main() -> None:
     r.add_argument("--random", type=int, default=0, help="also this many rules drawn at random from the grid")
     r.add_argument("--fit-label", default="joint fit", help="the captures' fit, for the columns' headings")
     r.add_argument("--seed", type=int, default=1, help="seed of --random")
+    for sp in (r, v):
+        sp.add_argument("--confirm-registration", type=float, default=None, metavar="GAIN",
+                        help="name the plates' registration from the fitted motion only when its relative gain on the marker-only motion is at least GAIN")
     args = ap.parse_args(own)
     if args.command == "capture":
         capture(None if args.alternation else args.sigma, args.out, passed)
         return
     if args.command == "live":
-        live(None if args.alternation else args.sigma, _values(args.values), passed)
+        live(None if args.alternation else args.sigma, _values(args.values), passed, args.confirm_registration)
         return
-    derive, check = load(args.derive), load(args.check)
-    target = table_rows(args.table, derive)
-    now = {"derive": score(derive, ChoiceRule()), "check": score(check, ChoiceRule())}
-    for name, recs in (("derive", derive), ("check", check)):
+    as_captured = {"derive": load(args.derive), "check": load(args.check)}
+    target = table_rows(args.table, as_captured["derive"])
+    now = {k: score(recs, ChoiceRule()) for k, recs in as_captured.items()}
+    for name, recs in as_captured.items():
         if recs:
             print(f"{name}: {len(recs)} records; the rule as it is: {now[name]['unlike']} replayed choices unlike the live run's, "
                   f"{now[name]['misses']} kept shares not captured")
+    gain = args.confirm_registration
+    derive, check = confirmed(as_captured["derive"], gain), confirmed(as_captured["check"], gain)
+    if gain is not None:
+        print(f"the registration confirmed on the marker-only motion (relative gain at least {gain:g} there); thresholds re-derived on top of it")
     values = search(derive, target, say=lambda m: print("  " + m))
     if args.random:
         got, drawn, shortfalls = random_search(derive, target, args.random, args.seed)
@@ -557,11 +627,18 @@ def main() -> None:
     start = current_values()
     print("\nthresholds: " + ", ".join(f"{k} {start[k]:g} -> {v:g}" if v != start[k] else f"{k} {v:g}" for k, v in values.items()) + "\n")
     rule = rule_of(values)
+
+    def columns(name: str, recs: list[Record]) -> list[tuple[str, dict[str, Any]]]:
+        out = [(f"{args.fit_label}, rule as it is", now[name])]
+        if gain is not None:
+            out.append((f"{args.fit_label}, confirmed", score(recs, ChoiceRule())))
+        return [*out, (f"{args.fit_label}, {'confirmed, ' if gain is not None else ''}re-derived", score(recs, rule))]
+
     print(_section("**draws the thresholds are derived on**", "alternation (the table)", target, table_alarms(args.table),
-                   args.fit_label, derive, now["derive"], score(derive, rule)))
+                   derive, columns("derive", derive)))
     if check:
         print("\n" + _section("**other draws (checked, not derived on)**", "alternation", table_rows(args.table_check, check),
-                                table_alarms(args.table_check), args.fit_label, check, now["check"], score(check, rule)))
+                                table_alarms(args.table_check), check, columns("check", check)))
 
 
 if __name__ == "__main__":

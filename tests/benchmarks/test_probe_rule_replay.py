@@ -1,6 +1,8 @@
 """tests/benchmarks/probe_rule_replay.py: replayed with the rule as it is, each captured draw
 and consistent trial names what the live diagnosis named, with the benchmark's own verdict
-(its ``--json`` rows); a rule that asks the impossible names nothing."""
+(its ``--json`` rows); a rule that asks the impossible names nothing; the registration
+confirmed on the marker-only motion gives a hidden mass redistribution back its name and
+keeps a hidden registration's."""
 
 from __future__ import annotations
 
@@ -31,12 +33,13 @@ def probe():
 
 @pytest.fixture(scope="module")
 def captured(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Two walk draws (a plate's shift, which the joint fit at mass_sigma 0.1 names as the
-    plates' registration, and a registration) and one consistent trial, captured."""
+    """Three walk draws (a plate's shift and a mass redistribution, which the joint fit at
+    mass_sigma 0.1 names as the plates' registration, and a registration) and one consistent
+    trial, captured."""
     out = tmp_path_factory.mktemp("replay") / "capture.pkl"
     subprocess.run(
         [sys.executable, str(SCRIPT), "capture", "--sigma", "0.1", "--out", str(out), "--", "--trials", "walk",
-         "--causes", "plate_position_offset,plate_registration", "--first", "6", "--draws", "1", "--synthetic", "1"],
+         "--causes", "plate_position_offset,segment_mass_distribution,plate_registration", "--first", "6", "--draws", "1", "--synthetic", "1"],
         cwd=REPO, check=True, capture_output=True,
     )
     return out
@@ -44,7 +47,7 @@ def captured(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_the_rule_as_it_is_replays_the_live_choices(probe, captured: Path) -> None:
     records = probe.load([captured])
-    assert [r.kind for r in records] == ["draw", "draw", "synthetic"]
+    assert [r.kind for r in records] == ["draw", "draw", "draw", "synthetic"]
     s = probe.score(records, ChoiceRule())
     assert s["unlike"] == 0 and s["misses"] == 0
     rows = json.loads(captured.with_suffix(".json").read_text())
@@ -63,3 +66,24 @@ def test_a_rule_asking_the_impossible_names_nothing(probe, captured: Path) -> No
     s = probe.score(records, probe.rule_of({"min_t": 1e9}))
     assert all(named is None for named, _ in s["verdicts"].values())
     assert s["alarms"] == 0 and sum(s["within"].values()) == 0
+
+
+def test_the_registration_confirmed_on_the_marker_only_motion(probe, captured: Path) -> None:
+    records = probe.load([captured])
+    assert probe.confirmed(records, None) is records
+    named = {r.hidden[0]: r for r in records if r.kind == "draw"}
+    mass, registration = named["segment_mass_distribution"], named["plate_registration"]
+    twin = {(e.cause, e.choice): e for e in mass.marker_only}
+    # the mass draw: a registration on the fitted motion that makes the marker-only motion worse
+    assert mass.chosen == ("plate_registration", None)
+    assert twin["plate_registration", None].relative_gain < 0
+    before = probe.score(records, ChoiceRule())["verdicts"]
+    after = probe.score(probe.confirmed(records, 0.0), ChoiceRule())["verdicts"]
+    key = ("segment_mass_distribution", mass.trial, mass.seed)
+    assert before[key] == (("plate_registration", None), False)
+    assert after[key] == (("segment_mass_distribution", None), True)
+    # the hidden registration shows on both motions and is still named, within tolerance
+    key = ("plate_registration", registration.trial, registration.seed)
+    assert before[key] == after[key] == (("plate_registration", None), True)
+    dropped = probe.unconfirmed_dropped(mass.fitted, mass.marker_only, 0.0)
+    assert {e.cause for e in mass.fitted} - {e.cause for e in dropped} == {"plate_registration"}
