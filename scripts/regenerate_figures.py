@@ -189,7 +189,7 @@ def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figur
     )
 
 
-def _rule_confirmed(values: str) -> tuple[Figure, Figure, Figure, Figure]:
+def _rule_confirmed(values: str) -> tuple[Figure, Figure, Figure, Figure, Figure]:
     """The rule's structure changed on the joint fit at ``mass_sigma`` 0.1: the plates'
     registration named from the fitted motion only when the marker-only motion confirms it
     (``--confirm-registration 0``), replayed on the captures of ``diagnose-rule-replay``
@@ -197,14 +197,20 @@ def _rule_confirmed(values: str) -> tuple[Figure, Figure, Figure, Figure]:
     with those thresholds (``values``, the replay's result) on draws 0-19 with 5 consistent
     trials per trial and draws 20-39 (side by side, into
     ``docs/diagnose/joint_fit_confirmed_draws_*.json``), compared with the table's 40 draws
-    (all recorded once, :data:`RECORDED_CONFIRMED`)."""
+    (all recorded once, :data:`RECORDED_CONFIRMED`); and the same replay on the captures of
+    ``diagnose-rule-replay-alternation`` (the fit the diagnosis judges on)."""
     cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
     live = f"{cmd} live --sigma 0.1 --values {values} --confirm-registration 0 --"
     data = [f"docs/diagnose/joint_fit_confirmed_draws_{part}.json" for part in ("0_19", "20_39")]
+
+    def replay(stem: str) -> str:  # on the captures REPLAY.format(stem + "0_19") and (stem + "20_39")
+        return (f"{cmd} replay --derive {REPLAY.format(stem + '0_19')} --table {TABLE} --check {REPLAY.format(stem + '20_39')} "
+                "--table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0")
+
     return (
-        Figure("diagnose-rule-confirmed", RESULTS, f"{cmd} replay --derive {REPLAY.format('0_19')} --table {TABLE} --check "
-               f"{REPLAY.format('20_39')} --table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0",
-               "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed", RESULTS, replay(""), "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed-alternation", RESULTS, f"{replay('alternation_')} --fit-label alternation", "accuracy", 6.0,
+               fence=False, retired=RECORDED_CONFIRMED),
         Figure("diagnose-rule-confirmed-live-0-19", "", f"{live} --draws 20 --synthetic 5 --json {data[0]}", "accuracy", 35.0,
                retired=RECORDED_CONFIRMED),
         Figure("diagnose-rule-confirmed-live-20-39", "", f"{live} --first 20 --draws 20 --synthetic 0 --json {data[1]}", "accuracy",
