@@ -189,34 +189,42 @@ def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figur
     )
 
 
-def _rule_confirmed(values: str) -> tuple[Figure, Figure, Figure, Figure, Figure]:
-    """The rule's structure changed on the joint fit at ``mass_sigma`` 0.1: the plates'
-    registration named from the fitted motion only when the marker-only motion confirms it
-    (``--confirm-registration 0``), replayed on the captures of ``diagnose-rule-replay``
-    (which must be in :data:`REPLAY`) with thresholds re-derived on top of it; then run live
-    with those thresholds (``values``, the replay's result) on draws 0-19 with 5 consistent
-    trials per trial and draws 20-39 (side by side, into
-    ``docs/diagnose/joint_fit_confirmed_draws_*.json``), compared with the table's 40 draws
-    (all recorded once, :data:`RECORDED_CONFIRMED`); and the same replay on the captures of
-    ``diagnose-rule-replay-alternation`` (the fit the diagnosis judges on)."""
+def _rule_confirmed(values: str) -> tuple[Figure, ...]:
+    """The rule's structure changed: the plates' registration named from the fitted motion
+    only when the marker-only motion confirms it (``--confirm-registration 0``). Replayed on
+    the captures of ``diagnose-rule-replay`` (the joint fit at ``mass_sigma`` 0.1) and of
+    ``diagnose-rule-replay-alternation`` (the fit the diagnosis judges on), which must be in
+    :data:`REPLAY`, with thresholds re-derived on top of it; then run live on draws 0-19 with
+    5 consistent trials per trial and draws 20-39 (side by side, into
+    ``docs/diagnose/<stem>_draws_*.json``): on the joint fit with the thresholds re-derived
+    there (``values``, the replay's result), and on the alternation with the thresholds as
+    they are; each compared with the table's 40 draws (all recorded once,
+    :data:`RECORDED_CONFIRMED`)."""
     cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
-    live = f"{cmd} live --sigma 0.1 --values {values} --confirm-registration 0 --"
-    data = [f"docs/diagnose/joint_fit_confirmed_draws_{part}.json" for part in ("0_19", "20_39")]
 
     def replay(stem: str) -> str:  # on the captures REPLAY.format(stem + "0_19") and (stem + "20_39")
         return (f"{cmd} replay --derive {REPLAY.format(stem + '0_19')} --table {TABLE} --check {REPLAY.format(stem + '20_39')} "
                 "--table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0")
 
+    def live(name: str, fit: str, stem: str, label: str) -> tuple[Figure, Figure, Figure]:
+        run = f"{cmd} live {fit} --confirm-registration 0 --"
+        data = [f"docs/diagnose/{stem}_draws_{part}.json" for part in ("0_19", "20_39")]
+        return (
+            Figure(f"{name}-live-0-19", "", f"{run} --draws 20 --synthetic 5 --json {data[0]}", "accuracy", 35.0, retired=RECORDED_CONFIRMED),
+            Figure(f"{name}-live-20-39", "", f"{run} --first 20 --draws 20 --synthetic 0 --json {data[1]}", "accuracy", 31.0,
+                   retired=RECORDED_CONFIRMED),
+            Figure(f"{name}-compare", RESULTS, f"{cmd} compare --table {TABLE_40} --with {' '.join(data)} --label {shlex.quote(label)}",
+                   "accuracy", 0.1, fence=False, retired=RECORDED_CONFIRMED),
+        )
+
     return (
         Figure("diagnose-rule-confirmed", RESULTS, replay(""), "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
         Figure("diagnose-rule-confirmed-alternation", RESULTS, f"{replay('alternation_')} --fit-label alternation", "accuracy", 6.0,
                fence=False, retired=RECORDED_CONFIRMED),
-        Figure("diagnose-rule-confirmed-live-0-19", "", f"{live} --draws 20 --synthetic 5 --json {data[0]}", "accuracy", 35.0,
-               retired=RECORDED_CONFIRMED),
-        Figure("diagnose-rule-confirmed-live-20-39", "", f"{live} --first 20 --draws 20 --synthetic 0 --json {data[1]}", "accuracy",
-               31.0, retired=RECORDED_CONFIRMED),
-        Figure("diagnose-rule-confirmed-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare "
-               f"{TABLE_40} --with {' '.join(data)}", "accuracy", 0.1, fence=False, retired=RECORDED_CONFIRMED),
+        *live("diagnose-rule-confirmed", f"--sigma 0.1 --values {values}", "joint_fit_confirmed",
+              "joint fit (mass_sigma 0.1), registration confirmed, thresholds re-derived"),
+        *live("diagnose-rule-confirmed-alternation", "--alternation", "alternation_confirmed",
+              "alternation, registration confirmed, thresholds as they are"),
     )
 
 

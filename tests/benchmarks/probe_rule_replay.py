@@ -5,6 +5,7 @@ other thresholds (a probe, run on demand; not a change of ``addb diagnose``).
     .venv/bin/python tests/benchmarks/probe_rule_replay.py capture [--sigma 0.1 | --alternation] --out CAPTURE.pkl -- BENCH_DIAGNOSE_ARGS ...
     .venv/bin/python tests/benchmarks/probe_rule_replay.py replay --derive CAPTURE.pkl ... --table TABLE.json ... [--check CAPTURE.pkl ... --table-check TABLE.json ...] [--confirm-registration GAIN]
     .venv/bin/python tests/benchmarks/probe_rule_replay.py live [--sigma 0.1 | --alternation] --values NAME=VALUE ... [--confirm-registration GAIN] -- BENCH_DIAGNOSE_ARGS ...
+    .venv/bin/python tests/benchmarks/probe_rule_replay.py compare --table TABLE.json ... --with LIVE.json ... --label LABEL
 
 ``capture`` runs ``tests/benchmarks/bench_diagnose.py`` with the arguments after ``--`` in
 this process, the joint fit with ``mass_sigma`` ``--sigma`` in the alternation's place (as
@@ -45,6 +46,9 @@ an error of the force recording, which the marker-only motion shows as well; on 
 a mass misplaced in the model leaves a registration-like residue on the motion the forces
 bent and none on the marker-only one. The replay prints the rule as it is, the rule with the
 confirmation, and the confirmation with thresholds re-derived on top of it.
+
+``compare`` puts ``live`` results (``--json`` of the runs) beside the table's, draw by draw
+(:func:`compare`).
 """
 
 from __future__ import annotations
@@ -284,6 +288,22 @@ def _confirm_in_place(min_gain: float) -> None:
 
     core.evaluate = evaluating  # type: ignore[assignment]
     core.choose = choosing  # type: ignore[assignment]
+
+
+def compare(table: list[Path], results: list[Path], label: str) -> str:
+    """Markdown: per cause, the draws within tolerance in the table's ``--json`` files and in
+    ``results`` (a ``live`` run's), side by side, and every draw whose named cause or verdict
+    differs (:func:`bench_diagnose_joint.compare`, its second column named ``label``).
+
+    Raises
+    ------
+    SystemExit
+        ``results`` holds a draw the table has not, or leaves out a draw of a cause it holds.
+    """
+    import bench_diagnose_joint  # this folder
+
+    text = bench_diagnose_joint.compare(table, results, sigma=0.1)
+    return text.replace("within tolerance, joint fit, mass_sigma 0.1 |", f"within tolerance, {label} |").replace("(joint fit).", f"({label}).")
 
 
 def _values(items: list[str]) -> dict[str, float]:
@@ -595,12 +615,19 @@ def main() -> None:
     r.add_argument("--random", type=int, default=0, help="also this many rules drawn at random from the grid")
     r.add_argument("--fit-label", default="joint fit", help="the captures' fit, for the columns' headings")
     r.add_argument("--seed", type=int, default=1, help="seed of --random")
+    m = sub.add_parser("compare")
+    m.add_argument("--table", type=Path, nargs="+", required=True, help="the table's --json results")
+    m.add_argument("--with", dest="results", type=Path, nargs="+", required=True, help="--json results of live runs")
+    m.add_argument("--label", required=True, help="the live runs' column heading")
     for sp in (r, v):
         sp.add_argument("--confirm-registration", type=float, default=None, metavar="GAIN",
                         help="name the plates' registration from the fitted motion only when its relative gain on the marker-only motion is at least GAIN")
     args = ap.parse_args(own)
     if args.command == "capture":
         capture(None if args.alternation else args.sigma, args.out, passed)
+        return
+    if args.command == "compare":
+        print(compare(args.table, args.results, args.label))
         return
     if args.command == "live":
         live(None if args.alternation else args.sigma, _values(args.values), passed, args.confirm_registration)

@@ -87,3 +87,18 @@ def test_the_registration_confirmed_on_the_marker_only_motion(probe, captured: P
     assert before[key] == after[key] == (("plate_registration", None), True)
     dropped = probe.unconfirmed_dropped(mass.fitted, mass.marker_only, 0.0)
     assert {e.cause for e in mass.fitted} - {e.cause for e in dropped} == {"plate_registration"}
+
+
+def test_compare_names_the_live_column_and_lists_changed_draws(probe, tmp_path: Path) -> None:
+    table = [REPO / "docs" / "diagnose" / f"results_draws_{part}.json" for part in ("0_9", "10_19")]
+    same = probe.compare(table, table, "live, label")
+    assert "| within tolerance, live, label |" in same and "joint fit" not in same
+    assert "Draws whose verdict changed (0 of 180;" in same
+    # one draw's verdict flipped in a copy: listed, and its row counts one fewer
+    rows = json.loads(table[1].read_text())
+    flipped = next(r for r in rows["rows"] if r["within_tolerance"])
+    flipped["within_tolerance"] = False
+    (tmp_path / "b.json").write_text(json.dumps(rows))
+    text = probe.compare(table, [table[0], tmp_path / "b.json"], "live")
+    assert "Draws whose verdict changed (1 of 180;" in text
+    assert f"{flipped['trial']} draw {flipped['seed']}" in text
