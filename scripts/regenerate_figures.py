@@ -129,17 +129,32 @@ TABLE = "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.
 TABLE_40 = f"{TABLE} docs/diagnose/results_draws_20_39.json"
 
 
+def _halves(name: str, run: str, stem: str, size: int, minutes: tuple[float, float], retired: str,
+            part: str = "draws") -> tuple[list[str], tuple[Figure, Figure]]:
+    """A benchmark of the diagnosis (``run``: the command up to the benchmark's own
+    arguments) in two halves to run side by side: draws 0 to ``size`` - 1 with 5 consistent
+    synthetic trials per trial, and the next ``size`` draws, into
+    ``docs/diagnose/<stem>_draws_<first>_<last>.json`` (figures ``<name>-<part>-<first>-<last>``);
+    returns the two files and the two figures."""
+    data, figures = [], []
+    for first, synthetic in ((0, 5), (size, 0)):
+        last = first + size - 1
+        data.append(f"docs/diagnose/{stem}_draws_{first}_{last}.json")
+        start = f"--first {first} " if first else ""
+        figures.append(Figure(f"{name}-{part}-{first}-{last}", "", f"{run} {start}--draws {size} --synthetic {synthetic} --json {data[-1]}",
+                              "accuracy", minutes[len(figures)], retired=retired))
+    return data, (figures[0], figures[1])
+
+
 def _probe_table(name: str, probe: str, stem: str, retired: str = "") -> tuple[Figure, Figure, Figure]:
     """The diagnosis' table with a probe of tests/benchmarks in its place (``probe``: the
-    script and its switches): draws 0-9 with the synthetic trials and draws 10-19 (two halves
-    to run side by side) into ``docs/diagnose/<stem>_draws_*.json``, then their comparison
-    with the table's own draws in RESULTS (``retired``: :attr:`Figure.retired` of all three)."""
+    script and its switches): draws 0-9 with the synthetic trials and draws 10-19
+    (:func:`_halves`), then their comparison with the table's own draws in RESULTS
+    (``retired``: :attr:`Figure.retired` of all three)."""
     cmd = f"{PY} tests/benchmarks/{probe}"
-    halves = [f"docs/diagnose/{stem}_draws_{part}.json" for part in ("0_9", "10_19")]
+    halves, draws = _halves(name, f"{cmd} --", stem, 10, (25.0, 25.0), retired)
     return (
-        Figure(f"{name}-draws-0-9", "", f"{cmd} -- --draws 10 --synthetic 5 --json {halves[0]}", "accuracy", 25.0, retired=retired),
-        Figure(f"{name}-draws-10-19", "", f"{cmd} -- --first 10 --draws 10 --synthetic 0 --json {halves[1]}", "accuracy", 25.0,
-               retired=retired),
+        *draws,
         Figure(f"{name}-compare", RESULTS, f"{cmd} --compare {TABLE} --with {' '.join(halves)}", "accuracy", 0.1, fence=False,
                retired=retired),
     )
@@ -207,12 +222,9 @@ def _rule_confirmed(values: str) -> tuple[Figure, ...]:
                 "--table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0")
 
     def live(name: str, fit: str, stem: str, label: str) -> tuple[Figure, Figure, Figure]:
-        run = f"{cmd} live {fit} --confirm-registration 0 --"
-        data = [f"docs/diagnose/{stem}_draws_{part}.json" for part in ("0_19", "20_39")]
+        data, draws = _halves(name, f"{cmd} live {fit} --confirm-registration 0 --", stem, 20, (35.0, 31.0), RECORDED_CONFIRMED, "live")
         return (
-            Figure(f"{name}-live-0-19", "", f"{run} --draws 20 --synthetic 5 --json {data[0]}", "accuracy", 35.0, retired=RECORDED_CONFIRMED),
-            Figure(f"{name}-live-20-39", "", f"{run} --first 20 --draws 20 --synthetic 0 --json {data[1]}", "accuracy", 31.0,
-                   retired=RECORDED_CONFIRMED),
+            *draws,
             Figure(f"{name}-compare", RESULTS, f"{cmd} compare --table {TABLE_40} --with {' '.join(data)} --label {shlex.quote(label)}",
                    "accuracy", 0.1, fence=False, retired=RECORDED_CONFIRMED),
         )
