@@ -137,12 +137,12 @@ def _halves(name: str, run: str, stem: str, size: int, minutes: tuple[float, flo
     ``docs/diagnose/<stem>_draws_<first>_<last>.json`` (figures ``<name>-<part>-<first>-<last>``);
     returns the two files and the two figures."""
     data, figures = [], []
-    for first, synthetic in ((0, 5), (size, 0)):
+    for first, synthetic, duration in ((0, 5, minutes[0]), (size, 0, minutes[1])):
         last = first + size - 1
         data.append(f"docs/diagnose/{stem}_draws_{first}_{last}.json")
         start = f"--first {first} " if first else ""
         figures.append(Figure(f"{name}-{part}-{first}-{last}", "", f"{run} {start}--draws {size} --synthetic {synthetic} --json {data[-1]}",
-                              "accuracy", minutes[len(figures)], retired=retired))
+                              "accuracy", duration, retired=retired))
     return data, (figures[0], figures[1])
 
 
@@ -176,11 +176,20 @@ RECORDED_RULE = ("2026-11-27: a probe recorded once to close a question (can the
                  "of the code at its stamp's commit")
 #: Where the replay's captures are kept (one folder each, so that the two run side by side).
 REPLAY = "/tmp/addb_rule_replay_{}/capture.pkl"
+#: The choice rule's probe (capture, replay, live, compare).
+RULE_PROBE = f"{PY} tests/benchmarks/probe_rule_replay.py"
 
 #: The registration confirmed on the marker-only motion, recorded once and retired as made (:attr:`Figure.retired`).
 RECORDED_CONFIRMED = ("2026-11-27: a probe recorded once to close a question (does the registration confirmed on the "
                       "marker-only motion, with thresholds re-derived on top of it, give the joint fit back the rows the "
                       "alternation names?), retired as it was made: its block is the record of the code at its stamp's commit")
+
+
+def _replay_command(stem: str, options: str) -> str:
+    """``probe_rule_replay.py replay`` deriving on the captures ``REPLAY.format(stem + "0_19")``
+    and checking on ``(stem + "20_39")``, each against the table's own draws, with ``options``."""
+    return (f"{RULE_PROBE} replay --derive {REPLAY.format(stem + '0_19')} --table {TABLE} --check "
+            f"{REPLAY.format(stem + '20_39')} --table-check docs/diagnose/results_draws_20_39.json {options}")
 
 
 def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figure]:
@@ -190,7 +199,7 @@ def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figur
     (folders ``[label_]0_19`` and ``[label_]20_39``, side by side), then the replay that
     derives the thresholds on the first and checks them on the second in RESULTS
     (recorded once, :data:`RECORDED_RULE`)."""
-    cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
+    cmd = RULE_PROBE
     stem = f"{label}_" if label else ""
     first, second = REPLAY.format(f"{stem}0_19"), REPLAY.format(f"{stem}20_39")
     return (
@@ -198,8 +207,7 @@ def _rule_replay(name: str, fit: str, label: str) -> tuple[Figure, Figure, Figur
                retired=RECORDED_RULE),
         Figure(f"{name}-capture-20-39", "", f"{cmd} capture {fit} --out {second} -- --first 20 --draws 20 --synthetic 0", "accuracy",
                31.0, retired=RECORDED_RULE),
-        Figure(name, RESULTS, f"{cmd} replay --derive {first} --table {TABLE} --check {second} --table-check "
-               "docs/diagnose/results_draws_20_39.json --random 3000" + (f" --fit-label {label}" if label else ""), "accuracy", 7.0,
+        Figure(name, RESULTS, _replay_command(stem, "--random 3000" + (f" --fit-label {label}" if label else "")), "accuracy", 7.0,
                fence=False, retired=RECORDED_RULE),
     )
 
@@ -215,11 +223,8 @@ def _rule_confirmed(values: str) -> tuple[Figure, ...]:
     there (``values``, the replay's result), and on the alternation with the thresholds as
     they are; each compared with the table's 40 draws (all recorded once,
     :data:`RECORDED_CONFIRMED`)."""
-    cmd = f"{PY} tests/benchmarks/probe_rule_replay.py"
-
-    def replay(stem: str) -> str:  # on the captures REPLAY.format(stem + "0_19") and (stem + "20_39")
-        return (f"{cmd} replay --derive {REPLAY.format(stem + '0_19')} --table {TABLE} --check {REPLAY.format(stem + '20_39')} "
-                "--table-check docs/diagnose/results_draws_20_39.json --random 1000 --confirm-registration 0")
+    cmd = RULE_PROBE
+    replay = "--random 1000 --confirm-registration 0"
 
     def live(name: str, fit: str, stem: str, label: str) -> tuple[Figure, Figure, Figure]:
         data, draws = _halves(name, f"{cmd} live {fit} --confirm-registration 0 --", stem, 20, (35.0, 31.0), RECORDED_CONFIRMED, "live")
@@ -230,9 +235,9 @@ def _rule_confirmed(values: str) -> tuple[Figure, ...]:
         )
 
     return (
-        Figure("diagnose-rule-confirmed", RESULTS, replay(""), "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
-        Figure("diagnose-rule-confirmed-alternation", RESULTS, f"{replay('alternation_')} --fit-label alternation", "accuracy", 6.0,
-               fence=False, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed", RESULTS, _replay_command("", replay), "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
+        Figure("diagnose-rule-confirmed-alternation", RESULTS, _replay_command("alternation_", f"{replay} --fit-label alternation"),
+               "accuracy", 6.0, fence=False, retired=RECORDED_CONFIRMED),
         *live("diagnose-rule-confirmed", f"--sigma 0.1 --values {values}", "joint_fit_confirmed",
               "joint fit (mass_sigma 0.1), registration confirmed, thresholds re-derived"),
         *live("diagnose-rule-confirmed-alternation", "--alternation", "alternation_confirmed",
