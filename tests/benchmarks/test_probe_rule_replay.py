@@ -101,4 +101,6 @@ def test_compare_names_the_live_column_and_lists_changed_draws(probe, tmp_path: 
     (tmp_path / "b.json").write_text(json.dumps(rows))
     text = probe.compare(table, [table[0], tmp_path / "b.json"], "live")
     assert "Draws whose verdict changed (1 of 180;" in text
+    within = sum(r["within_tolerance"] for t in table for r in json.loads(t.read_text())["rows"] if r["cause"] == flipped["cause"])
+    assert f"| {flipped['cause']} | 20 | {within} | {within - 1} |" in text
     assert f"{flipped['trial']} draw {flipped['seed']}" in text
