@@ -418,7 +418,8 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
     ranked = best_per_cause(evaluations, options.rule)
     # a cause of the force recording that the marker-only motion does not confirm is no
     # candidate on the fitted motion (the plates' registration: selection.confirmed); the
-    # report still ranks it, and the reason says why it was left out
+    # report still ranks it, and the reason says why it was left out when its share of the
+    # cost there would have counted
     candidates = confirmed(evaluations, twins, options.rule)
     # two overlapping causes (a plate's shift, the plates' registration) that each keep their
     # gain on top of the other on the fitted motion are told apart on the marker-only one
@@ -435,7 +436,7 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         f" ({e.cause} removes {100 * e.relative_gain:.0f}% of its channels' cost on the fitted motion but "
         f"{100 * twins[e.cause, e.choice].relative_gain:.1f}% on the motion the markers alone decide, which does not confirm it)"
         for e in ranked
-        if id(e) in left_out and (chosen is None or e.score > chosen.score)
+        if id(e) in left_out and e.relative_gain >= options.rule.relative_gain_needed(e.cause)
     )
     held_ctx, held_alts = ctx, alts
     own_sigmas: list[Sigmas] = []

@@ -48,14 +48,13 @@ def test_a_foot_marker_misplacement_is_named_on_folds_mixing_the_phases(index: i
     assert chosen["folds_improved"] >= 0.8
 
 
-@pytest.mark.parametrize("index", [2, 12], ids=["5.4 kg", "5.5 kg"])
-def test_a_mass_redistribution_the_registration_took_is_named(index: int, base: Base, tmp_path: Path) -> None:
-    # benchmark draws 2 and 12 (the legs 5.4 and 5.5 kg lighter): on the fitted motion the
-    # plates' registration removes 12 % of its channels' cost and was named, while on the
-    # marker-only motion it adds 1.6-1.7 %; the registration is named from the fitted motion
-    # only when that motion confirms it (PlateRegistration.confirmed_on_marker_motion)
-    _, seed = draw("segment_mass_distribution", index)
+def test_a_mass_redistribution_the_registration_took_is_named(base: Base, tmp_path: Path) -> None:
+    # benchmark draw 12 (the legs 5.5 kg lighter; draw 2 is among the hidden-cause cases):
+    # on the fitted motion the plates' registration removes 12 % of its channels' cost and
+    # was named, while on the marker-only motion it adds 1.6 %; the registration is named
+    # from the fitted motion only when that motion confirms it
+    # (PlateRegistration.confirmed_on_marker_motion), and the reason says so
+    _, seed = draw("segment_mass_distribution", 12)
     report = assert_named_and_recovered("segment_mass_distribution", seed, base, tmp_path)
-    # still ranked, with the reason it was left out
-    assert any(c["cause"] == "plate_registration" for c in report["candidates"])
+    assert any(c["cause"] == "plate_registration" for c in report["candidates"])  # still ranked
     assert "plate_registration removes" in report["reason"] and "does not confirm it" in report["reason"]
