@@ -55,6 +55,7 @@ from solver.diagnose.selection import (
     best_per_cause,
     channels,
     choose,
+    confirmed,
     cross_validate,
     make_blocks,
 )
@@ -415,6 +416,11 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
             ev.parameters, ev.uncertainty = twin.parameters, twin.uncertainty
     blocks = make_blocks(data.n_frames, data.dt, options.block_seconds)
     ranked = best_per_cause(evaluations, options.rule)
+    # a cause of the force recording that the marker-only motion does not confirm is no
+    # candidate on the fitted motion (the plates' registration: selection.confirmed); the
+    # report still ranks it, and the reason says why it was left out when its share of the
+    # cost there would have counted
+    candidates = confirmed(evaluations, twins, options.rule)
     # two overlapping causes (a plate's shift, the plates' registration) that each keep their
     # gain on top of the other on the fitted motion are told apart on the marker-only one
     kept_ik = JointGains(alts_ik, evaluations_ik, folds).kept_share
@@ -423,7 +429,15 @@ def _diagnose(processed: ProcessedTrial, inputs: TrialInputs, options: DiagnoseO
         a, b = twins.get((best.cause, best.choice)), twins.get((rival.cause, rival.choice))
         return None if a is None or b is None else kept_ik(a, b)
 
-    chosen, reason = choose(ranked, options.rule, blocks, evaluations, JointGains(alts, evaluations, folds).kept_share, on_marker_motion)
+    kept = JointGains(alts, evaluations, folds).kept_share
+    chosen, reason = choose(best_per_cause(candidates, options.rule), options.rule, blocks, candidates, kept, on_marker_motion)
+    left_out = {id(e) for e in evaluations} - {id(e) for e in candidates}
+    reason += "".join(
+        f" ({e.cause} removes {100 * e.relative_gain:.0f}% of its channels' cost on the fitted motion but "
+        f"{100 * twins[e.cause, e.choice].relative_gain:.1f}% on the motion the markers alone decide, which does not confirm it)"
+        for e in ranked
+        if id(e) in left_out and e.relative_gain >= options.rule.relative_gain_needed(e.cause)
+    )
     held_ctx, held_alts = ctx, alts
     own_sigmas: list[Sigmas] = []
 

@@ -21,7 +21,7 @@ otherwise no cause stands out.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -268,6 +268,14 @@ class ChoiceRule:
         stands out from the other one (in five captured draws of a hidden shift that were
         named, the hidden plate's shift scored 3.9 to 270 times the other's, or the other's
         score was negative).
+    min_confirming_gain
+        A cause confirmed on the marker-only motion
+        (:attr:`~solver.diagnose.causes.base.Cause.confirmed_on_marker_motion`, the plates'
+        registration) is a candidate on the fitted motion only when its twin there removes
+        at least this share of its channels' cost (:func:`confirmed`; 0: it does not make
+        that motion's cost worse). Any share from 0 to 3 % named the same draws in the
+        replay of 380 captured draws (tests/benchmarks/RESULTS.md, block
+        ``diagnose-rule-confirmed-alternation``; 2026-11-27).
     """
 
     min_relative_gain: float = 0.10
@@ -284,6 +292,7 @@ class ChoiceRule:
     min_t: float = 2.0
     kept_share: float = 0.8
     contained_share: float = 0.1
+    min_confirming_gain: float = 0.0
 
     def relative_gain_needed(self, cause: str) -> float:
         """The smallest relative gain that names ``cause``."""
@@ -391,6 +400,30 @@ def best_per_cause(evaluations: list[Evaluation], rule: ChoiceRule | None = None
             if eligible:
                 best[c.name] = max(eligible, key=lambda e: e.score)
     return sorted(best.values(), key=lambda e: e.score, reverse=True)
+
+
+def confirmed(evaluations: list[Evaluation], twins: Mapping[tuple[str, str | None], Evaluation], rule: ChoiceRule) -> list[Evaluation]:
+    """``evaluations`` (on the fitted motion) without those of a cause confirmed on the
+    marker-only motion (:attr:`~solver.diagnose.causes.base.Cause.confirmed_on_marker_motion`)
+    whose twin there (``twins``: ``(cause, choice)`` -> that motion's evaluation) removes
+    less than :attr:`ChoiceRule.min_confirming_gain` of its channels' cost; an evaluation
+    without a twin stays. The ones left out neither get named from the fitted motion nor
+    stand in another's way there (the marker-only motion may still name them,
+    :func:`solver.diagnose.core.choice_on_marker_motion`).
+
+    Why: the plates' registration is an error of the force recording, which the motion the
+    markers alone decide shows as well; on the fitted motion, a mass misplaced in the model
+    leaves a residue the registration explains (tests/benchmarks/RESULTS.md, "A change of
+    the rule's structure", 2026-11-27: on draws 0-39 of the walk and the run, segment masses
+    35 to 38 of 40 within tolerance, every other row the same, no false alarm).
+    """
+    out = []
+    for ev in evaluations:
+        twin = twins.get((ev.cause, ev.choice))
+        if cause(ev.cause).confirmed_on_marker_motion and twin is not None and twin.relative_gain < rule.min_confirming_gain:
+            continue
+        out.append(ev)
+    return out
 
 
 def stands_out_alone(ev: Evaluation, rule: ChoiceRule) -> bool:

@@ -500,3 +500,20 @@ def test_a_rival_that_keeps_nothing_on_top_does_not_hold_back(kept_best: float, 
     ranked = [delay, registration]
     chosen, reason = choose(ranked, ChoiceRule(), make_blocks(T, DT), ranked, kept)
     assert (chosen is delay) == named, reason
+
+
+def test_a_registration_the_marker_only_motion_does_not_confirm_is_no_candidate() -> None:
+    # a mass misplaced in the model leaves a registration-like residue on the fitted motion
+    # only; a true registration, an error of the force recording, shows on both motions
+    from solver.diagnose.selection import confirmed
+
+    fitted = [_evaluation("plate_registration", REGISTRATION, 0.15), _evaluation("force_time_offset", DELAY, 0.05)]
+    worse = [_evaluation("plate_registration", REGISTRATION, -0.02), _evaluation("force_time_offset", DELAY, -0.02)]
+    better = [_evaluation("plate_registration", REGISTRATION, 0.05)]
+    twins = {(e.cause, e.choice): e for e in worse}
+    left = confirmed(fitted, twins, ChoiceRule())
+    assert [e.cause for e in left] == ["force_time_offset"]  # only a cause confirmed there is left out
+    assert confirmed(fitted, {(e.cause, e.choice): e for e in better}, ChoiceRule()) == fitted
+    assert confirmed(fitted, {}, ChoiceRule()) == fitted  # no twin: kept
+    # the share the rule asks for: a 5 % twin is not enough at 10 %
+    assert [e.cause for e in confirmed(fitted, {(e.cause, e.choice): e for e in better}, ChoiceRule(min_confirming_gain=0.1))] == ["force_time_offset"]

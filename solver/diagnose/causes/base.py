@@ -17,7 +17,9 @@ The parts of a cause (class attributes, then methods):
   marker-only motion), ``on_marker_motion`` (:data:`MARKER_MOTION`),
   ``chosen_on_marker_motion`` (may be named from that motion), ``chosen_on_own_noise``
   (may be named from that motion whitened with its own noise,
-  :func:`solver.diagnose.core.choice_on_marker_motion`), ``distinct_choice`` (its
+  :func:`solver.diagnose.core.choice_on_marker_motion`), ``confirmed_on_marker_motion``
+  (named from the fitted motion only when the marker-only motion confirms it,
+  :func:`solver.diagnose.selection.confirmed`), ``distinct_choice`` (its
   plate must stand out from the same cause on the other plates), ``overlaps`` (the causes
   it is told from by which keeps its gain on top of the other,
   :func:`solver.diagnose.selection._stands_out`), ``folds_mix_phases`` (its alternatives
@@ -148,6 +150,7 @@ class Cause(ABC):
     on_marker_motion: ClassVar[str] = "estimated"
     chosen_on_marker_motion: ClassVar[bool] = False
     chosen_on_own_noise: ClassVar[bool] = False
+    confirmed_on_marker_motion: ClassVar[bool] = False
     distinct_choice: ClassVar[bool] = False
     overlaps: ClassVar[tuple[Cause, ...]] = ()
     folds_mix_phases: ClassVar[bool] = False
@@ -277,6 +280,7 @@ REQUIRED: dict[str, type | tuple[type, ...]] = {
     "on_marker_motion": str,
     "chosen_on_marker_motion": bool,
     "chosen_on_own_noise": bool,
+    "confirmed_on_marker_motion": bool,
     "distinct_choice": bool,
     "folds_mix_phases": bool,
 }

@@ -137,6 +137,13 @@ class PlateRegistration(ForceCorrection):
     min_effect = 0.005  # m (displacement of the centres of pressure, as a plate's shift)
     max_effect = 0.1  # m
     chosen_on_marker_motion = True
+    # an error of the force recording shows on the motion the markers alone decide as well; a
+    # mass misplaced in the model leaves a registration-like residue only on the motion the
+    # dynamics fit bent to the forces (walk draws hiding 5.0-6.9 kg moved out of the legs:
+    # 11-15 % of its channels' cost removed on the fitted motion, 0.7-1.9 % added on the
+    # marker-only one; hidden registrations removed up to 39 % there; tests/benchmarks/RESULTS.md,
+    # "A change of the rule's structure", 2026-11-27)
+    confirmed_on_marker_motion = True
     overlaps = (plate_position_offset.CAUSE,)
 
     def alternatives(self, ctx: Context, full: Any) -> list[Alternative]:
