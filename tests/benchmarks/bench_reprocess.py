@@ -1,6 +1,6 @@
 """Reprocess after a flag edit: time from the button to the updated before/after table.
 
-    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [--fit band] [walk] [camargo]
+    .venv/bin/python tests/benchmarks/bench_reprocess.py [--repeat N] [--fit band] [--host-reference] [walk] [camargo]
 
 For each subject (the shared rajagopal2016_walk; the Camargo level-ground circuit assembled
 by scripts/make_example_subject.py) in a temporary folder: one full ``process_subject``
@@ -25,6 +25,10 @@ frames plus 20 frames of stance, and ``--repeat`` times each (median and range p
 the converged fit); every Reprocess then uses the fit recorded in the output (as the app
 does), which for the converged fit is warm-started by default (the job rows; the band fit is
 not), and the ``in process`` row is asked for no warm start explicitly.
+
+``--host-reference`` also times OpenSim's IK tool on the walk, ``--repeat`` runs before the
+subjects and as many after (``bench_kinematics.opensim_reference``, as ``bench_process.py``
+does): the host's speed that day, to compare this block with one made on another day.
 """
 
 from __future__ import annotations
@@ -108,7 +112,11 @@ def main() -> None:
     ap.add_argument("which", nargs="*", default=["walk", "camargo"], choices=["walk", "camargo"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--fit", default="default", choices=FIT_CHOICES, help="the first full process's fit (addb process --fit)")
+    ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     args = ap.parse_args()
+    if args.host_reference:
+        from bench_kinematics import host_reference_line, opensim_reference  # this folder; needs ``pip install opensim``
+    reference = opensim_reference(args.repeat) if args.host_reference else []
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for which in args.which:
@@ -141,6 +149,8 @@ def main() -> None:
         print(f"| {which} | {trial} | {n} | {first:.2f} | {_fmt(t['dynamics only'])} | {_fmt(t['cold child'])} | {_fmt(t['full run'])} | {_fmt(t['in process'])} | {_fmt(t['in process, warm'])} |")
     for which, trial, _, _, _, stage in rows:
         print(f"{which} stage_seconds of the last dynamics-only run: " + json.dumps({k: round(v, 3) for k, v in stage.items()}))
+    if args.host_reference:
+        print("\n" + host_reference_line(reference, opensim_reference(args.repeat)))
 
 
 if __name__ == "__main__":
