@@ -357,6 +357,8 @@ FIGURES: tuple[Figure, ...] = (
     # the same comparison on 40 draws of every cause (draws 20-39 and the six causes left out above)
     Figure("diagnose-draws-20-39", "", f"{DIAG} --first 20 --draws 20 --synthetic 0 --json docs/diagnose/results_draws_20_39.json",
            "accuracy", 30.0),
+    # the table on its 40 draws (draws 0-39 pooled)
+    Figure("diagnose-results-40", "docs/diagnose/RESULTS.md", f"{DIAG} --pool --from-json {TABLE_40}", "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws-20-39", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --first 20 "
            "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0, retired=BEFORE_CONFIRMATION),
     Figure("diagnose-joint-sigma-draws-rest", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
