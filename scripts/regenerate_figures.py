@@ -359,6 +359,14 @@ FIGURES: tuple[Figure, ...] = (
            "accuracy", 30.0),
     # the table on its 40 draws (draws 0-39 pooled)
     Figure("diagnose-results-40", "docs/diagnose/RESULTS.md", f"{DIAG} --pool --from-json {TABLE_40}", "accuracy", 0.1, fence=False),
+    # what the registration's confirmation changed, draw by draw: the 40 draws before it (the table's files at
+    # 4ca3423, the last commit with the rule before) beside the table's files now
+    Figure("diagnose-confirmation-compare", "docs/diagnose/RESULTS.md",
+           "rm -rf /tmp/addb_table_4ca3423 && mkdir -p /tmp/addb_table_4ca3423 && for h in 0_9 10_19 20_39; do "
+           "git show 4ca3423:docs/diagnose/results_draws_$h.json > /tmp/addb_table_4ca3423/results_draws_$h.json; done && "
+           f"{RULE_PROBE} compare --table /tmp/addb_table_4ca3423/results_draws_0_9.json /tmp/addb_table_4ca3423/results_draws_10_19.json "
+           f"/tmp/addb_table_4ca3423/results_draws_20_39.json --with {TABLE_40} --label 'alternation, the registration confirmed (now)'",
+           "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws-20-39", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --first 20 "
            "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0, retired=BEFORE_CONFIRMATION),
     Figure("diagnose-joint-sigma-draws-rest", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
