@@ -186,10 +186,9 @@ RECORDED_CONFIRMED = ("2026-11-27: a probe recorded once to close a question (do
 
 #: The joint fit's probes of the choice rule as it was before the registration's confirmation
 #: (:attr:`solver.diagnose.causes.base.Cause.confirmed_on_marker_motion`), retired when it landed.
-BEFORE_CONFIRMATION = ("2026-11-27: a probe of the joint fit's diagnosis under the choice rule before the plates' registration "
-                       "was confirmed on the marker-only motion; its question was answered under that rule (the blocks after it "
-                       "say how), and re-made with the confirmation it would cost about 1.5 h of runs the product's own figures needed, "
-                       "so its block is kept as the record of the code at its stamp's commit")
+BEFORE_CONFIRMATION = ("2026-11-27: a probe of one lead for the joint fit's diagnosis (its choices under the rule before the "
+                       "plates' registration was confirmed on the marker-only motion), not taken by addb diagnose; retired when "
+                       "the confirmation landed, its block kept as the record of the code at its stamp's commit")
 
 
 def _replay_command(stem: str, options: str) -> str:
@@ -350,10 +349,10 @@ FIGURES: tuple[Figure, ...] = (
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
            "plate_position_offset,marker_offset,segment_mass_distribution --draws 20 --synthetic 5 "
-           "--json docs/diagnose/joint_fit_sigma_0_1_draws.json", "accuracy", 15.0, retired=BEFORE_CONFIRMATION),
+           "--json docs/diagnose/joint_fit_sigma_0_1_draws.json", "accuracy", 15.0),
     Figure("diagnose-joint-sigma-compare", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare {TABLE} "
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json",
-           "accuracy", 0.1, fence=False, retired=BEFORE_CONFIRMATION),
+           "accuracy", 0.1, fence=False),
     # the same comparison on 40 draws of every cause (draws 20-39 and the six causes left out above)
     Figure("diagnose-draws-20-39", "", f"{DIAG} --first 20 --draws 20 --synthetic 0 --json docs/diagnose/results_draws_20_39.json",
            "accuracy", 30.0),
@@ -368,13 +367,13 @@ FIGURES: tuple[Figure, ...] = (
            f"/tmp/addb_table_4ca3423/results_draws_20_39.json --with {TABLE_40} --label 'alternation, the registration confirmed (now)'",
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws-20-39", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --first 20 "
-           "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0, retired=BEFORE_CONFIRMATION),
+           "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0),
     Figure("diagnose-joint-sigma-draws-rest", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --causes "
            "force_time_offset,body_mass,plate_force_offset,plate_force_gain,unmeasured_force,plate_registration --draws 20 "
-           "--synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json", "accuracy", 20.0, retired=BEFORE_CONFIRMATION),
+           "--synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json", "accuracy", 20.0),
     Figure("diagnose-joint-sigma-compare-40", RESULTS, f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 --compare {TABLE_40} "
            "--with docs/diagnose/joint_fit_sigma_0_1_draws.json docs/diagnose/joint_fit_sigma_0_1_draws_rest.json "
-           "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False, retired=BEFORE_CONFIRMATION),
+           "docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 0.1, fence=False),
     # the two rows the joint fit loses, with its mass prior a third and three times 0.1 (recorded once, retired as made)
     *_joint_two_rows("0.03"),
     *_joint_two_rows("0.3"),
