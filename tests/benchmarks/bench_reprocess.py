@@ -49,6 +49,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from bench_kinematics import (  # this folder; the reference needs ``pip install opensim``
+    host_reference_line,
+    opensim_reference,
+)
+
 from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from solver.pipeline import FIT_CHOICES, options_for_fit, process_subject, reprocess_dynamics
@@ -114,8 +119,6 @@ def main() -> None:
     ap.add_argument("--fit", default="default", choices=FIT_CHOICES, help="the first full process's fit (addb process --fit)")
     ap.add_argument("--host-reference", action="store_true", help="also time OpenSim's IK tool on the walk (the host's speed)")
     args = ap.parse_args()
-    if args.host_reference:
-        from bench_kinematics import host_reference_line, opensim_reference  # this folder; needs ``pip install opensim``
     reference = opensim_reference(args.repeat) if args.host_reference else []
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
