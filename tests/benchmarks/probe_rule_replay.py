@@ -68,6 +68,7 @@ sys.path.insert(0, str(REPO))
 from solver.diagnose import core
 from solver.diagnose.report import _params
 from solver.diagnose.selection import ChoiceRule, Evaluation, best_per_cause, channels, choose
+from solver.diagnose.selection import confirmed as confirmed_by_rule
 
 Key = tuple[str, str | None]
 
@@ -102,19 +103,15 @@ def _pairs(evaluations: list[Evaluation]) -> Iterator[tuple[Evaluation, Evaluati
             yield a, b
 
 
-#: The cause the confirmation (``--confirm-registration``) applies to.
-CONFIRMED = "plate_registration"
-
-
 def unconfirmed_dropped(fitted: list[Evaluation], marker_only: list[Evaluation], min_gain: float | None) -> list[Evaluation]:
-    """``fitted`` without the plates' registration's alternatives whose twin on the
-    marker-only motion (same cause and choice in ``marker_only``) has a relative gain below
-    ``min_gain`` (:attr:`~solver.diagnose.selection.Evaluation.relative_gain`); None: ``fitted``
-    as it is. An alternative without a twin stays."""
+    """``fitted`` without the alternatives of a cause confirmed on the marker-only motion (the
+    plates' registration) whose twin in ``marker_only`` has a relative gain below ``min_gain``:
+    :func:`solver.diagnose.selection.confirmed`, the product's own rule, with
+    :attr:`~solver.diagnose.selection.ChoiceRule.min_confirming_gain` ``min_gain``; None:
+    ``fitted`` as it is. An alternative without a twin stays."""
     if min_gain is None:
         return fitted
-    twins = {_key(e): e for e in marker_only}
-    return [e for e in fitted if not (e.cause == CONFIRMED and _key(e) in twins and twins[_key(e)].relative_gain < min_gain)]
+    return confirmed_by_rule(fitted, {_key(e): e for e in marker_only}, ChoiceRule(min_confirming_gain=min_gain))
 
 
 def confirmed(records: list[Record], min_gain: float | None) -> list[Record]:
