@@ -178,6 +178,12 @@ RECORDED_RULE = ("2026-11-27: a probe recorded once to close a question (can the
 REPLAY = "/tmp/addb_rule_replay_{}/capture.pkl"
 #: The choice rule's probe (capture, replay, live, compare).
 RULE_PROBE = f"{PY} tests/benchmarks/probe_rule_replay.py"
+#: The table's 40 draws before the plates' registration was confirmed on the marker-only motion
+#: (git archive of their files at the last commit before; block diagnose-confirmation-compare).
+UNCONFIRMED = "4ca3423"
+UNCONFIRMED_TREE = f"/tmp/addb_table_{UNCONFIRMED}"
+EXPORT_UNCONFIRMED = f"rm -rf {UNCONFIRMED_TREE} && mkdir -p {UNCONFIRMED_TREE} && git archive {UNCONFIRMED} {TABLE_40} | tar -x -C {UNCONFIRMED_TREE}"
+UNCONFIRMED_TABLE_40 = " ".join(f"{UNCONFIRMED_TREE}/{path}" for path in TABLE_40.split())
 
 #: The registration confirmed on the marker-only motion, recorded once and retired as made (:attr:`Figure.retired`).
 RECORDED_CONFIRMED = ("2026-11-27: a probe recorded once to close a question (does the registration confirmed on the "
@@ -361,10 +367,8 @@ FIGURES: tuple[Figure, ...] = (
     # what the registration's confirmation changed, draw by draw: the 40 draws before it (the table's files at
     # 4ca3423, the last commit with the rule before) beside the table's files now
     Figure("diagnose-confirmation-compare", "docs/diagnose/RESULTS.md",
-           "rm -rf /tmp/addb_table_4ca3423 && mkdir -p /tmp/addb_table_4ca3423 && for h in 0_9 10_19 20_39; do "
-           "git show 4ca3423:docs/diagnose/results_draws_$h.json > /tmp/addb_table_4ca3423/results_draws_$h.json; done && "
-           f"{RULE_PROBE} compare --table /tmp/addb_table_4ca3423/results_draws_0_9.json /tmp/addb_table_4ca3423/results_draws_10_19.json "
-           f"/tmp/addb_table_4ca3423/results_draws_20_39.json --with {TABLE_40} --label 'alternation, the registration confirmed (now)'",
+           f"{EXPORT_UNCONFIRMED} && {RULE_PROBE} compare --table {UNCONFIRMED_TABLE_40} --with {TABLE_40} "
+           "--label 'alternation, the registration confirmed (now)'",
            "accuracy", 0.1, fence=False),
     Figure("diagnose-joint-sigma-draws-20-39", "", f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1 -- --first 20 "
            "--draws 20 --synthetic 0 --json docs/diagnose/joint_fit_sigma_0_1_draws_20_39.json", "accuracy", 30.0),
