@@ -2,11 +2,14 @@
 between the project's modules (imports inside functions and under TYPE_CHECKING count:
 they are circles a reader has to untangle all the same), and imports that run one way
 (``addb_viewer`` -> ``solver``, ``annotations``; ``solver`` and ``annotations`` import
-neither each other nor the app)."""
+neither each other nor the app); and the README's map of the layout, which names every
+module under its own folder."""
 
 from __future__ import annotations
 
 import ast
+import fnmatch
+import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -118,3 +121,70 @@ def test_imports_run_one_way() -> None:
         or (m.startswith("annotations") and t.split(".")[0] in ("addb_viewer", "solver"))
     ]
     assert wrong == []
+
+
+#: Column where the architecture map's descriptions start; a line whose text starts left of it
+#: opens an entry (a folder ``name/`` or a file ``name.py``), one that starts there continues one.
+_DESCRIPTION_COLUMN = 22
+
+
+def layout_map(readme: str) -> dict[str, set[str]]:
+    """The README's architecture map (the first fenced block after ``## Architecture``) as
+    folder -> the file names and patterns (``b3d*.py``) written for it.
+
+    An entry's folder is read from its indentation (two spaces a level under the folder entry
+    above it); the ``.py`` names in an entry and its continuation lines belong to the folder the
+    entry is (a folder entry: ``dataset/  discover.py (...), manifest.py``) or is in (a file
+    entry: ``stage.py ... result.py its frozen results``). A folder with an entry of its own
+    maps to a set, empty when none of its files is named."""
+    block = readme.split("\n## Architecture", 1)[1].split("```", 2)[1]
+    out: dict[str, set[str]] = {}
+    stack: list[tuple[int, str]] = []  # (indent, folder path) of the open folder entries
+    folder = ""  # the folder the current entry's names belong to
+    for line in block.splitlines():
+        text = line.lstrip(" ")
+        indent = len(line) - len(text)
+        if not text:
+            continue
+        if indent < _DESCRIPTION_COLUMN:
+            name = text.split()[0]
+            while stack and stack[-1][0] >= indent:
+                stack.pop()
+            parent = stack[-1][1] if stack else ""
+            if name.endswith("/"):
+                folder = f"{parent}{name}"
+                stack.append((indent, folder))
+                out.setdefault(folder, set())
+            else:
+                folder = parent
+        out.setdefault(folder, set()).update(re.findall(r"[\w*]+\.py", text))
+    return out
+
+
+def test_the_layout_map_reader_follows_indentation() -> None:
+    readme = (
+        "x\n## Architecture\n\n```\n"
+        "pkg/                  the package (cli.py)\n"
+        "  sub/                parts: a.py, b*.py\n"
+        "    deep.py           deep, with c.py\n"
+        "  top.py              top\n"
+        "                      continued with d.py\n"
+        "```\n"
+    )
+    assert layout_map(readme) == {"pkg/": {"cli.py", "top.py", "d.py"}, "pkg/sub/": {"a.py", "b*.py", "deep.py", "c.py"}}
+
+
+def test_the_readme_architecture_names_every_module() -> None:
+    """Every module of the packages is named in the README's architecture map under its own
+    folder (by its file name or a pattern), and every folder holding modules has an entry: the
+    map tells the layout as it really is (a newcomer finds where a thing happens from it)."""
+    names = layout_map((REPO / "README.md").read_text())
+    missing = []
+    for pkg in PACKAGES:
+        for f in sorted((REPO / pkg).rglob("*.py")):
+            folder = f.parent.relative_to(REPO).as_posix() + "/"
+            if folder not in names:
+                missing.append(folder)
+            elif f.name != "__init__.py" and not any(fnmatch.fnmatch(f.name, n) for n in names[folder]):
+                missing.append(f.relative_to(REPO).as_posix())
+    assert sorted(set(missing)) == []
