@@ -21,6 +21,7 @@ class ProgressBar:
         self._tty = hasattr(self.stream, "isatty") and self.stream.isatty()
 
     def __call__(self, message: str, fraction: float) -> None:
+        """Redraw the bar at ``fraction`` (clipped to [0, 1]) with ``message``."""
         frac = min(max(fraction, 0.0), 1.0)
         elapsed = time.perf_counter() - self.t0
         if self._tty:

@@ -25,6 +25,7 @@ DEFAULT_B3D = REPO.parent / "shared" / "data" / "b3d" / "results.b3d"
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line (the module docstring); returns the exit code."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("b3d", nargs="?", default=str(DEFAULT_B3D))
     ap.add_argument("--work", help="working folder (default: a temporary one)")

@@ -74,6 +74,7 @@ def make_subject(name: str, out: Path) -> Path:
 
 
 def main() -> None:
+    """The command line (the module docstring): assemble one example subject folder."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("example", choices=sorted(EXAMPLES))
     parser.add_argument("out", type=Path)

@@ -50,6 +50,7 @@ def _digest(path: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line (the module docstring); returns the exit code (1: ``--check`` found a difference; 2: no Geometry folder)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default ../shared/data)")
     ap.add_argument("--check", action="store_true", help="compare only, write nothing")

@@ -1,5 +1,6 @@
 """The code base is clean under the pinned linter (ruff, the test extra; rules: ruff's
-defaults with pyproject.toml's line length). A finding that is meant (a library's error turned
+defaults with pyproject.toml's line length, and a docstring on every public module, class,
+method and function outside tests/, pyproject.toml's ``[tool.ruff.lint]``). A finding that is meant (a library's error turned
 into the user's message) carries a ``noqa`` with its reason."""
 
 from __future__ import annotations

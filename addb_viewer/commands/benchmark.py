@@ -80,6 +80,20 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb benchmark SUBJECT_DIR|FILE.b3d... --method ...``: the seed paper's benchmark (Werling
+    et al. 2024, §5) on the given subjects; prints the table and writes benchmark.json/.md
+    under ``-o``.
+
+    Returns
+    -------
+    The exit code: 0 when the table was written.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from addb_viewer.progress import ProgressBar, table
     from solver.benchmark.dataset import load_dataset
     from solver.benchmark.filtering import filtering_markdown, filtering_study, plot_filtering
@@ -133,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``benchmark`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "benchmark",
         help="the seed paper's benchmark: estimate dynamics from motion (analytical / MLP baselines, hybrid)",

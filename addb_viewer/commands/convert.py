@@ -65,6 +65,20 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb convert FILE.b3d --out SUBJECT_DIR``: the .b3d file as a subject folder, its missing-
+    GRF labels as the folder's review record; prints each trial's frames and labelled
+    frames.
+
+    Returns
+    -------
+    The exit code: 0 when the folder and record were written.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from solver.io.b3d_convert import b3d_to_subject
 
     converted = b3d_to_subject(args.file, args.out, pass_index=args.pass_index, overwrite=args.force)
@@ -78,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``convert`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "convert",
         help="convert an AddBiomechanics .b3d file to a subject folder that addb process solves",

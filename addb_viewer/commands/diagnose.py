@@ -20,6 +20,20 @@ from pathlib import Path
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb diagnose SUBJECT_DIR --trial NAME``: diagnose the trial (processing the subject first
+    when it has no output), print the report or its JSON, write
+    ``OUT/<trial>/diagnosis.json``; with ``--apply`` save the chosen cause's extension.
+
+    Returns
+    -------
+    The exit code: 0 when the diagnosis was written (whether or not a cause stands out).
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
     from addb_viewer.review_masks import masks_from_file
@@ -74,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``diagnose`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "diagnose",
         help="explain a trial's remaining residuals: test candidate causes, name one, measure the gain",

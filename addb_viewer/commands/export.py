@@ -97,6 +97,19 @@ def export_b3d(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb export ... --format mcap|b3d``: a trial as MCAP, or a processed subject (one file per
+    subject of a dataset output tree) as .b3d.
+
+    Returns
+    -------
+    The exit code: 0 when every file was written.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     fmt = args.format
     if fmt is None:
         suffix = Path(args.output).suffix.lower()
@@ -119,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``export`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "export",
         help="export a processed trial (MCAP, Rerun) or a processed subject (.b3d) for other tools",

@@ -6,6 +6,19 @@ import argparse
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb info [PATH]``: print the summary of a lab file, model, .b3d file or subject folder
+    (default: the demo subject).
+
+    Returns
+    -------
+    The exit code: 0.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from solver.io.summary import format_summary, summarize
 
     path = args.path
@@ -18,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``info`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim file or an AddBiomechanics subject folder")
     p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
     p.set_defaults(handler=run)

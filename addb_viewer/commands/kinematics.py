@@ -7,6 +7,19 @@ import argparse
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb kinematics SUBJECT_DIR --out OUT``: scaling and inverse kinematics (``--model``:
+    inverse kinematics alone with a scaled model); prints each trial's marker RMS error.
+
+    Returns
+    -------
+    The exit code: 0 when the outputs were written.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from addb_viewer.progress import ProgressBar, table
     from solver.pipeline import ProcessOptions, process_kinematics
 
@@ -23,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``kinematics`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser("kinematics", help="scale the model and solve inverse kinematics for a subject")
     p.add_argument("subject", help="AddBiomechanics subject folder")
     p.add_argument("--out", required=True, help="output folder (replaced atomically)")

@@ -59,6 +59,21 @@ def run_dataset(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics of one subject, with a table
+    of each trial's measured frames, marker RMS error, residual forces and Hicks verdicts; a
+    folder that is no subject folder is processed as a dataset (:func:`run_dataset`).
+
+    Returns
+    -------
+    The exit code: 0 when the subject's outputs were written; for a dataset, 1 when a
+    subject failed.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from solver.dataset.discover import is_subject_folder
 
     if not is_subject_folder(args.subject) and Path(args.subject).is_dir():
@@ -101,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``process`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "process",
         help="scaling, inverse kinematics and the dynamics fit; writes OpenSim files (one subject or a dataset)",

@@ -6,6 +6,19 @@ import argparse
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb record SUBJECT_DIR --trial NAME -o FILE.rrd``: a Rerun recording of the trial, no
+    viewer.
+
+    Returns
+    -------
+    The exit code: 0 when the file was written.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from addb_viewer.progress import ProgressBar
     from addb_viewer.recording.jobs import record_subject_trial
 
@@ -23,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``record`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser(
         "record",
         help="write a Rerun recording (.rrd) of a processed trial: 3D scene, residuals, GRF, torques",

@@ -122,6 +122,19 @@ def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, objec
 
 
 def run(args: argparse.Namespace) -> int:
+    """``addb view [SUBJECT_DIR|FILE.b3d|DATASET_DIR]``: serve the review app (a subject, a
+    converted .b3d file, or a dataset's workbench) until Ctrl-C or SIGTERM.
+
+    Returns
+    -------
+    The exit code: 0 after a clean stop, 1 when the subject folder does not exist.
+
+    Raises
+    ------
+    solver.errors.AddbError, annotations.AnnotationError
+        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
+        and exits with 1.
+    """
     from addb_viewer.app.paths import ReviewPaths
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
@@ -185,6 +198,7 @@ def _serve(app: object, args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``view`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser("view", help="review a subject in the browser: replay, flag frames, reprocess")
     p.add_argument(
         "subject",

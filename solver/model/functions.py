@@ -52,12 +52,15 @@ class Constant(Function):
     c: float
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """``c`` at every ``x``, same shape as ``x``."""
         return np.full(np.shape(x), self.c, dtype=float)
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """Zeros, same shape as ``x``."""
         return np.zeros(np.shape(x))
 
     def is_constant(self) -> bool:
+        """True."""
         return True
 
 
@@ -69,12 +72,15 @@ class Linear(Function):
     intercept: float = 0.0
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """``slope`` x + ``intercept``, same shape as ``x``."""
         return self.slope * np.asarray(x, dtype=float) + self.intercept
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """``slope`` (order 1) or 0 (order 2), same shape as ``x``."""
         return np.full(np.shape(x), self.slope if order == 1 else 0.0)
 
     def is_identity(self) -> bool:
+        """True when ``slope`` is 1 and ``intercept`` 0."""
         return self.slope == 1.0 and self.intercept == 0.0
 
 
@@ -88,9 +94,11 @@ class Polynomial(Function):
     coefficients: tuple[float, ...]
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """The polynomial at ``x`` (``numpy.polyval``), same shape as ``x``."""
         return np.polyval(np.asarray(self.coefficients), np.asarray(x, dtype=float))
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """The ``order``-th derivative (``numpy.polyder``) at ``x``, same shape as ``x``."""
         c = np.polyder(np.asarray(self.coefficients, dtype=float), order)
         return np.polyval(c, np.asarray(x, dtype=float)) * np.ones(np.shape(x))
 
@@ -103,12 +111,15 @@ class Multiplier(Function):
     scale: float
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """``scale`` times ``inner`` at ``x``."""
         return self.scale * self.inner.value(x)
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """``scale`` times ``inner``'s ``order``-th derivative at ``x``."""
         return self.scale * self.inner.derivative(x, order)
 
     def is_constant(self) -> bool:
+        """True when ``inner`` is constant."""
         return self.inner.is_constant()
 
 
@@ -203,6 +214,8 @@ class CubicSpline(Function):
         return x - self.x[i], i
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """The spline at ``x``, continued linearly with the end slopes outside the knots;
+        same shape as ``x``."""
         xa = np.asarray(x, dtype=float)
         t, i = self._locate(xa)
         f = self.y[i] + t * (self._b[i] + t * (self._c[i] + t * self._d[i]))
@@ -210,6 +223,8 @@ class CubicSpline(Function):
         return np.where(xa > self.x[-1], self.y[-1] + (xa - self.x[-1]) * self._slope_end, f)
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """The first or second derivative at ``x`` (outside the knots: the end slope, and
+        0); same shape as ``x``."""
         xa = np.asarray(x, dtype=float)
         t, i = self._locate(xa)
         if order == 1:
@@ -231,11 +246,15 @@ class PiecewiseLinear(Function):
         self._slopes = np.diff(self.y) / np.diff(self.x)
 
     def value(self, x: ArrayLike) -> FloatArray:
+        """Linear interpolation at ``x``, extrapolated with the end segments' slopes;
+        same shape as ``x``."""
         xa = np.asarray(x, dtype=float)
         i = np.clip(np.searchsorted(self.x, xa, side="right") - 1, 0, self.x.size - 2)
         return self.y[i] + (xa - self.x[i]) * self._slopes[i]
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
+        """The slope of the segment holding ``x`` (order 1), or 0 (order 2); at a knot,
+        the slope of the segment to its right."""
         xa = np.asarray(x, dtype=float)
         if order != 1:
             return np.zeros(xa.shape)

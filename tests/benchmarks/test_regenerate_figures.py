@@ -194,6 +194,19 @@ def test_stale_names_blocks_made_before_a_change_to_their_code(rf, tmp_path, mon
     assert "scripts/b3d_compare.py" in rf.measured_paths(rf.Figure("x", "", ".venv/bin/python scripts/b3d_compare.py --md a.md", "accuracy", 0.0))
 
 
+def test_a_docstring_alone_is_no_change_of_code_in_an_empty_module_or_function(rf, tmp_path, monkeypatch) -> None:
+    """A package's empty ``__init__.py`` given a docstring, and a function whose ``pass`` became
+    a docstring, run the same code (as any docstring edit); a statement added beside is a change."""
+    repository_of(tmp_path, {"solver/__init__.py": "", "solver/fit.py": "def f():\n    pass\n"})
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    (tmp_path / "solver" / "__init__.py").write_text('"""The package."""\n')
+    (tmp_path / "solver" / "fit.py").write_text('def f():\n    """Nothing."""\n')
+    assert rf._same_code("HEAD", "solver/__init__.py", None)
+    assert rf._same_code("HEAD", "solver/fit.py", None)
+    (tmp_path / "solver" / "__init__.py").write_text('"""The package."""\n\nx = 1\n')
+    assert not rf._same_code("HEAD", "solver/__init__.py", None)
+
+
 def test_a_data_writer_is_stale_with_the_block_that_pools_its_output(rf, tmp_path, monkeypatch) -> None:
     """A figure that writes only a data file (the diagnosis' draws) has no stamp of its own:
     it is read against the stamp of the block whose command reads that file, with its own
