@@ -88,11 +88,7 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0 when the table was written.
 
-    Raises
-    ------
-    solver.errors.AddbError, annotations.AnnotationError
-        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
-        and exits with 1.
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from addb_viewer.progress import ProgressBar, table
     from solver.benchmark.dataset import load_dataset

@@ -73,11 +73,7 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0 when the folder and record were written.
 
-    Raises
-    ------
-    solver.errors.AddbError, annotations.AnnotationError
-        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
-        and exits with 1.
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from solver.io.b3d_convert import b3d_to_subject
 

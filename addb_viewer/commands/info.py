@@ -13,11 +13,7 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0.
 
-    Raises
-    ------
-    solver.errors.AddbError, annotations.AnnotationError
-        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
-        and exits with 1.
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from solver.io.summary import format_summary, summarize
 

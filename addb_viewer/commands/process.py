@@ -68,11 +68,7 @@ def run(args: argparse.Namespace) -> int:
     The exit code: 0 when the subject's outputs were written; for a dataset, 1 when a
     subject failed.
 
-    Raises
-    ------
-    solver.errors.AddbError, annotations.AnnotationError
-        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
-        and exits with 1.
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from solver.dataset.discover import is_subject_folder
 

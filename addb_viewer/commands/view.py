@@ -129,11 +129,7 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0 after a clean stop, 1 when the subject folder does not exist.
 
-    Raises
-    ------
-    solver.errors.AddbError, annotations.AnnotationError
-        Bad input (a file, line or frame named); :func:`addb_viewer.cli.main` prints it
-        and exits with 1.
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from addb_viewer.app.paths import ReviewPaths
     from addb_viewer.app.queue import is_dataset
