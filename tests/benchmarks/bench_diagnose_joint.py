@@ -60,12 +60,14 @@ def _rows(paths: list[Path]) -> tuple[dict[tuple[str, str, int], dict[str, Any]]
     return rows, synthetic
 
 
-def compare(default: list[Path], joint: list[Path], sigma: float = JOINT_MASS_SIGMA) -> str:
+def compare(default: list[Path], joint: list[Path], sigma: float = JOINT_MASS_SIGMA, label: str | None = None) -> str:
     """Markdown: per cause, draws within tolerance on each fit; the draws that changed.
 
     ``joint`` may hold a subset of the causes of ``default`` (all their draws): the
     comparison is then on those causes alone. ``sigma`` names the joint fit's
-    ``mass_sigma`` in the table's heading.
+    ``mass_sigma`` in the table's heading; ``label``, when given, names the second set of
+    results there and in the false alarms' line instead (another rule or fit, as the probes'
+    ``compare`` puts it: :func:`probe_rule_replay.compare`).
 
     Raises
     ------
@@ -79,13 +81,13 @@ def compare(default: list[Path], joint: list[Path], sigma: float = JOINT_MASS_SI
     if set(a) != set(b):
         raise SystemExit(f"the two sets hold different draws: {sorted(set(a) ^ set(b))[:5]} ...")
     causes = list(dict.fromkeys(k[0] for k in a))
-    joint_name = "joint fit (default)" if sigma == JOINT_MASS_SIGMA else f"joint fit, mass_sigma {sigma:g}"
+    joint_name = label or ("joint fit (default)" if sigma == JOINT_MASS_SIGMA else f"joint fit, mass_sigma {sigma:g}")
     lines = [f"| cause | draws | within tolerance, alternation (judged fit) | within tolerance, {joint_name} |", "| --- | ---: | ---: | ---: |"]
     for c in causes:
         keys = [k for k in a if k[0] == c]
         lines.append(f"| {c} | {len(keys)} | {sum(bool(a[k]['within_tolerance']) for k in keys)} | {sum(bool(b[k]['within_tolerance']) for k in keys)} |")
     alarms = [sum(s.get("chosen") is not None for s in syn) for syn in (a_syn, b_syn)]
-    lines += ["", f"False alarms on consistent synthetic trials: {alarms[0]} of {len(a_syn)} (alternation), {alarms[1]} of {len(b_syn)} (joint fit).", ""]
+    lines += ["", f"False alarms on consistent synthetic trials: {alarms[0]} of {len(a_syn)} (alternation), {alarms[1]} of {len(b_syn)} ({label or 'joint fit'}).", ""]
     changed = sorted((k for k in a if (a[k]["chosen"], a[k]["within_tolerance"]) != (b[k]["chosen"], b[k]["within_tolerance"])), key=lambda k: (causes.index(k[0]), k[2]))
     lines.append(f"Draws whose verdict changed ({len(changed)} of {len(a)}; named cause, within tolerance):")
     lines.append("")
@@ -103,8 +105,10 @@ def main() -> None:
     ap.add_argument("--compare", type=Path, nargs="+", help="--json results of the default fit")
     ap.add_argument("--with", dest="joint", type=Path, nargs="+", help="--json results of the joint fit")
     args = ap.parse_args(own)
+    if args.compare and not args.joint:
+        ap.error("--compare needs --with: the joint fit's --json results to put beside the default fit's")
     if args.compare:
-        print(compare(args.compare, args.joint or [], args.sigma))
+        print(compare(args.compare, args.joint, args.sigma))
         return
     import bench_diagnose  # this folder
 

@@ -299,8 +299,7 @@ def compare(table: list[Path], results: list[Path], label: str) -> str:
     """
     import bench_diagnose_joint  # this folder
 
-    text = bench_diagnose_joint.compare(table, results, sigma=0.1)
-    return text.replace("within tolerance, joint fit, mass_sigma 0.1 |", f"within tolerance, {label} |").replace("(joint fit).", f"({label}).")
+    return bench_diagnose_joint.compare(table, results, sigma=0.1, label=label)
 
 
 def _values(items: list[str]) -> dict[str, float]:
