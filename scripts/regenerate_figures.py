@@ -52,6 +52,12 @@ output identical to the block.)
 The command's standard error goes to the terminal (progress); only its standard output
 goes into the document.
 
+Before it makes a timing figure, the script times the host reference (OpenSim's IK tool on
+the walk, best of 3: about 20 s) and stops with exit status 2 when the host runs more than
+:data:`HOST_SLACK` times slower than the median of the references the timing blocks record
+(:func:`host_check`): figures made on a slowed host would not compare with the others
+(``--any-host`` makes them all the same; the prose should then say so).
+
 ``kind`` is ``timing`` (wall times: run on a quiet machine) or ``accuracy`` (errors,
 residuals, counts: deterministic given the code and data, up to round-off and network
 training seeds). Durations in ``--list`` are rough, from the last runs on the 2-core
@@ -68,7 +74,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -972,6 +978,78 @@ def run_all(chosen: list[Figure], jobs: int = 1, poll: float = 0.5) -> list[str]
     return [f.name for f in chosen if f.name in failed]
 
 
+#: How much slower than the timing blocks' recorded host references (their median) the host
+#: may run for new timing figures to be made beside them (:func:`host_check`).
+HOST_SLACK = 1.15
+#: The host reference's line that ``--host-reference`` ends a timing block with
+#: (``bench_kinematics.host_reference_line``): the best of its runs, in seconds.
+_HOST_REFERENCE = re.compile(r"^host reference, OpenSim [\d.]+ IK tool on the walk\b.*?: best (\d+(?:\.\d+)?) s\b", re.MULTILINE)
+#: Times OpenSim's IK tool on the walk three times in a fresh interpreter of the venv and
+#: prints the best (s): the measurement behind every block's host reference line.
+_MEASURE_HOST = (f"{PY} -c \"import sys; sys.path.insert(0, 'tests/benchmarks'); "
+                 "from bench_kinematics import opensim_reference; print(min(opensim_reference(3)))\"")
+
+
+def recorded_host_references(figures: tuple[Figure, ...] | list[Figure] | None = None) -> dict[str, float]:
+    """Block name -> the best host reference time (s) its block records, for the live timing
+    figures of ``figures`` (default: the registry) whose block has a host reference line."""
+    found: dict[str, float] = {}
+    for fig in FIGURES if figures is None else figures:
+        block = _block(fig)[1] if fig.kind == "timing" and not fig.retired else None
+        match = _HOST_REFERENCE.search(block) if block else None
+        if match:
+            found[fig.name] = float(match.group(1))
+    return found
+
+
+def measure_host_reference() -> float:
+    """The host reference now: OpenSim's IK tool on the walk, best of 3 whole processes (s).
+
+    Raises
+    ------
+    RuntimeError
+        The measurement failed (OpenSim not installed in the venv: ``pip install opensim``),
+        with its error output.
+    """
+    done = subprocess.run(["bash", "-c", _MEASURE_HOST], cwd=REPO, capture_output=True, text=True, check=False)
+    try:
+        return float(done.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        raise RuntimeError(f"could not time the host reference ({_MEASURE_HOST}): "
+                           f"{(done.stderr.strip().splitlines() or ['no output'])[-1]}") from None
+
+
+def host_check(chosen: list[Figure], measure: Callable[[], float] | None = None,
+               figures: tuple[Figure, ...] | list[Figure] | None = None) -> str | None:
+    """Why timing figures should not be made on this host now, or None when they may.
+
+    Timing figures measure wall and CPU time, which drift with the host's speed from day to
+    day (tests/benchmarks/RESULTS.md); blocks made on a host slower than the others' are not
+    comparable with them. When ``chosen`` holds a timing figure, the host reference is timed
+    (``measure``, default :func:`measure_host_reference`: s) and compared with the median of the references the live timing blocks
+    record (:func:`recorded_host_references`); slower than :data:`HOST_SLACK` times that
+    median, the reason is returned. Nothing is timed when ``chosen`` holds no timing figure
+    or no block records a reference.
+    """
+    if not any(f.kind == "timing" for f in chosen):
+        return None
+    recorded = sorted(recorded_host_references(figures).values())
+    if not recorded:
+        return None
+    median = recorded[len(recorded) // 2] if len(recorded) % 2 else 0.5 * (recorded[len(recorded) // 2 - 1] + recorded[len(recorded) // 2])
+    try:
+        now = (measure or measure_host_reference)()
+    except RuntimeError as err:
+        return f"{err}; the timing figures' host cannot be compared with their blocks'"
+    print(f"host reference now {now:.2f} s; the timing blocks record {median:.2f} s (median of {len(recorded)})", file=sys.stderr)
+    if now > HOST_SLACK * median:
+        return (f"the host runs {now / median:.2f}x slower than when the timing blocks were made (OpenSim's IK tool on "
+                f"the walk: best {now:.2f} s now, median {median:.2f} s in their blocks; at most {HOST_SLACK:g}x): timing "
+                "figures made now would not compare with the others. Run them when the host is quiet, run the accuracy "
+                "figures alone (--kind accuracy), or pass --any-host and say in the document's prose which host made them")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line (the module docstring); returns the exit code."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -987,6 +1065,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1, metavar="N",
                     help="run up to N accuracy figures at a time (timing figures always alone; a figure waits for "
                          "those whose data it reads)")
+    ap.add_argument("--any-host", action="store_true",
+                    help="make timing figures even when the host runs slower than when their blocks were made "
+                         f"(more than {HOST_SLACK:g}x their recorded host reference)")
     args = ap.parse_args(argv)
     if args.jobs < 1:
         ap.error(f"--jobs must be 1 or more, not {args.jobs}")
@@ -1028,6 +1109,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(chosen)} figures, about {sum(f.minutes for f in chosen) / 60:.1f} h in all"
               + ("" if args.only else f" (and {retired} retired ones, run only when named)"))
         return 0
+    reason = None if args.any_host else host_check(chosen)
+    if reason:
+        print(f"error: {reason}", file=sys.stderr)
+        return 2
     failed = run_all(chosen, args.jobs)
     if failed:
         print(f"failed or not run: {', '.join(failed)}", file=sys.stderr)

@@ -474,3 +474,57 @@ def test_no_live_figure_reads_what_a_retired_one_writes(rf) -> None:
         if not fig.retired:
             named = rf._files(fig)[0]
             assert not named & set(retired_writes), (fig.name, sorted(named & set(retired_writes)))
+
+
+def test_every_timing_block_made_with_a_host_reference_records_it(rf) -> None:
+    """Each live timing figure whose command asks for the host reference has its best time
+    in its block (what :func:`host_check` compares the host with), in the range OpenSim's IK
+    tool on the walk has taken on the development machine (4.5-10 s); no other block has one."""
+    recorded = rf.recorded_host_references()
+    asked = {f.name for f in rf.FIGURES if f.kind == "timing" and not f.retired and "--host-reference" in f.command}
+    assert set(recorded) == asked
+    assert all(3.0 < seconds < 15.0 for seconds in recorded.values()), recorded
+
+
+def test_timing_figures_are_not_made_on_a_slowed_host(rf, tmp_path, monkeypatch) -> None:
+    """``main``: with a timing figure chosen, a host reference above HOST_SLACK times the
+    blocks' median stops the run (exit 2, nothing run, the reason on standard error naming
+    both times); at the median it runs; ``--any-host`` runs without timing the host; with only
+    accuracy figures chosen the host is not timed."""
+    doc = tmp_path / "doc.md"
+    line = "host reference, OpenSim 4.6 IK tool on the walk (whole process, as block `kinematics`): best {} s (runs ...)"
+    doc.write_text("".join(f"<!-- begin: {n} -->\nMade by `x` on 2026-01-01, commit abcdef0 (1 s).\n\n{line.format(s)}\n<!-- end: {n} -->\n"
+                           for n, s in (("t1", "4.00"), ("t2", "5.00"), ("t3", "9.00"))) + "<!-- begin: a -->\n<!-- end: a -->\n")
+    figures = (*(rf.Figure(n, "doc.md", "true", "timing", 0.0) for n in ("t1", "t2", "t3")), rf.Figure("a", "doc.md", "true", "accuracy", 0.0))
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "FIGURES", figures)
+    assert rf.recorded_host_references() == {"t1": 4.0, "t2": 5.0, "t3": 9.0}
+    ran: list[list[str]] = []
+    monkeypatch.setattr(rf, "run_all", lambda chosen, jobs: ran.append([f.name for f in chosen]) or [])
+    timed: list[float] = []
+
+    def host(seconds: float):
+        def measure() -> float:
+            timed.append(seconds)
+            return seconds
+        return measure
+
+    monkeypatch.setattr(rf, "measure_host_reference", host(rf.HOST_SLACK * 5.0 + 0.01))
+    assert rf.main(["--only", "t1", "a"]) == 2 and ran == [] and len(timed) == 1
+    assert rf.main(["--only", "a"]) == 0 and ran == [["a"]] and len(timed) == 1
+    assert rf.main(["--only", "t1", "--any-host"]) == 0 and ran[-1] == ["t1"] and len(timed) == 1
+    monkeypatch.setattr(rf, "measure_host_reference", host(5.0))
+    assert rf.main(["--only", "t1", "t2"]) == 0 and ran[-1] == ["t1", "t2"] and timed[-1] == 5.0
+    reason = rf.host_check(list(figures), measure=host(6.0))
+    assert reason is not None and "6.00 s now, median 5.00 s" in reason and "--any-host" in reason
+
+
+def test_a_host_reference_that_cannot_be_timed_stops_the_timing_figures(rf) -> None:
+    """Without OpenSim (the measurement fails), timing figures are not made: the reason names
+    the failure and the way past it."""
+    def failing() -> float:
+        raise RuntimeError("could not time the host reference (cmd): ModuleNotFoundError: No module named 'opensim'")
+
+    timing = next(f for f in rf.FIGURES if f.name == "process")
+    reason = rf.host_check([timing], measure=failing)
+    assert reason is not None and "No module named 'opensim'" in reason
