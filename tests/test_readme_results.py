@@ -4,12 +4,12 @@ until the README says what the block now says."""
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.conftest import load_script
 
 REPO = Path(__file__).resolve().parents[1]
 #: A number as the blocks print it: 12.1x, 0.003 BW, 1.24 cm, 4724 (no sign: "4-7" is a range).
@@ -18,11 +18,7 @@ NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?![\w.]*\d)")
 
 @pytest.fixture(scope="module")
 def figures():
-    spec = importlib.util.spec_from_file_location("regenerate_figures", REPO / "scripts" / "regenerate_figures.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["regenerate_figures"] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_script("scripts/regenerate_figures.py")
 
 
 def results_rows() -> list[tuple[str, str, list[str]]]:

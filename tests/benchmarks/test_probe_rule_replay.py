@@ -6,7 +6,6 @@ its name and a hidden registration keeps its own."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -17,6 +16,7 @@ import pytest
 
 from solver.diagnose.causes.registry import NAMES
 from solver.diagnose.selection import ChoiceRule
+from tests.conftest import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "tests" / "benchmarks" / "probe_rule_replay.py"
@@ -24,11 +24,7 @@ SCRIPT = REPO / "tests" / "benchmarks" / "probe_rule_replay.py"
 
 @pytest.fixture(scope="module")
 def probe():
-    spec = importlib.util.spec_from_file_location("probe_rule_replay", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["probe_rule_replay"] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_script(str(SCRIPT.relative_to(REPO)))
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,6 @@ the command's output, and a failed command leaves the document as it was."""
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 from functools import partial
@@ -12,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import SHARED_DATA, writable_copy
+from tests.conftest import SHARED_DATA, load_script, writable_copy
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -49,11 +48,7 @@ def stamped_repository(root: Path, scripts: dict[str, str]) -> str:
 
 @pytest.fixture(scope="module")
 def rf():
-    spec = importlib.util.spec_from_file_location("regenerate_figures", REPO / "scripts" / "regenerate_figures.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["regenerate_figures"] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_script("scripts/regenerate_figures.py")
 
 
 def test_every_figure_has_exactly_one_block(rf) -> None:
