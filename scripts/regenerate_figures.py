@@ -277,6 +277,30 @@ def _joint_two_rows(sigma: str) -> tuple[Figure, Figure]:
     )
 
 
+#: The walk's two overlapping force causes on both fits, recorded once and retired as made (:attr:`Figure.retired`).
+RECORDED_WALK = ("2026-11-28: a probe recorded once to close a question (on the walk, does the joint fit lose the plates' "
+                 "shifts, or trade them with the plates' registration?), retired as it was made: its block is the record of "
+                 "the code at its stamp's commit")
+
+
+def _walk_two_rows() -> tuple[Figure, Figure, Figure]:
+    """Plate position and plate registration, 40 draws each, every draw on the walk (the
+    benchmark's draws alternate between the walk and the run; here seeds 5000-5039 and
+    9000-9039 all hide their effect in the walk), on the alternation the diagnosis judges on
+    and on the joint fit at ``mass_sigma`` 0.1, into
+    ``docs/diagnose/walk_two_rows_{alternation,joint_fit_sigma_0_1}.json``; then the two
+    compared draw by draw in RESULTS (recorded once, :data:`RECORDED_WALK`)."""
+    args = "--causes plate_position_offset,plate_registration --trials walk --draws 40 --synthetic 0"
+    alternation, joint = "docs/diagnose/walk_two_rows_alternation.json", "docs/diagnose/walk_two_rows_joint_fit_sigma_0_1.json"
+    joint_cmd = f"{PY} tests/benchmarks/bench_diagnose_joint.py --sigma 0.1"
+    return (
+        Figure("diagnose-walk-two-rows-alternation", "", f"{DIAG} {args} --json {alternation}", "accuracy", 14.0, retired=RECORDED_WALK),
+        Figure("diagnose-walk-two-rows-joint", "", f"{joint_cmd} -- {args} --json {joint}", "accuracy", 14.0, retired=RECORDED_WALK),
+        Figure("diagnose-walk-two-rows-compare", RESULTS, f"{joint_cmd} --compare {alternation} --with {joint}", "accuracy", 0.1,
+               fence=False, retired=RECORDED_WALK),
+    )
+
+
 FIGURES: tuple[Figure, ...] = (
     # ---- tests/benchmarks/RESULTS.md, in the document's order
     Figure("model", RESULTS, f"OPENBLAS_NUM_THREADS=1 taskset -c 0 {PY} tests/benchmarks/bench_model.py", "timing", 0.2),
@@ -387,6 +411,7 @@ FIGURES: tuple[Figure, ...] = (
     # the two rows the joint fit loses, with its mass prior a third and three times 0.1 (recorded once, retired as made)
     *_joint_two_rows("0.03"),
     *_joint_two_rows("0.3"),
+    *_walk_two_rows(),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
            "accuracy", 3.0, fence=False, retired=BEFORE_CONFIRMATION),
     Figure("diagnose-registration-gain-draws-0-19", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --draws 20 "
