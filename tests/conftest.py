@@ -94,19 +94,6 @@ def writable_copy(src: Path, dst: Path, **copytree_kw: object) -> Path:
 #: Environment variable that lists tools to treat as missing (comma-separated names as
 #: given to :func:`require_tool`, e.g. ``ADDB_TEST_PRETEND_MISSING=opensim,torch``): lets
 #: the skip/fail rule be checked on a machine that has them, without uninstalling.
-def load_script(rel: str) -> ModuleType:
-    """The repository's script ``rel`` (e.g. ``scripts/regenerate_figures.py``) imported as a
-    module named after its file, registered in ``sys.modules`` (dataclasses look their module
-    up there); imported once per test process."""
-    name = Path(rel).stem
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / rel)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
 PRETEND_MISSING = "ADDB_TEST_PRETEND_MISSING"
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import load_script
+from tests.scripts import load_script
 
 REPO = Path(__file__).resolve().parents[1]
 #: A number as the blocks print it: 12.1x, 0.003 BW, 1.24 cm, 4724 (no sign: "4-7" is a range).

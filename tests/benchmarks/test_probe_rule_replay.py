@@ -16,7 +16,7 @@ import pytest
 
 from solver.diagnose.causes.registry import NAMES
 from solver.diagnose.selection import ChoiceRule
-from tests.conftest import load_script
+from tests.scripts import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "tests" / "benchmarks" / "probe_rule_replay.py"

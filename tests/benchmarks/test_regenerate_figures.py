@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import SHARED_DATA, load_script, writable_copy
+from tests.conftest import SHARED_DATA, writable_copy
+from tests.scripts import load_script
 
 REPO = Path(__file__).resolve().parents[2]
 
