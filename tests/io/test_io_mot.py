@@ -26,6 +26,7 @@ from solver.io.mot import (
 from solver.io.plate_moments import detect_reference
 from solver.io.types import ForcePlate, ForceRecording, Table
 from tests.conftest import OPENSIM_REASON, import_tool
+from tests.io.damage import damaged, expect_format_error
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 MOT_FILES = sorted([*DATA.rglob("*.mot"), *DATA.rglob("*.sto")])
@@ -295,23 +296,13 @@ def grf_lines(shared_data: Path) -> list[str]:
 
 
 def _damaged(tmp_path: Path, lines: list[str]) -> Path:
-    path = tmp_path / "damaged.mot"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return damaged(tmp_path, lines, ".mot")
 
 
 def _expect(
     path: Path, line: int | None, *words: str, reader: Callable[[Path], object] = read_table
 ) -> MotFormatError:
-    with pytest.raises(MotFormatError) as info:
-        reader(path)
-    err = info.value
-    assert err.path == str(path)
-    assert err.line == line
-    assert str(path) in str(err)
-    for word in words:
-        assert word in err.message
-    return err
+    return expect_format_error(MotFormatError, reader, path, line, *words)
 
 
 def test_truncated_file(tmp_path: Path, grf_lines: list[str]) -> None:

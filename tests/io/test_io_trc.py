@@ -11,6 +11,7 @@ from solver.errors import TrcFormatError
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import MarkerTrajectories
 from tests.conftest import OPENSIM_REASON, import_tool
+from tests.io.damage import damaged, expect_format_error
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 TRC_FILES = sorted(DATA.rglob("*.trc"))
@@ -188,21 +189,11 @@ def small_trc(shared_data: Path, tmp_path: Path) -> list[str]:
 
 
 def _damaged(tmp_path: Path, lines: list[str]) -> Path:
-    path = tmp_path / "damaged.trc"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return damaged(tmp_path, lines, ".trc")
 
 
 def _expect(path: Path, line: int | None, *words: str) -> TrcFormatError:
-    with pytest.raises(TrcFormatError) as info:
-        read_trc(path)
-    err = info.value
-    assert err.path == str(path)
-    assert err.line == line
-    assert str(path) in str(err)
-    for word in words:
-        assert word in err.message
-    return err
+    return expect_format_error(TrcFormatError, read_trc, path, line, *words)
 
 
 def test_truncated_rows_report_frame_count(tmp_path: Path, small_trc: list[str]) -> None:
