@@ -70,6 +70,7 @@ import argparse
 import datetime as _dt
 import re
 import shlex
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -1009,10 +1010,10 @@ HOST_SLACK = 1.15
 #: The host reference's line that ``--host-reference`` ends a timing block with
 #: (``bench_kinematics.host_reference_line``): the best of its runs, in seconds.
 _HOST_REFERENCE = re.compile(r"^host reference, OpenSim [\d.]+ IK tool on the walk\b.*?: best (\d+(?:\.\d+)?) s\b", re.MULTILINE)
-#: Times OpenSim's IK tool on the walk three times in a fresh interpreter of the venv and
-#: prints the best (s): the measurement behind every block's host reference line.
-_MEASURE_HOST = (f"{PY} -c \"import sys; sys.path.insert(0, 'tests/benchmarks'); "
-                 "from bench_kinematics import opensim_reference; print(min(opensim_reference(3)))\"")
+#: Times OpenSim's IK tool on the walk three times and prints the best (s), run by the venv's
+#: interpreter: the measurement behind every block's host reference line.
+_MEASURE_HOST = ("import sys; sys.path.insert(0, 'tests/benchmarks'); "
+                 "from bench_kinematics import opensim_reference; print(min(opensim_reference(3)))")
 
 
 def recorded_host_references(figures: tuple[Figure, ...] | list[Figure] | None = None) -> dict[str, float]:
@@ -1036,11 +1037,14 @@ def measure_host_reference() -> float:
         The measurement failed (OpenSim not installed in the venv: ``pip install opensim``),
         with its error output.
     """
-    done = subprocess.run(["bash", "-c", _MEASURE_HOST], cwd=REPO, capture_output=True, text=True, check=False)
+    command = [str(REPO / PY), "-c", _MEASURE_HOST]
     try:
+        done = subprocess.run(command, cwd=REPO, capture_output=True, text=True, check=False)
         return float(done.stdout.strip().splitlines()[-1])
+    except OSError as err:  # no venv interpreter
+        raise RuntimeError(f"could not time the host reference ({shlex.join(command)}): {err}") from None
     except (IndexError, ValueError):
-        raise RuntimeError(f"could not time the host reference ({_MEASURE_HOST}): "
+        raise RuntimeError(f"could not time the host reference ({shlex.join(command)}): "
                            f"{(done.stderr.strip().splitlines() or ['no output'])[-1]}") from None
 
 
@@ -1058,10 +1062,10 @@ def host_check(chosen: list[Figure], measure: Callable[[], float] | None = None,
     """
     if not any(f.kind == "timing" for f in chosen):
         return None
-    recorded = sorted(recorded_host_references(figures).values())
+    recorded = list(recorded_host_references(figures).values())
     if not recorded:
         return None
-    median = recorded[len(recorded) // 2] if len(recorded) % 2 else 0.5 * (recorded[len(recorded) // 2 - 1] + recorded[len(recorded) // 2])
+    median = statistics.median(recorded)
     try:
         now = (measure or measure_host_reference)()
     except RuntimeError as err:
