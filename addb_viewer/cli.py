@@ -141,6 +141,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileNotFoundError as exc:
         print(f"addb {args.command}: no such file or folder: {exc.filename}", file=sys.stderr)
         return 1
+    except OSError as exc:  # a folder named where a file is expected, no permission, disk full
+        if exc.filename is None:
+            raise
+        target = exc.filename if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
+        print(f"addb {args.command}: cannot use {target}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     except Exception as exc:
         from annotations import (
             AnnotationError,  # the review record's own errors (no solver base class)

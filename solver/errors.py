@@ -110,6 +110,11 @@ class DatasetError(AddbError):
     """A dataset folder holds no subject, or a dataset run could not start or finish."""
 
 
+class OutputFolderError(AddbError):
+    """An output folder cannot be written without deleting what is not addb's output: it
+    is a file, it is (or holds) the input folder, or it holds other files."""
+
+
 class B3dFormatError(FileFormatError):
     """An AddBiomechanics binary subject file (.b3d) is damaged, truncated or of an unknown version.
 

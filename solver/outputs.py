@@ -11,7 +11,9 @@ Layout (``<subject>`` is the subject folder's name)::
     OUT/subject.json                     subject-level results (scales, offsets, mass)
 
 Everything is first written into a temporary sibling folder, which then replaces OUT in
-two renames, so a crash or an error never leaves a half-written OUT behind.
+two renames, so a crash or an error never leaves a half-written OUT behind. Since OUT is
+replaced whole, :func:`check_output_folder` refuses an OUT that holds anything but an
+earlier output of addb (or is the subject folder, or a folder above it).
 """
 
 from __future__ import annotations
@@ -27,6 +29,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from solver.errors import OutputFolderError
+from solver.files import as_created
+
+#: Entries of which one marks a folder as an output of addb: ``subject.json`` (every
+#: subject output, kinematics only included) or ``manifest.json`` (a dataset run's
+#: subject folder, also when the subject failed).
+OUTPUT_MARKERS = ("subject.json", "manifest.json")
 
 
 def _clean(value: Any) -> Any:
@@ -53,6 +63,48 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     path.write_text(json.dumps(_clean(data), indent=2) + "\n")
 
 
+def check_output_folder(out_dir: str | Path, inputs: tuple[str | Path, ...] = ()) -> None:
+    """Refuse an output folder whose replacement would delete what addb did not write.
+
+    Parameters
+    ----------
+    out_dir
+        The folder an output is about to replace (it need not exist).
+    inputs
+        Folders read to make the output (the subject folder): ``out_dir`` must be neither
+        one of them nor a folder above one.
+
+    Raises
+    ------
+    OutputFolderError
+        Naming ``out_dir``: it is a file; it is an input folder or holds one; it holds
+        entries and none of :data:`OUTPUT_MARKERS` (the first few entries are named).
+    """
+    out = Path(out_dir).resolve()
+    for folder in inputs:
+        src = Path(folder).resolve()
+        if src == out or out in src.parents:
+            what = "is" if src == out else "holds"
+            raise OutputFolderError(
+                f"the output folder {what} the input folder {src}, and writing the output replaces the whole "
+                "output folder; expected a new folder, an empty one, or an earlier output of addb (e.g. --out "
+                f"{src.parent / (src.name + '_out')})",
+                path=out,
+            )
+    if out.exists() and not out.is_dir():
+        raise OutputFolderError("exists and is not a folder; expected a folder for the output (new, empty, or an earlier output of addb)", path=out)
+    if out.is_dir():
+        entries = sorted(e.name for e in out.iterdir())
+        if entries and not any(m in entries for m in OUTPUT_MARKERS):
+            shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
+            raise OutputFolderError(
+                f"holds {len(entries)} entries ({shown}) and is not an output of addb (no "
+                f"{' or '.join(OUTPUT_MARKERS)}); writing the output replaces the whole folder and would delete them. "
+                "Expected a new folder, an empty one, or an earlier output of addb",
+                path=out,
+            )
+
+
 @contextmanager
 def staged_output(out_dir: str | Path, *, merge: bool = False) -> Iterator[Path]:
     """Yield a temporary folder; on success it replaces ``out_dir`` atomically.
@@ -61,10 +113,18 @@ def staged_output(out_dir: str | Path, *, merge: bool = False) -> Iterator[Path]
     model, subject.json) replaces its namesake inside ``out_dir`` by a rename, and the other
     entries stay (used to reprocess some trials of a subject). On an exception the
     temporary folder is removed and ``out_dir`` is left untouched.
+
+    Raises
+    ------
+    OutputFolderError
+        Before anything is written: ``out_dir`` is not a folder addb may replace
+        (:func:`check_output_folder`).
     """
+    check_output_folder(out_dir)
     out = Path(out_dir).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    as_created(tmp)  # it becomes OUT: readable by others as the umask allows, not mkdtemp's 0700
     try:
         yield tmp
     except BaseException:

@@ -42,7 +42,7 @@ from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
-from solver.outputs import staged_output, write_json
+from solver.outputs import check_output_folder, staged_output, write_json
 from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 from solver.sampling import frame_rate
@@ -199,6 +199,9 @@ def process_kinematics(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError
         Bad input, naming the file or trial; a name in ``options.trials`` that the subject
         does not have raises KinematicsError before the stage runs.
+    OutputFolderError
+        Before the stage runs: ``out_dir`` cannot be replaced
+        (:func:`solver.outputs.check_output_folder`).
     """
     with single_threaded_blas(load_scipy=False):  # the kinematics stage uses numpy's BLAS only
         return _process_kinematics(subject_dir, out_dir, options, progress, scaled_model)
@@ -213,6 +216,7 @@ def _process_kinematics(
 ) -> SubjectKinematics:
     opts = options or ProcessOptions()
     t0 = time.perf_counter()
+    check_output_folder(out_dir, (subject_dir,))  # before the stage runs: OUT is replaced whole at the end
     subject = load_subject(subject_dir)
     _selected(opts.trials, [t.name for t in subject.trials])  # a wrong name fails before the stage runs
     sk = subject_kinematics(subject, opts.kinematics, progress, scaled_model=scaled_model, trials=opts.trials)
@@ -280,6 +284,9 @@ def process_subject(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
         Bad input, naming the file or trial; a name in ``options.trials`` that the subject
         does not have raises KinematicsError before any stage runs.
+    OutputFolderError
+        Before any stage runs: ``out_dir`` is a file, is or holds ``subject_dir``, or holds
+        what is not an output of addb (:func:`solver.outputs.check_output_folder`).
     """
     with single_threaded_blas():
         return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress)
@@ -532,6 +539,7 @@ def _process_subject(
     opts = options or ProcessOptions()
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
+    check_output_folder(out_dir, (subject_dir,))  # before any stage runs: OUT is replaced whole at the end
     subject = load_subject(subject_dir)
     _selected(opts.trials, [t.name for t in subject.trials])  # a wrong name fails before any stage runs
     subject = extend_subject(subject)  # mass and model saved by `addb diagnose --apply`

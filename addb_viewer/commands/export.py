@@ -80,6 +80,10 @@ def export_b3d(args: argparse.Namespace) -> int:
             print(f"wrote {target} ({target.stat().st_size / 1e6:.1f} MB)")
         print(f"{len(outs)} subjects written under {output}")
         return 0
+    if output.is_dir():
+        from solver.errors import OutputFolderError
+
+        raise OutputFolderError(f"is a folder; expected the name of the .b3d file to write (e.g. {output / (src.name + '.b3d')})", path=output)
     if (src / "subject.json").is_file() and processed_trials(src):
         out_dir = src
         subject_dir, record = _record_beside(out_dir)

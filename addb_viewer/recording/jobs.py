@@ -166,9 +166,14 @@ def record_subject_trial(
     SubjectFolderError
         The subject has no trial ``trial`` (checked before any processing), or it was not
         processed.
+    OutputFolderError
+        ``output`` is a folder (checked before any processing).
     """
     from addb_viewer.geometry import mesh_search_path, trial_search_path
+    from solver.errors import OutputFolderError
 
+    if Path(output).is_dir():
+        raise OutputFolderError(f"is a folder; expected the name of the file to write (e.g. {Path(output) / (trial + '.' + fmt)})", path=output)
     mesh_search_path(None, None, geometry, bundled=False)  # a wrong --geometry fails first
     out = ensure_processed(subject_dir, out_dir, progress=progress, trial=trial)
     processed = load_trial(out, trial)

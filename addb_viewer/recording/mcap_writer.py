@@ -23,6 +23,7 @@ import numpy as np
 
 from addb_viewer.recording import foxglove_schemas as fox
 from addb_viewer.recording.metadata import recording_info
+from solver.files import as_created
 from solver.io.mcap_file import (
     META_FRAMES,
     META_INFO,
@@ -240,6 +241,7 @@ def write_mcap(
             w.start(profile="", library="addb")
             _write_all(w, trial, info, log_ns, search)
             w.finish()
+        as_created(tmp_name)  # not mkstemp's 0600
         os.replace(tmp_name, path)
     except BaseException:
         Path(tmp_name).unlink(missing_ok=True)

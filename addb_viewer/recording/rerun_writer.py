@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.recording.metadata import recording_info
+from solver.files import as_created
 from solver.results import ProcessedTrial
 
 #: Length of a GRF arrow per newton, m/N (1 mm per N, as AddBiomechanics draws it).
@@ -153,6 +154,7 @@ def write_rerun(
         _log_all(rec, trial, info, search)
         rec.flush()
         rec.disconnect()
+        as_created(tmp_name)  # not mkstemp's 0600
         os.replace(tmp_name, path)
     except BaseException:
         rec.disconnect()

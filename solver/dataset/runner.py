@@ -51,8 +51,8 @@ from solver.dataset.task import (
     remove_stale_work,
     run_subject,
 )
-from solver.errors import DatasetError
-from solver.outputs import write_json
+from solver.errors import DatasetError, OutputFolderError
+from solver.outputs import check_output_folder, write_json
 from solver.provenance import addb_version
 
 SUMMARY_NAME = "dataset_summary.json"
@@ -231,13 +231,22 @@ def process_dataset(
     Raises
     ------
     DatasetError
-        No subject below ``dataset_dir``, or the scheduler cannot be reached.
+        No subject below ``dataset_dir``, the scheduler cannot be reached, or ``out_dir``
+        is ``dataset_dir`` or a folder above it (checked first). A subject whose output
+        folder holds what addb did not write (:func:`solver.outputs.check_output_folder`)
+        fails alone, with that error, and the others run.
     """
     opts = options or DatasetOptions()
     say = progress or (lambda m, f: None)
     tell = log or (lambda m: None)
     t0 = time.perf_counter()
     out = Path(out_dir).resolve()
+    source = Path(dataset_dir).resolve()
+    if out == source or out in source.parents:
+        raise DatasetError(
+            f"the output tree {out} {'is' if out == source else 'holds'} the dataset folder {source}; each subject's "
+            "output folder replaces its namesake in the output tree, so it must be another folder (e.g. "
+            f"{source / 'addb_out'})", path=out)
     subjects = find_subjects(dataset_dir, exclude=(out,))
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_work(out)
@@ -246,6 +255,11 @@ def process_dataset(
     jobs: list[SubjectJob] = []
     for entry in subjects:
         target = entry.out_dir(out)
+        try:
+            check_output_folder(target, (entry.path,))
+        except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
+            results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
+            continue
         try:
             review = review_digest(str(entry.path), str(target)) if review_digest else None
             key = manifest_key(entry.path, settings, review)

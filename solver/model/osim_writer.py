@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import OsimModelError
+from solver.files import as_created
 from solver.model import functions as fn
 from solver.model.osim import _FUNCTION_TAGS, Joint, OsimModel, is_v3_layout
 
@@ -222,6 +223,7 @@ def write_osim(
         with os.fdopen(fd, "wb") as fh:
             ET.indent(tree, space="\t")
             tree.write(fh, encoding="UTF-8", xml_declaration=True)
+        as_created(tmp)  # mkstemp's 0600 would keep the model from the other users of a lab server
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

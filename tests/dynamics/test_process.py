@@ -189,12 +189,13 @@ def test_bad_forces_name_the_trial_and_leave_out_untouched(tmp_path: Path, damag
     _damage_grf(subject, damage)
     out = tmp_path / "out"
     out.mkdir()
+    (out / "subject.json").write_text("{}")  # an earlier output (addb replaces only its own)
     (out / "keep.txt").write_text("previous results")
     with pytest.raises(DynamicsError, match=match) as err:
         process_subject(subject, out)
     assert "walk" in str(err.value)
     assert (out / "keep.txt").read_text() == "previous results"  # nothing half-written
-    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "subject.json"]
     assert not list(tmp_path.glob(".out.tmp-*"))
 
 

@@ -1,0 +1,39 @@
+"""Permissions of files and folders made through :mod:`tempfile`.
+
+Outputs are written under a temporary name (``tempfile.mkstemp`` / ``mkdtemp``) and
+renamed into place, so that a crash never leaves a half-written file. ``tempfile`` makes
+them private to their owner (0600 / 0700) whatever the umask; :func:`as_created` gives
+them the permissions ``open()`` or ``mkdir()`` would have (0666 / 0777 less the process's
+umask), so that the reviewers of a lab server read what ``addb process`` wrote.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import threading
+from pathlib import Path
+
+_lock = threading.Lock()
+
+
+def _umask() -> int:
+    """The process's umask (read by setting and restoring it, under a lock)."""
+    with _lock:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
+def as_created(path: str | Path) -> None:
+    """Give ``path`` (a file or a folder) the mode a plain ``open(path, "w")`` or
+    ``os.mkdir(path)`` would have given it: 0o666 or 0o777 less the umask.
+
+    Raises
+    ------
+    OSError
+        ``path`` does not exist or its mode cannot be changed.
+    """
+    p = Path(path)
+    base = 0o777 if stat.S_ISDIR(p.stat().st_mode) else 0o666
+    os.chmod(p, base & ~_umask())

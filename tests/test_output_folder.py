@@ -1,0 +1,132 @@
+"""An output folder is replaced whole, so addb refuses one that holds what it did not write.
+
+`addb process SUBJECT --out SUBJECT` once deleted the subject's own files, and `--out` naming
+a folder of notes replaced it with the outputs. Every refusal happens before any stage runs
+and leaves every file where it was. Outputs are as readable as the umask makes a new file.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.dataset.runner import process_dataset
+from solver.errors import DatasetError, OutputFolderError
+from solver.outputs import check_output_folder
+from solver.pipeline import process_kinematics, process_subject
+from tests.conftest import SHARED_DATA, writable_copy
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    """Every file below ``folder`` (relative path -> bytes)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def subject(tmp_path: Path) -> Path:
+    return writable_copy(WALK, tmp_path / "lab" / "s01")
+
+
+@pytest.mark.parametrize("where", ["the subject folder", "a folder above it"])
+@pytest.mark.parametrize("run", [process_subject, process_kinematics], ids=["process", "kinematics"])
+def test_an_output_folder_that_is_or_holds_the_subject_is_refused_before_any_stage(subject: Path, where: str, run) -> None:
+    out = subject if where == "the subject folder" else subject.parent.parent
+    before = _tree(out)
+    with pytest.raises(OutputFolderError, match="input folder") as err:
+        run(subject, out)
+    assert str(out) in str(err.value)
+    assert _tree(out) == before
+    assert not [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.")]  # no staging folder was made
+
+
+def test_a_folder_of_other_files_is_refused_and_kept(subject: Path, tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    (out / "other").mkdir(parents=True)
+    (out / "notes.txt").write_text("my notes")
+    with pytest.raises(OutputFolderError, match=r"holds 2 entries \(notes.txt, other\) and is not an output of addb"):
+        process_subject(subject, out)
+    assert (out / "notes.txt").read_text() == "my notes" and (out / "other").is_dir()
+    # the command line says the same, with the folder, and exits 1
+    assert cli(["process", str(subject), "--out", str(out)]) == 1
+    assert (out / "notes.txt").read_text() == "my notes"
+
+
+def test_a_file_is_refused(subject: Path, tmp_path: Path) -> None:
+    out = tmp_path / "afile"
+    out.write_text("not a folder")
+    with pytest.raises(OutputFolderError, match="exists and is not a folder"):
+        process_kinematics(subject, out)
+    assert out.read_text() == "not a folder"
+
+
+def test_an_earlier_output_an_empty_folder_and_a_folder_inside_the_subject_are_written(subject: Path, tmp_path: Path) -> None:
+    first = tmp_path / "out"
+    process_kinematics(subject, first)
+    (first / "stale.txt").write_text("from before")  # an earlier output: replaced whole
+    check_output_folder(first, (subject,))
+    process_kinematics(subject, first)
+    assert (first / "subject.json").is_file() and not (first / "stale.txt").exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    check_output_folder(empty, (subject,))
+    check_output_folder(subject / "addb_out", (subject,))  # where `addb view` writes by default
+
+
+def test_a_dataset_cannot_be_its_own_output_tree_and_a_foreign_subject_folder_fails_alone(subject: Path) -> None:
+    dataset = subject.parent.parent  # lab/s01 below it
+    before = _tree(dataset)
+    for out in (dataset, dataset.parent):
+        with pytest.raises(DatasetError, match="dataset folder"):
+            process_dataset(dataset, out)
+    assert _tree(dataset) == before
+    # the subject's output folder holds someone else's files: that subject fails, named, and
+    # its folder stays (no worker starts: no subject is left to run)
+    out = dataset.parent / "out"
+    (out / "lab" / "s01").mkdir(parents=True)
+    (out / "lab" / "s01" / "notes.txt").write_text("keep")
+    run = process_dataset(dataset, out)
+    [failed] = run.failed
+    assert failed["rel"] == "lab/s01" and failed["error"]["type"] == "OutputFolderError"
+    assert "notes.txt" in failed["error"]["message"]
+    assert (out / "lab" / "s01" / "notes.txt").read_text() == "keep"
+
+
+def test_outputs_are_as_readable_as_the_umask_allows(subject: Path, tmp_path: Path) -> None:
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "out"
+        process_kinematics(subject, out)
+    finally:
+        os.umask(old)
+    mode = lambda p: stat.S_IMODE(p.stat().st_mode)
+    assert mode(out) == 0o755  # not mkdtemp's 0700
+    assert mode(out / "s01_scaled.osim") == 0o644  # not mkstemp's 0600
+    assert mode(out / "walk" / "walk_ik.mot") == 0o644
+
+
+def test_a_folder_where_a_file_is_written_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "model_dir"
+    folder.mkdir()
+    assert cli(["kinematics", str(WALK), "--out", str(tmp_path / "out"), "--model", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert f"cannot use {folder}: Is a directory" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [["record", "--trial", "walk"], ["export", "--trial", "walk", "--format", "mcap"], ["export", "--format", "b3d"]],
+                         ids=["record", "export_mcap", "export_b3d"])
+def test_a_recording_or_b3d_named_by_a_folder_is_refused_before_processing(argv: list[str], subject: Path, tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    out = tmp_path / "out"
+    assert cli([argv[0], str(subject), *argv[1:], "-o", str(folder), "--out", str(out)] if argv[0] != "export" or "b3d" not in argv
+               else [argv[0], str(subject), *argv[1:], "-o", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert f"OutputFolderError ({folder}): is a folder; expected the name of the" in err and "Traceback" not in err
+    assert not out.exists() and list(folder.iterdir()) == []  # nothing processed, nothing written
