@@ -62,7 +62,7 @@ from __future__ import annotations
 import json
 import time as _time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -115,7 +115,32 @@ def read_extensions(subject_dir: str | Path) -> list[dict[str, Any]]:
             raise SubjectFolderError(
                 f"extension {i + 1} has cause {e['cause']!r}, which this version cannot apply (known: {', '.join(CORRECTIONS)})", path=path
             )
+        _check_fields(i, e, path)
     return exts
+
+
+def _check_fields(i: int, entry: Mapping[str, Any], path: Path) -> None:
+    """Raise SubjectFolderError naming extension ``i + 1`` of ``path`` and the field, when
+    a field its cause's correction reads is missing or of the wrong kind
+    (:attr:`Correction.fields`, :attr:`Correction.optional`)."""
+    spec = CORRECTIONS[entry["cause"]]
+    for name, kind in (*spec.fields.items(), *spec.optional.items()):
+        if name not in entry:
+            if name in spec.fields:
+                raise SubjectFolderError(f"extension {i + 1} ({entry['cause']}) has no {name!r}; expected {FIELD_KINDS[kind][1]}",
+                                         path=path, where=f"extensions[{i}].{name}")
+            continue
+        ok, expected = FIELD_KINDS[kind]
+        if not ok(entry[name]):
+            raise SubjectFolderError(f"extension {i + 1} ({entry['cause']}) has {name}={entry[name]!r}; expected {expected}",
+                                     path=path, where=f"extensions[{i}].{name}")
+    if entry["cause"] == "marker_offset" and len(entry["time_s"]) != len(entry["lab_shift_m"]):
+        raise SubjectFolderError(f"extension {i + 1} (marker_offset) has {len(entry['time_s'])} times and "
+                                 f"{len(entry['lab_shift_m'])} lab_shift_m rows; expected one row per time",
+                                 path=path, where=f"extensions[{i}].lab_shift_m")
+    if entry["cause"] == "unmeasured_force" and any(r[1] > entry["n_frames"] for r in entry.get("frames", [])):
+        raise SubjectFolderError(f"extension {i + 1} (unmeasured_force) has a frame range past n_frames={entry['n_frames']}",
+                                 path=path, where=f"extensions[{i}].frames")
 
 
 def append_extension(subject_dir: str | Path, extension: Mapping[str, Any], *, source: str = "addb diagnose") -> Path:
@@ -350,8 +375,19 @@ def extend_subject(subject: Subject) -> Subject:
 
 
 def _change_mass(subject: Subject, ext: Mapping[str, Any]) -> Subject:
-    """``body_mass``: the subject's mass plus ``mass_change_kg``."""
-    return replace(subject, mass_kg=subject.mass_kg + float(ext["mass_change_kg"]))
+    """``body_mass``: the subject's mass plus ``mass_change_kg``.
+
+    Raises
+    ------
+    SubjectFolderError
+        The changed mass is not positive (naming the extensions file).
+    """
+    mass = subject.mass_kg + float(ext["mass_change_kg"])
+    if not mass > 0:
+        raise SubjectFolderError(f"a body_mass extension changes the subject's {subject.mass_kg:g} kg by "
+                                 f"{float(ext['mass_change_kg']):g} kg to {mass:g} kg; expected a positive mass",
+                                 path=subject.path / FILE_NAME)
+    return replace(subject, mass_kg=mass)
 
 
 def _redistributed_model(subject: Subject, ext: Mapping[str, Any]) -> Subject:
@@ -450,6 +486,10 @@ class Correction:
     prepare
         ``(subject folder, entry) -> entry`` on saving (:func:`save_extension`): writes the
         files the entry refers to.
+    fields, optional
+        The entry's fields these read, name -> kind (:data:`FIELD_KINDS`): required, and
+        checked when present; :func:`read_extensions` refuses an entry that lacks one or
+        holds the wrong kind.
 
     ``unmeasured_force`` extensions have none of these: their frames join the masks
     (:func:`extension_masks`).
@@ -459,21 +499,52 @@ class Correction:
     markers: Callable[[MarkerTrajectories, Mapping[str, Any]], MarkerTrajectories] | None = None
     subject: Callable[[Subject, Mapping[str, Any]], Subject] | None = None
     prepare: Callable[[Path, dict[str, Any]], dict[str, Any]] | None = None
+    fields: Mapping[str, str] = field(default_factory=dict)
+    optional: Mapping[str, str] = field(default_factory=dict)
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v))
+
+
+def _is_vector(v: Any) -> bool:
+    return isinstance(v, list) and len(v) == 3 and all(_is_number(x) for x in v)
+
+
+#: Kind of an extension field -> (test of its JSON value, what is expected, for the error).
+FIELD_KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "text": (lambda v: isinstance(v, str) and bool(v), "a name (text)"),
+    "number": (_is_number, "a number"),
+    "positive": (lambda v: _is_number(v) and v > 0, "a positive number"),
+    "count": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v > 0, "a positive whole number"),
+    "vector": (_is_vector, "3 numbers [x, y, z]"),
+    "numbers": (lambda v: isinstance(v, list) and len(v) > 0 and all(_is_number(x) for x in v), "a list of numbers"),
+    "vectors": (lambda v: isinstance(v, list) and len(v) > 0 and all(_is_vector(x) for x in v), "a list of [x, y, z] rows"),
+    "masses": (lambda v: isinstance(v, dict) and all(isinstance(k, str) and _is_number(x) for k, x in v.items()),
+               "an object of group name -> kg"),
+    "frames": (lambda v: isinstance(v, list) and all(
+        isinstance(r, list) and len(r) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in r) and 0 <= r[0] <= r[1]
+        for r in v), "a list of [start, stop] frame ranges (whole numbers, start <= stop)"),
+}
 
 
 #: Cause name -> its correction. Every diagnosis cause has an entry here (the diagnosis'
 #: registry refuses one that has not, :func:`solver.diagnose.causes.base.check`); the
 #: diagnosis' cause module says how the entry is written, this table how it is applied.
 CORRECTIONS: dict[str, Correction] = {
-    "unmeasured_force": Correction(),
-    "body_mass": Correction(subject=_change_mass),
-    "force_time_offset": Correction(forces=_delay_forces),
-    "plate_force_offset": Correction(forces=_offset_forces),
-    "plate_force_gain": Correction(forces=_gain_forces),
-    "plate_position_offset": Correction(forces=_shift_forces),
-    "segment_mass_distribution": Correction(subject=_redistributed_model, prepare=_write_redistributed_model),
-    "marker_offset": Correction(markers=_shift_marker),
-    "plate_registration": Correction(forces=_register_forces),
+    "unmeasured_force": Correction(fields={"trial": "text", "n_frames": "count"}, optional={"frames": "frames"}),
+    "body_mass": Correction(subject=_change_mass, fields={"mass_change_kg": "number"}),
+    "force_time_offset": Correction(forces=_delay_forces, fields={"trial": "text", "delay_s": "number"}),
+    "plate_force_offset": Correction(forces=_offset_forces, fields={"trial": "text", "plate": "text", "offset_N": "vector"},
+                                     optional={"centre_m": "vector"}),
+    "plate_force_gain": Correction(forces=_gain_forces, fields={"trial": "text", "plate": "text", "gain": "positive"}),
+    "plate_position_offset": Correction(forces=_shift_forces, fields={"trial": "text", "plate": "text", "shift_m": "vector"}),
+    "segment_mass_distribution": Correction(subject=_redistributed_model, prepare=_write_redistributed_model,
+                                            optional={"model": "text", "mass_change_kg": "masses"}),
+    "marker_offset": Correction(markers=_shift_marker, fields={"trial": "text", "marker": "text", "time_s": "numbers",
+                                                               "lab_shift_m": "vectors"}, optional={"shift_m": "vector"}),
+    "plate_registration": Correction(forces=_register_forces, fields={"trial": "text", "shift_m": "vector", "centre_m": "vector"},
+                                     optional={"rotation_rad": "number"}),
 }
 
 

@@ -213,7 +213,9 @@ def assign_contacts(
     foot_loaded = np.stack([(plate_foot == k).any(axis=0) for k in range(len(feet))], axis=0)
 
     # kinematic contact: lowest point at the level the foot has when it stands on a plate
-    ground = np.nanmedian(np.concatenate([p.cop[np.nan_to_num(p.force[:, 1]) > st.loaded_bw * bw, 1] for p in plates] or [np.zeros(1)]))
+    levels = np.concatenate([p.cop[np.nan_to_num(p.force[:, 1]) > st.loaded_bw * bw, 1] for p in plates] or [np.zeros(1)])
+    levels = levels[np.isfinite(levels)]
+    ground = float(np.median(levels)) if levels.size else np.nan  # no plate ever loaded: no kinematic contact
     contact = np.zeros((len(feet), t), dtype=bool)
     for k, (_, _, lowest) in enumerate(pts):
         height = lowest[:, 1] - ground

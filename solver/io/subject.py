@@ -141,7 +141,8 @@ def load_subject(path: str | Path) -> Subject:
     SubjectFolderError
         ``path`` is not a folder; ``_subject.json`` missing, not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
-        the key); a malformed ``heightM``, ``footBodyNames`` or ``disableDynamics``;
+        the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
+        unit error); a malformed ``heightM``, ``footBodyNames`` (or an empty list) or ``disableDynamics``;
         no ``unscaled_generic.osim``; no ``trials`` folder or no trial in it; a trial
         folder without ``markers.trc``/``markers.c3d`` or with both.
     """
@@ -152,8 +153,8 @@ def load_subject(path: str | Path) -> Subject:
         raise SubjectFolderError("expected a subject folder, found a file", path=folder)
     raw = _read_json(folder / SUBJECT_JSON)
     json_path = folder / SUBJECT_JSON
-    mass = _number(raw, "massKg", json_path, required=True)
-    height = _number(raw, "heightM", json_path, required=False)
+    mass = _number(raw, "massKg", json_path, required=True, most=MOST_KG)
+    height = _number(raw, "heightM", json_path, required=False, most=MOST_M)
     model = folder / MODEL_FILE
     if not model.is_file():
         raise SubjectFolderError(
@@ -189,7 +190,13 @@ def _read_json(path: Path) -> dict[str, Any]:
     return raw
 
 
-def _number(raw: dict[str, Any], key: str, path: Path, *, required: bool) -> float | None:
+#: Largest ``massKg`` (kg) and ``heightM`` (m) read as such: a larger value is a unit error
+#: (grams, centimetres), refused with the file and key named, not scaled to a giant.
+MOST_KG = 500.0
+MOST_M = 3.0
+
+
+def _number(raw: dict[str, Any], key: str, path: Path, *, required: bool, most: float = math.inf) -> float | None:
     if key not in raw or raw[key] in ("", None):
         if required:
             raise SubjectFolderError(
@@ -205,6 +212,10 @@ def _number(raw: dict[str, Any], key: str, path: Path, *, required: bool) -> flo
         number = math.nan
     if not (math.isfinite(number) and number > 0):
         raise SubjectFolderError(f"{key}={value!r} is not a positive number", path=path, where=key)
+    if number > most:
+        unit = "kg" if key == "massKg" else "m"
+        raise SubjectFolderError(f"{key}={value!r} is more than {most:g} {unit}; expected the value in {unit} (not {'g or lb' if unit == 'kg' else 'cm or mm'})",
+                                 path=path, where=key)
     return number
 
 
@@ -212,9 +223,9 @@ def _foot_bodies(raw: dict[str, Any], path: Path) -> tuple[str, ...]:
     value = raw.get("footBodyNames")
     if value is None:
         return DEFAULT_FOOT_BODIES
-    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v for v in value):
         raise SubjectFolderError(
-            f"footBodyNames={value!r}; expected a list of body names",
+            f"footBodyNames={value!r}; expected a list of one or more body names (the feet: contact is found from them)",
             path=path,
             where="footBodyNames",
         )

@@ -110,6 +110,28 @@ def _initial_fit_poses(solver: FrameSolver, fit_y: FloatArray, trial_of: list[in
     return q_init
 
 
+#: Marker RMS error (m) over which a trial's fit is warned about: far past any lab's
+#: marker error (the shared trials fit at 0.7-1.3 cm), it means the markers and the model
+#: disagree in units or identity (a TRC's Units line, ``heightM`` in the wrong unit, a
+#: marker set mapped to the wrong landmarks).
+GROSS_RMS_M = 0.10
+
+
+def _warn_gross_errors(results: Sequence[TrialKinematics]) -> None:
+    """Warn (UserWarning) about each trial whose marker RMS error exceeds :data:`GROSS_RMS_M`."""
+    import warnings
+
+    for trial in results:
+        if trial.marker_rms > GROSS_RMS_M:
+            warnings.warn(
+                f"trial {trial.name}: marker RMS error {100 * trial.marker_rms:.1f} cm after scaling and inverse "
+                "kinematics; the markers and the model disagree: check the marker file's Units line (mm or m), "
+                "heightM, and that the marker names match the model's",
+                UserWarning,
+                stacklevel=3,
+            )
+
+
 def run_kinematics(
     generic: OsimModel,
     trials: Sequence[tuple[str, MarkerTrajectories]],
@@ -228,6 +250,7 @@ def run_kinematics(
         results.append(_trial_ik(sk, name, markers, names, columns[k], w, unmatched_k, opts.ik))
     timings["ik"] = time.perf_counter() - t3
     timings["total"] = time.perf_counter() - t0
+    _warn_gross_errors(results)
     say("kinematics done", 1.0)
     body_scales = {b: tuple(float(v) for v in s) for b, s in groups.body_scales(fit.scales).items()}
     offsets = {n: tuple(float(v) for v in d) for n, d in zip(union, fit.offsets)}
@@ -357,5 +380,6 @@ def run_ik(
         w = np.array([float(opts.marker_weights.get(n, 1.0)) for n in names])
         results.append(_trial_ik(sk, name, markers, names, columns[k], w, tuple(match.unmatched), opts.ik))
     seconds = time.perf_counter() - t0
+    _warn_gross_errors(results)
     say("kinematics done", 1.0)
     return KinematicsResult(model=model, body_scales={}, marker_offsets={}, trials=tuple(results), seconds={"ik": seconds, "total": seconds})

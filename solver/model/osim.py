@@ -612,6 +612,15 @@ def is_v3_layout(model_elem: ET.Element) -> bool:
     return jointset is None or len(list(jointset.iter())) <= 1 or jointset.find(".//*[@name]") is None
 
 
+def _refuse_duplicates(ctx: _Ctx, kind: str, names: list[str], elem: ET.Element | None) -> None:
+    """Raise OsimModelError naming the first ``kind`` name that two components share."""
+    seen: set[str] = set()
+    for n in names:
+        if n in seen:
+            raise ctx.error(f"two {kind} components are named {n!r}; expected unique {kind} names", elem)
+        seen.add(n)
+
+
 def read_osim(path: str | Path) -> OsimModel:
     """Parse an OpenSim model file.
 
@@ -649,6 +658,9 @@ def read_osim(path: str | Path) -> OsimModel:
         raise ctx.error("no <BodySet>", root)
     body_elems = [b for b in bodyset.iter("Body") if b.get("name") != "ground"]
     bodies = [_parse_body(ctx, b) for b in body_elems]
+    _refuse_duplicates(ctx, "body", [b.name for b in bodies], bodyset)
+    if not sum(b.mass for b in bodies) > 0:
+        raise ctx.error("every body has zero mass; expected the segments' masses in kg", bodyset)
     names = {b.name for b in bodies}
     joints: list[Joint] = []
     coords: list[Coordinate] = []
@@ -683,16 +695,17 @@ def read_osim(path: str | Path) -> OsimModel:
         for off in (j.parent, j.child):
             if off.body not in names and off.body != "ground":
                 raise ctx.error(f"joint {j.name} refers to unknown body {off.body!r}")
+    _refuse_duplicates(ctx, "joint", [j.name for j in joints], root)
+    _refuse_duplicates(ctx, "coordinate", [c.name for c in coords], root)
     joints = _sort_joints(ctx, joints)
     cnames = {c.name for c in coords}
-    if len(cnames) != len(coords):
-        raise ctx.error("duplicate coordinate names", root)
     couplers = _parse_couplers(ctx, root)
     for c in couplers:
         for n in (c.dependent, c.independent):
             if n not in cnames:
                 raise ctx.error(f"coupler {c.name} names unknown coordinate {n!r}")
     markers = _parse_markers(ctx, root, frames)
+    _refuse_duplicates(ctx, "marker", [m.name for m in markers], root.find("MarkerSet"))
     for m in markers:
         if m.body not in names and m.body != "ground":
             raise ctx.error(f"marker {m.name} is on unknown body {m.body!r}")

@@ -66,3 +66,28 @@ def test_coupler_with_unknown_coordinate(tmp_path: Path) -> None:
 def test_missing_file_raises_file_not_found(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError):
         read_osim(tmp_path / "nope.osim")
+
+
+def test_two_markers_of_one_name_are_refused(tmp_path: Path) -> None:
+    start = SOURCE.index('<Marker name="')
+    end = SOURCE.index("</Marker>", start) + len("</Marker>")
+    text = SOURCE[:end] + SOURCE[start:end] + SOURCE[end:]  # the first marker twice
+    name = SOURCE[start:].split('"')[1]
+    with pytest.raises(OsimModelError, match=f"two marker components are named '{name}'") as err:
+        read_osim(_write(tmp_path, text))
+    assert "MarkerSet" in str(err.value)
+
+
+def test_two_bodies_of_one_name_are_named_as_such(tmp_path: Path) -> None:
+    text = SOURCE.replace('<Body name="tibia_r">', '<Body name="femur_r">', 1)
+    assert text != SOURCE
+    with pytest.raises(OsimModelError, match="two body components are named 'femur_r'"):
+        read_osim(_write(tmp_path, text))
+
+
+def test_a_model_without_mass_is_refused(tmp_path: Path) -> None:
+    import re
+
+    text = re.sub(r"<mass>[^<]*</mass>", "<mass>0</mass>", SOURCE)
+    with pytest.raises(OsimModelError, match="every body has zero mass"):
+        read_osim(_write(tmp_path, text))
