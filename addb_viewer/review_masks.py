@@ -215,15 +215,19 @@ def is_addb_review(path: str | os.PathLike[str]) -> bool:
     return isinstance(data, dict) and KEY in data
 
 
-def masks_from_file(path: str | os.PathLike[str], subject_dir: str | os.PathLike[str], *, reviewer: str) -> dict[str, BoolArray]:
+def masks_from_file(
+    path: str | os.PathLike[str], subject_dir: str | os.PathLike[str], *, reviewer: str, trials: tuple[str, ...] | None = None
+) -> dict[str, BoolArray]:
     """``unmeasured_force`` from an ``--annotations`` file: a review record
-    (:func:`unmeasured_force`) or an AddBiomechanics ``review.json`` of a one-trial subject
-    (one entry per marker frame, resampled onto the processed frames).
+    (:func:`unmeasured_force`) or an AddBiomechanics ``review.json`` of one trial (one entry
+    per marker frame, resampled onto the processed frames): the subject's only trial, or
+    the one trial of ``trials`` (``--trial``).
 
     Raises
     ------
     solver.errors.SubjectFolderError
-        A ``review.json`` given for a subject with more than one trial.
+        A ``review.json`` given for a subject with more than one trial and not one trial
+        in ``trials`` (or a trial the subject lacks).
     solver.errors.FileFormatError
         A damaged ``review.json``, or one with fewer entries than the trial's marker frames.
     annotations.AnnotationError
@@ -238,17 +242,21 @@ def masks_from_file(path: str | os.PathLike[str], subject_dir: str | os.PathLike
         from solver.masks import resample_mask
 
         subject = load_subject(subject_dir)
-        if len(subject.trials) != 1:
+        if trials is not None and len(trials) == 1:
+            files = subject.trial(trials[0])  # SubjectFolderError naming the subject's trials
+        elif len(subject.trials) == 1:
+            files = subject.trials[0]
+        else:
             raise SubjectFolderError(
                 "an AddBiomechanics review.json covers one trial; this subject has "
-                f"{len(subject.trials)} ({', '.join(t.name for t in subject.trials)})",
+                f"{len(subject.trials)} ({', '.join(t.name for t in subject.trials)}): name it with --trial",
                 path=Path(path),
             )
-        name = subject.trials[0].name
+        name = files.name
         time = processed_frames(subject, name)
         if time is None:
             return {}
-        markers = load_trial(subject.trials[0]).markers
+        markers = load_trial(files).markers
         mask = read_review(path, n_frames=markers.n_frames)
         return {name: resample_mask(mask, np.asarray(markers.time), time)}
     with AnnotationStore.open(path, reviewer=reviewer) as store:

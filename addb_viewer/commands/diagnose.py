@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
     out = Path(args.out) if args.out else default_output_dir(subject)
     record = Path(args.annotations) if args.annotations else annotations_path(subject, out)
-    masks = masks_from_file(record, subject, reviewer="addb diagnose") if record.is_file() else {}
+    masks = masks_from_file(record, subject, reviewer="addb diagnose", trials=(args.trial,)) if record.is_file() else {}
     progress = ProgressBar(sys.stderr)
     if args.trial not in processed_trials(out):
         from solver.pipeline import process_subject

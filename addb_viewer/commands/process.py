@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.annotations:
         from addb_viewer.review_masks import masks_from_file
 
-        unmeasured_force = masks_from_file(args.annotations, args.subject, reviewer="addb process") or None
+        unmeasured_force = masks_from_file(args.annotations, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
     result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
     rows = []
     for t in result.kinematics.kinematics.trials:

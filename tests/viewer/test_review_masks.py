@@ -241,3 +241,21 @@ def test_import_keeps_agreeing_manual_flags_clears_the_others_and_undoes(tmp_pat
         assert store.ranges("walking1") == [(0, 24)]
         store.undo()  # one edit, one undo step
         assert store.snapshot() == before
+
+
+def test_a_review_json_for_one_trial_of_several_is_taken_with_trial(tmp_path: Path) -> None:
+    """``addb process SUBJECT --trial walk --annotations review.json``: the one trial named."""
+    from solver.io.subject import load_subject, load_trial
+
+    walk = SHARED_DATA / "subjects" / "rajagopal2016_walk"  # static and walk
+    n = load_trial(load_subject(walk).trial("walk")).markers.n_frames
+    flags = np.zeros(n, bool)
+    flags[:30] = True
+    review = tmp_path / "review.json"
+    write_addb_review(review, flags)
+    masks = masks_from_file(review, walk, reviewer="test", trials=("walk",))
+    assert list(masks) == ["walk"] and masks["walk"][:25].all() and not masks["walk"][40:].any()
+    with pytest.raises(SubjectFolderError, match="name it with --trial"):
+        masks_from_file(review, walk, reviewer="test", trials=("walk", "static"))
+    with pytest.raises(SubjectFolderError, match="no trial 'run'"):
+        masks_from_file(review, walk, reviewer="test", trials=("run",))
