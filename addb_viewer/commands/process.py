@@ -124,7 +124,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("subject", help="AddBiomechanics subject folder, or a dataset folder of subject folders")
-    p.add_argument("--out", required=True, help="output folder (replaced atomically; for a dataset, the output tree)")
+    p.add_argument("--out", required=True, help="output folder: new, empty, or an earlier output of addb (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
         "--fit", choices=("default", "converged", "rounds", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up

@@ -26,7 +26,13 @@ from numpy.typing import NDArray
 from solver.errors import KinematicsError
 from solver.io.types import MarkerTrajectories
 from solver.kinematics.autoplace import place_markers
-from solver.kinematics.fit import FitSettings, ScaleFitProblem, fit_model, landmark_scale_response
+from solver.kinematics.fit import (
+    FitResult,
+    FitSettings,
+    ScaleFitProblem,
+    fit_model,
+    landmark_scale_response,
+)
 from solver.kinematics.ik import (
     FrameSolver,
     IkSettings,
@@ -115,6 +121,29 @@ def _initial_fit_poses(solver: FrameSolver, fit_y: FloatArray, trial_of: list[in
 #: disagree in units or identity (a TRC's Units line, ``heightM`` in the wrong unit, a
 #: marker set mapped to the wrong landmarks).
 GROSS_RMS_M = 0.10
+
+
+def _scale_fit(problem: ScaleFitProblem, q0: FloatArray, scales0: FloatArray, trials: Sequence[tuple[str, MarkerTrajectories]]) -> FitResult:
+    """:func:`fit_model`, with a scale the fit drives to zero or below (markers and model
+    apart by far more than any subject's size: a unit error) reported as such.
+
+    Raises
+    ------
+    KinematicsError
+        The fit asked for a non-positive scale factor, naming the marker files.
+    """
+    from solver.errors import OsimModelError
+
+    try:
+        return fit_model(problem, q0, scales0)
+    except OsimModelError as exc:
+        if "scale factors of" not in str(exc):
+            raise
+        files = ", ".join(str(m.source) for _, m in trials if m.source) or "the marker files"
+        raise KinematicsError(
+            f"the scale fit drove a body's size to zero or below ({exc.message}): the markers and the model are far "
+            f"apart in size; check the Units line of {files} (mm or m) and heightM"
+        ) from None
 
 
 def _warn_gross_errors(results: Sequence[TrialKinematics]) -> None:
@@ -217,7 +246,7 @@ def run_kinematics(
     say("scale fit", 0.2)
     t2 = time.perf_counter()
     problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
-    fit = fit_model(problem, q_init, scales0)
+    fit = _scale_fit(problem, q_init, scales0, trials)
     attached: dict[str, str] = {}
     if unmatched:
         say("attaching unmatched markers", 0.3)
@@ -231,7 +260,7 @@ def run_kinematics(
             fit_y = np.concatenate([fit_y, gather([p.name for p in placed])], axis=1)
             weights = np.append(weights, np.ones(len(placed)))
             problem = ScaleFitProblem(generic, groups, union, fit_y, weights, h_scale, opts.fit)
-            fit = fit_model(problem, fit.q, fit.scales)
+            fit = _scale_fit(problem, fit.q, fit.scales, trials)
     in_fit = set(union)
     landmarks = [m.name for m in generic.markers if m.fixed and m.name in in_fit]
     fit_trial = np.array(trial_of)

@@ -172,13 +172,29 @@ def test_a_plate_without_centre_of_pressure_under_load_is_warned_about(walk: Pat
         process_subject(walk, tmp_path / "out")
 
 
-def test_markers_in_the_wrong_unit_are_warned_about(walk: Path, tmp_path: Path) -> None:
-    path = walk / "trials" / "walk" / "markers.trc"
-    text = path.read_text()
-    lines = text.splitlines()
-    assert lines[1].split("\t")[4] == "Units" and lines[2].count(" mm\t") == 1
-    lines[2] = lines[2].replace(" mm\t", " m\t")  # the values stay in mm: a thousand times too far apart
+def _set_trc_units(path: Path, unit: str) -> None:
+    """Write ``unit`` in the Units field of a TRC's header (its values unchanged)."""
+    lines = path.read_text().splitlines()
+    values = lines[2].split("\t")
+    [k] = [i for i, v in enumerate(values) if v.strip() == "mm"]
+    values[k] = values[k].replace("mm", unit)
+    lines[2] = "\t".join(values)
     path.write_text("\n".join(lines) + "\n")
+
+
+def test_markers_in_the_wrong_unit_are_warned_about(walk: Path, tmp_path: Path) -> None:
+    _set_trc_units(walk / "trials" / "walk" / "markers.trc", "m")  # the values stay in mm: a thousand times too far apart
     with pytest.warns(UserWarning, match=r"trial walk: marker RMS error \d+\.\d cm .* check the marker file's Units line"):
         process_kinematics(walk, tmp_path / "out")
     assert np.isfinite(json.loads((tmp_path / "out" / "walk" / "results.json").read_text())["marker_rms_m"])
+
+
+def test_markers_ten_times_too_large_name_the_marker_files_not_the_model(walk: Path, tmp_path: Path) -> None:
+    from solver.errors import KinematicsError
+
+    for trial in ("static", "walk"):
+        _set_trc_units(walk / "trials" / trial / "markers.trc", "cm")  # mm values read as cm: ten times too large
+    with pytest.raises(KinematicsError, match="the scale fit drove a body's size to zero or below") as err:
+        process_kinematics(walk, tmp_path / "out")
+    assert "markers.trc" in str(err.value) and "Units line" in str(err.value)
+    assert not (tmp_path / "out").exists()
