@@ -33,10 +33,14 @@ import numpy as np
 from solver.errors import OutputFolderError
 from solver.files import as_created
 
+CACHE_DIR = ".addb_cache"
+"""Folder of the output folder holding caches of the stages (not a trial)."""
+
 #: Entries of which one marks a folder as an output of addb: ``subject.json`` (every
-#: subject output, kinematics only included) or ``manifest.json`` (a dataset run's
-#: subject folder, also when the subject failed).
-OUTPUT_MARKERS = ("subject.json", "manifest.json")
+#: subject output, kinematics only included), ``manifest.json`` (a dataset run's subject
+#: folder, also when the subject failed) or :data:`CACHE_DIR` (a folder the diagnosis'
+#: judged fit reprocesses from the kinematics cache alone).
+OUTPUT_MARKERS = ("subject.json", "manifest.json", CACHE_DIR)
 
 
 def _clean(value: Any) -> Any:

@@ -42,7 +42,7 @@ from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
-from solver.outputs import check_output_folder, staged_output, write_json
+from solver.outputs import CACHE_DIR, check_output_folder, staged_output, write_json
 from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 from solver.sampling import frame_rate
@@ -375,8 +375,10 @@ def reprocess_dynamics(
 
 
 # ---------------------------------------------------------------------- kinematics cache
-CACHE_DIR = ".addb_cache"
-"""Folder of the output folder holding caches of the stages (not a trial)."""
+#: Name prefix of the review record's files in a subject folder (the annotations package's
+#: ``annotations.json``, ``annotations.journal``, ``annotations.lock``): not inputs of the
+#: kinematics stage (:func:`kinematics_cache_key`).
+REVIEW_RECORD_PREFIX = "annotations."
 KINEMATICS_CACHE = "kinematics.pkl"
 """The kinematics stage's cached result inside :data:`CACHE_DIR`."""
 _CACHE_SCHEMA = "addb.kinematics_cache/1"
@@ -398,10 +400,11 @@ def kinematics_cache_key(subject: Subject, options: KinematicsOptions | None = N
     (links followed), each by size, modification time (ns) and content digest; the model
     file the subject names (it may live elsewhere); the kinematics options; addb's version
     and a digest of the solver's source. The reviewer's flags are not part of it: they
-    enter the dynamics stage only.
+    enter the dynamics stage only, so the review record (``annotations.json`` and its
+    journal and lock, :data:`REVIEW_RECORD_PREFIX`) and hidden files are left out.
     """
     folder = Path(subject.path).resolve()
-    files = [f for f in folder.iterdir() if f.is_file()]
+    files = [f for f in folder.iterdir() if f.is_file() and not f.name.startswith((REVIEW_RECORD_PREFIX, "."))]
     if (folder / "trials").is_dir():
         files += [f for f in (folder / "trials").rglob("*") if f.is_file()]
     inputs = {}

@@ -318,3 +318,24 @@ def test_the_command_offers_every_named_fit() -> None:
 def test_an_unknown_fit_name_is_refused() -> None:
     with pytest.raises(ValueError, match="unknown dynamics fit 'fast'"):
         pipeline.options_for_fit("fast")
+
+
+def test_the_review_record_in_the_subject_folder_does_not_invalidate_the_kinematics(
+    base: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The review app keeps the record in the subject folder (annotations.json, its journal
+    and lock): a flag edit rewrites those files, and the Reprocess that follows must still
+    reuse the cached kinematics (the key once hashed every top-level file)."""
+    from annotations import AnnotationStore
+
+    subject, out0 = base
+    out = _copy_out(out0, tmp_path / "out")
+    key = pipeline.kinematics_cache_key(pipeline.extend_subject(pipeline.load_subject(subject)))
+    with AnnotationStore.open(subject / "annotations.json", reviewer="tester") as store:
+        store.set_reviewed("walk", True)
+    written = sorted(p.name for p in subject.iterdir() if p.name.startswith("annotations."))
+    assert "annotations.json" in written and len(written) >= 2, written
+    assert pipeline.kinematics_cache_key(pipeline.extend_subject(pipeline.load_subject(subject))) == key
+    _no_kinematics(monkeypatch)
+    reprocess_dynamics(subject, out, ["walk"], _flags(out), options=BAND)
+    assert set(range(100, 121)) <= set(_results(out)["unobserved_frames"])
