@@ -267,9 +267,14 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
     return sorted(out, key=lambda row: row.attention)
 
 
-def next_to_review(rows: list[QueueRow], after: tuple[str, str] | None = None) -> QueueRow | None:
-    """The first row that needs review (in queue order), other than ``after`` (rel, trial)."""
-    for row in rows:
+def next_to_review(rows: list[QueueRow], after: tuple[str, str | None] | None = None) -> QueueRow | None:
+    """The next row that needs review after ``after`` (rel, trial) in queue order, wrapping
+    around to the first; the first such row when ``after`` is no row (None, or a subject
+    whose trial is not known yet). Repeated, it visits every row that needs review, and
+    never returns ``after`` itself."""
+    keys = [(r.subject.rel, r.trial) for r in rows]
+    start = keys.index(after) + 1 if after in keys else 0
+    for row in rows[start:] + rows[:start]:
         if row.needs_review and (row.subject.rel, row.trial) != after:
             return row
     return None

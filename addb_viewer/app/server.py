@@ -122,6 +122,8 @@ class ReviewApp:
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
+        #: Why the review record could not be opened (shown again with every trial loaded).
+        self.store_problem: tuple[str, BaseException] | None = None
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
         self.scene: TrialScene | None = None
@@ -233,9 +235,11 @@ class ReviewApp:
         self.paths.annotations.parent.mkdir(parents=True, exist_ok=True)
         try:
             self.store = AnnotationStore.open(self.paths.annotations, reviewer=self.reviewer)
+            self.store_problem = None
         except AnnotationError as exc:
             self.store = None
-            self.show_error("The review record cannot be opened; flagging is disabled", exc)
+            self.store_problem = ("The review record cannot be opened; flagging is disabled", exc)
+            self.show_error(*self.store_problem)
 
     def stop(self) -> None:
         """Stop playback, cancel a running solver (and a dataset's background run), close
@@ -303,6 +307,8 @@ class ReviewApp:
             self._aim_camera(trial)
             self.render(self.playback.frame, force_plots=True)
         self.clear_error()
+        if self.store is None and self.store_problem is not None:  # stays in view while flagging is off
+            self.show_error(*self.store_problem)
         if problems:
             self.show_error("Some bone meshes could not be read (drawn as axes)", "; ".join(problems[:5]))
         if record_problem is not None:
@@ -575,7 +581,8 @@ class ReviewApp:
             editor, pb = self.editor, self.playback
             frame = pb.frame if pb is not None else 0
         if editor is None:
-            self.panel.saved.content = "Flagging is unavailable (no trial or no review record)."
+            why = f": {self.store_problem[1]}" if self.store is None and self.store_problem is not None else " (no trial or no review record)"
+            self.panel.saved.content = f"Flagging is unavailable{_escape(why)}."
             return
         self.panel.saved.content = f"saving: {what}…"
         try:

@@ -86,13 +86,16 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
     dict
         ``marker_rms_cm``, ``marker_max_cm`` (over all markers and frames),
         ``residual_force_rms_n``, ``residual_force_max_n``, ``residual_moment_rms_nm``,
-        ``residual_moment_max_nm``, ``hicks_frames`` (frames over a threshold),
+        ``residual_moment_max_nm``, ``hicks_frames`` (frames over a threshold): on the
+        frames with measured force only, as results.json's residual metrics (on a frame
+        left out of the fit the residual carries the force no plate measured);
         ``unobserved_frames`` (left out of the dynamic fit), ``measured_frames`` (frames
         with measured force, in the fit; None without dynamics), ``mass_kg``.
     """
     err = trial.marker_errors
-    f = np.linalg.norm(trial.residual_force, axis=1)
-    m = np.linalg.norm(trial.residual_moment, axis=1)
+    measured = ~np.asarray(trial.unobserved, bool)
+    f = np.linalg.norm(trial.residual_force, axis=1)[measured]
+    m = np.linalg.norm(trial.residual_moment, axis=1)[measured]
     rms = _rms(err.ravel())
     mx = _max(err.ravel())
     return {
@@ -102,7 +105,7 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
         "residual_force_max_n": _max(f),
         "residual_moment_rms_nm": _rms(m),
         "residual_moment_max_nm": _max(m),
-        "hicks_frames": int(hicks_exceeded(trial).sum()) if trial.has_dynamics else None,
+        "hicks_frames": int((hicks_exceeded(trial) & measured).sum()) if trial.has_dynamics else None,
         "unobserved_frames": int(np.count_nonzero(trial.unobserved)),
         "measured_frames": int(np.count_nonzero(~np.asarray(trial.unobserved, bool))) if trial.has_dynamics else None,
         "mass_kg": float(trial.mass_kg),
@@ -112,11 +115,11 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
 _ROWS = (
     ("marker_rms_cm", "marker RMS (cm)", 2),
     ("marker_max_cm", "marker max (cm)", 2),
-    ("residual_force_rms_n", "residual force RMS (N)", 1),
-    ("residual_force_max_n", "residual force max (N)", 1),
-    ("residual_moment_rms_nm", "residual moment RMS (N·m)", 1),
-    ("residual_moment_max_nm", "residual moment max (N·m)", 1),
-    ("hicks_frames", "frames over Hicks threshold", 0),
+    ("residual_force_rms_n", "residual force RMS, measured frames (N)", 1),
+    ("residual_force_max_n", "residual force max, measured frames (N)", 1),
+    ("residual_moment_rms_nm", "residual moment RMS, measured frames (N·m)", 1),
+    ("residual_moment_max_nm", "residual moment max, measured frames (N·m)", 1),
+    ("hicks_frames", "measured frames over a Hicks threshold", 0),
     ("unobserved_frames", "frames left out of dynamics", 0),
     ("measured_frames", "frames with measured force", 0),
     ("mass_kg", "mass (kg)", 2),

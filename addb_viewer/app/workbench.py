@@ -134,15 +134,20 @@ class Workbench:
     def refresh(self) -> list[QueueRow]:
         """Read the queue again from disk and redraw it."""
         with self._lock:
+            shown = getattr(self.app, "trial", None)
+            if self.current is not None and self.current[1] is None and shown is not None:
+                self.current = (self.current[0], shown.trial)  # the subject's trial has loaded since it was opened
             rows = build_queue(self.subjects, dict(self.running))
             self.rows = rows
             self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
             self.table.content = queue_markdown(rows, current=self.current)
             options = ("(none)", *self.labels)
-            if tuple(self.choice.options) != options:
+            value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
+            if tuple(self.choice.options) != options or self.choice.value != value:
                 with self.app._quiet_updates():
-                    self.choice.options = options
-                    self.choice.value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
+                    if tuple(self.choice.options) != options:
+                        self.choice.options = options
+                    self.choice.value = value  # also after R or a background open: the dropdown names the trial shown
             return rows
 
     def _poll(self) -> None:

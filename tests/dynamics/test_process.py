@@ -232,3 +232,19 @@ def test_reprocessing_one_trial_keeps_the_others(walk_out: Path, tmp_path: Path)
     r = _results(out, "walk")
     assert r["hicks_linear_threshold_N"] == pytest.approx(0.05 * r["mass_kg"] * 9.80665)
     assert not list(tmp_path.glob(".out.*"))
+
+
+def test_the_review_apps_table_gives_the_residuals_of_results_json(walk_out: Path) -> None:
+    """The Reprocess table's residual figures are over the frames with measured force, as
+    results.json's: over every frame they counted the force no plate measured on the frames
+    left out of the fit (hundreds of newtons on the walk) and every such frame as over a
+    Hicks threshold."""
+    from addb_viewer.app.summary import hicks_exceeded, trial_summary
+
+    trial = load_processed(walk_out, "walk")
+    r = _results(walk_out, "walk")
+    s = trial_summary(trial)
+    assert s["residual_force_rms_n"] == pytest.approx(r["linear_residual_rms_N"], rel=1e-9)
+    assert s["residual_moment_rms_nm"] == pytest.approx(r["angular_residual_rms_Nm"], rel=1e-9)
+    assert s["measured_frames"] == r["n_observed_frames"]
+    assert s["hicks_frames"] < int(hicks_exceeded(trial).sum())  # the left-out frames are not counted

@@ -83,6 +83,26 @@ def test_a_record_on_other_frames_is_not_edited_and_says_why(demo_paths, make_ap
         assert (store.review("walk").rate_hz, store.ranges("walk")) == (200.0, [(300, 301)])
 
 
+def test_a_damaged_review_record_keeps_saying_why_flagging_is_off(demo_paths, make_app) -> None:
+    """A hand-edited record that does not open disables flagging; the reason stays in the
+    page after every trial load, and a flag key says it too (it was shown once, then
+    cleared by the end of the first trial's loading, and the page said only "unavailable")."""
+    from addb_viewer.locations import annotations_path
+
+    record = annotations_path(demo_paths.subject_dir, demo_paths.out_dir)
+    record.parent.mkdir(parents=True, exist_ok=True)
+    record.write_text('{"schema": "addb.annotations", "vers')  # truncated
+    app = make_app(demo_paths)
+    app.load_trial("walk")
+    assert app.store is None and app.editor is None
+    assert app.panel.error.visible and "The review record cannot be opened" in app.panel.error.content
+    app.load_trial("static")
+    assert app.panel.error.visible and "The review record cannot be opened" in app.panel.error.content
+    app._edit("flag", lambda ed, frame, foot: ed.toggle(frame, foot))
+    assert app.panel.saved.content.startswith("Flagging is unavailable: ") and "no trial or no review record" not in app.panel.saved.content
+    assert record.read_text() == '{"schema": "addb.annotations", "vers'  # left as it was
+
+
 def test_trial_picker_refuses_names_from_the_page_that_leave_the_output(demo_paths, make_app) -> None:
     app = make_app(demo_paths)
     assert app.panel.trial.options == ("static", "walk") and app.panel.trial.value == "walk"

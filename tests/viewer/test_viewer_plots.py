@@ -93,5 +93,5 @@ def test_summary_table_marks_missing_dynamics(walk) -> None:
     assert before["marker_rms_cm"] == pytest.approx(100 * walk.metrics["marker_rms_m"], rel=1e-6)
     after = dict(before, residual_force_rms_n=12.5, marker_rms_cm=before["marker_rms_cm"] + 0.5)
     table = comparison_markdown(before, after)
-    assert "| residual force RMS (N) | — | 12.5 | — |" in table
+    assert "| residual force RMS, measured frames (N) | — | 12.5 | — |" in table
     assert "| marker RMS (cm) |" in table and "+0.50" in table

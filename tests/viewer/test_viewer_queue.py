@@ -101,3 +101,22 @@ def test_a_dataset_output_tree_opens_the_same_queue(dataset: Path) -> None:
     root2, out2, subjects2 = dataset_subjects(out)
     assert (root2, out2) == (root, out) and subjects2 == subjects
     assert [r.attention for r in build_queue(subjects2)] == [r.attention for r in build_queue(subjects)]
+
+
+def test_next_to_review_goes_round_every_unreviewed_row(tmp_path: Path) -> None:
+    """Pressing R again and again visits every row that needs review, in queue order, and
+    starts from the first when the trial on screen is not known yet (rel, None)."""
+    from types import SimpleNamespace
+
+    def row(rel: str, trial: str, needs: bool) -> SimpleNamespace:
+        return SimpleNamespace(subject=SimpleNamespace(rel=rel), trial=trial, needs_review=needs)
+
+    rows = [row("a", "t1", True), row("b", "t1", True), row("c", "t1", False), row("d", "t1", True)]
+    seen, after = [], None
+    for _ in range(4):
+        nxt = next_to_review(rows, after=after)
+        after = (nxt.subject.rel, nxt.trial)
+        seen.append(nxt.subject.rel)
+    assert seen == ["a", "b", "d", "a"]  # c is reviewed; after d the queue starts again
+    assert next_to_review(rows, after=("b", None)).subject.rel == "a"
+    assert next_to_review([row("a", "t1", True)], after=("a", "t1")) is None  # never the row on screen

@@ -162,7 +162,7 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
             assert a == before.n_frames - int(mask.sum()) and a < b, row
             after = load_processed(out / "labB" / "run", "run")
             assert np.array_equal(after.unobserved, mask)
-            res = page.get_by_role("row").filter(has_text="residual force RMS (N)").inner_text()
+            res = page.get_by_role("row").filter(has_text="residual force RMS, measured frames (N)").inner_text()
             rb, ra = (float(x) for x in re.findall(r"\d+\.\d", res)[:2])
             assert rb != ra, res
         finally:
