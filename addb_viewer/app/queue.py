@@ -209,29 +209,48 @@ def _snapshots(subject: QueueSubject) -> dict[str, Any]:
         return {}
 
 
+def _results_row(res: Path) -> dict[str, Any] | None:
+    """A queue row's figures from one trial's ``results.json`` (None when unreadable or
+    the trial has no ``trial.npz``)."""
+    if not (res.parent / "trial.npz").is_file():
+        return None
+    try:
+        m = json.loads(res.read_text())
+    except (OSError, ValueError):
+        return None
+    dyn = "n_observed_frames" in m
+    return {
+        "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
+        "measured_frames": m.get("n_observed_frames", 0), "marker_rms_m": m.get("marker_rms_m"),
+        "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
+    }  # fmt: skip
+
+
+#: The figures of a manifest's trial row that a later Reprocess (which rewrites the trial's
+#: results.json, not the dataset run's manifest) replaces.
+_REPROCESSED = ("status", "measured_frames", "marker_rms_m", "hicks_linear_ok", "hicks_angular_ok")
+
+
 def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any]]]:
-    """(processing state, detail, trial rows) from a subject's output folder."""
+    """(processing state, detail, trial rows) from a subject's output folder: the dataset
+    run's manifest, with the figures of each trial whose results.json is newer (the review
+    app's Reprocess) taken from there; without a manifest, the results.json files."""
+    from solver.dataset.manifest import MANIFEST_NAME
+
     manifest = read_manifest(subject.out_dir)
     if manifest is not None:
         if manifest.get("status") == "failed":
             err = manifest.get("error") or {}
             where = ":".join(str(x) for x in (err.get("path"), err.get("line")) if x is not None)
             return FAILED, f"{err.get('type')}: {err.get('message')}" + (f" ({where})" if where else ""), []
-        return PROCESSED, "", list(manifest.get("trials") or [])
-    rows = []
-    for res in sorted(subject.out_dir.glob("*/results.json")):
-        if not (res.parent / "trial.npz").is_file():
-            continue
-        try:
-            m = json.loads(res.read_text())
-        except (OSError, ValueError):
-            continue
-        dyn = "n_observed_frames" in m
-        rows.append({
-            "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
-            "measured_frames": m.get("n_observed_frames", 0), "marker_rms_m": m.get("marker_rms_m"),
-            "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
-        })  # fmt: skip
+        rows = [dict(r) for r in manifest.get("trials") or []]
+        written = (subject.out_dir / MANIFEST_NAME).stat().st_mtime_ns
+        for r in rows:
+            res = subject.out_dir / str(r.get("trial")) / "results.json"
+            if res.is_file() and res.stat().st_mtime_ns > written and (new := _results_row(res)) is not None:
+                r.update({k: new[k] for k in _REPROCESSED})
+        return PROCESSED, "", rows
+    rows = [row for res in sorted(subject.out_dir.glob("*/results.json")) if (row := _results_row(res)) is not None]
     return (PROCESSED if rows else NOT_PROCESSED), "", rows
 
 

@@ -120,3 +120,24 @@ def test_next_to_review_goes_round_every_unreviewed_row(tmp_path: Path) -> None:
     assert seen == ["a", "b", "d", "a"]  # c is reviewed; after d the queue starts again
     assert next_to_review(rows, after=("b", None)).subject.rel == "a"
     assert next_to_review([row("a", "t1", True)], after=("a", "t1")) is None  # never the row on screen
+
+
+def test_a_reprocess_after_the_dataset_run_shows_its_figures_in_the_queue(dataset: Path) -> None:
+    """The review app's Reprocess rewrites a trial's results.json, not the dataset run's
+    manifest: the queue takes that trial's figures from the newer results.json."""
+    import os
+
+    _, out, subjects = dataset_subjects(dataset)
+    res = out / "lab" / "fresh" / "walk" / "results.json"
+    m = json.loads(res.read_text())
+    before = {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")]
+    assert before.marker_rms_m == pytest.approx(m["marker_rms_m"])
+    m.update(marker_rms_m=0.0131, n_observed_frames=m["n_observed_frames"] - 14, hicks_linear_ok=False)
+    res.write_text(json.dumps(m))
+    manifest = out / "lab" / "fresh" / MANIFEST_NAME
+    os.utime(res, ns=(manifest.stat().st_mtime_ns + 10**9,) * 2)  # written after the run
+    after = {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")]
+    assert after.marker_rms_m == 0.0131 and after.measured_frames == before.measured_frames - 14
+    assert after.hicks_linear_ok is False and after.pending == before.pending  # proposals: the run's
+    os.utime(res, ns=(manifest.stat().st_mtime_ns - 10**9,) * 2)  # older than the manifest: the manifest counts
+    assert {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")].marker_rms_m == before.marker_rms_m
