@@ -130,6 +130,11 @@ EXPORT_BEFORE = f"rm -rf {BEFORE_TREE} && mkdir -p {BEFORE_TREE} && git archive 
 AGAINST = "ef4449a"
 AGAINST_TREE = f"/tmp/addb_{AGAINST}"
 EXPORT_AGAINST = f"rm -rf {AGAINST_TREE} && mkdir -p {AGAINST_TREE} && git archive {AGAINST} solver addb_viewer annotations | tar -x -C {AGAINST_TREE}"
+# git archive of the commit before the input checks of 2026-11-28 (output folder, extensions, subject values)
+CHECKS = "faf2215"
+CHECKS_TREE = f"/tmp/addb_{CHECKS}"
+EXPORT_CHECKS = f"rm -rf {CHECKS_TREE} && mkdir -p {CHECKS_TREE} && git archive {CHECKS} solver addb_viewer annotations | tar -x -C {CHECKS_TREE}"
+CHECKED_SUBJECTS = "rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023 camargo2021_levelground"
 DIAG = f"{PY} tests/benchmarks/bench_diagnose.py"
 #: The diagnosis table's draws 0-19 (blocks diagnose-draws-0-9 and -10-19), and with draws 20-39: what the comparisons read.
 TABLE = "docs/diagnose/results_draws_0_9.json docs/diagnose/results_draws_10_19.json"
@@ -359,6 +364,17 @@ FIGURES: tuple[Figure, ...] = (
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_against_before /tmp/addb_against_after && "
         "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after && echo 'every other file byte-identical'",
         "accuracy", 1.0),
+    Figure(
+        "input-checks-exactness", RESULTS,
+        f"{EXPORT_CHECKS} && rm -rf /tmp/addb_checks && R=$PWD && mkdir -p /tmp/addb_checks/subjects && "
+        f"{PY} scripts/make_example_subject.py camargo2021_levelground /tmp/addb_checks/subjects/camargo2021_levelground >/dev/null && "
+        "for s in rajagopal2016_walk rajagopal2016_run opencap_uhlrich2023; do ln -s $R/../shared/data/subjects/$s /tmp/addb_checks/subjects/$s; done && "
+        f"for f in default rounds; do for s in {CHECKED_SUBJECTS}; do "
+        f"(cd /tmp && PYTHONPATH={CHECKS_TREE} $R/.venv/bin/addb process /tmp/addb_checks/subjects/$s --out /tmp/addb_checks/before_$f/$s --fit $f >/dev/null 2>&1) && "
+        ".venv/bin/addb process /tmp/addb_checks/subjects/$s --out /tmp/addb_checks/after_$f/$s --fit $f >/dev/null 2>&1; done && echo \"--fit $f\" && "
+        f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f && "
+        "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f && echo 'every other file byte-identical'; done",
+        "accuracy", 3.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
     Figure("dataset-client", RESULTS, f"{PY} tests/benchmarks/bench_dataset_client.py", "timing", 1.5, fence=False),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --host-reference walk camargo", "timing", 2.5, fence=False),
