@@ -296,6 +296,7 @@ class AnnotationStore(JournaledStore):
         *,
         foot: str | None = None,
         source: str = "manual",
+        keep_other_foot: bool = False,
     ) -> Edit:
         """Flag (or clear) frames whose ground reaction force is not fully measured.
 
@@ -312,6 +313,9 @@ class AnnotationStore(JournaledStore):
             ``value=True``. The new flag replaces any earlier one on those frames.
         source
             ``"manual"``, ``"proposal_accepted"`` or ``"imported"``.
+        keep_other_foot
+            With ``foot`` "left" or "right": a frame already flagged for the other foot or
+            for both becomes "both" instead of losing that flag (one edit, one undo step).
 
         Returns
         -------
@@ -322,7 +326,8 @@ class AnnotationStore(JournaledStore):
         if foot is not None and not value:
             raise AnnotationError("foot is only given when flagging (value=True)")
         return self._flags_edit(
-            trial, UNMEASURED_FORCE, frames, value=bool(value), foot=foot, source=source
+            trial, UNMEASURED_FORCE, frames, value=bool(value), foot=foot, source=source,
+            keep_other_foot=keep_other_foot and foot in ("left", "right"),
         )
 
     def set_excluded(
@@ -404,6 +409,7 @@ class AnnotationStore(JournaledStore):
         value: bool,
         foot: str | None,
         source: str,
+        keep_other_foot: bool = False,
     ) -> Edit:
         source = check_source(source)
         check_trial(trial)
@@ -412,6 +418,12 @@ class AnnotationStore(JournaledStore):
 
         def build(prov: Provenance) -> dict[Key, Any]:
             flags = self._state.trial(trial).flags[kind]
+            if value and keep_other_foot:
+                def merged(f: int) -> str | None:
+                    old = flags.get(f)
+                    return "both" if old is not None and old[0] in ("left", "right", "both") and old[0] != foot else foot
+
+                return {("flag", trial, kind, f): (merged(f), prov) for f in frame_list}
             if value:
                 return dict.fromkeys([("flag", trial, kind, f) for f in frame_list], (foot, prov))
             return {("flag", trial, kind, f): None for f in frame_list if f in flags}

@@ -177,8 +177,10 @@ class TrialEditor:
         return self.store.set_unmeasured(self.trial, frame, True, foot=new)
 
     def flag_range(self, start: int, stop: int, foot: str | None) -> Edit:
-        """Flag frames ``[start, stop)`` for ``foot`` (replacing earlier flags there)."""
-        return self.store.set_unmeasured(self.trial, self._range(start, stop), True, foot=foot)
+        """Flag frames ``[start, stop)`` for ``foot``: a frame flagged for the other foot
+        becomes "both" (the reviewer's earlier flag is kept), other earlier flags there are
+        replaced; one edit (one undo step)."""
+        return self.store.set_unmeasured(self.trial, self._range(start, stop), True, foot=foot, keep_other_foot=True)
 
     def clear_range(self, start: int, stop: int) -> Edit:
         """Clear the unmeasured-force flags of frames ``[start, stop)``."""

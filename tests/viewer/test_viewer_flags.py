@@ -57,6 +57,23 @@ def test_toggle_and_ranges_per_foot(editor: TrialEditor) -> None:
         editor.toggle(T, "left")
 
 
+def test_flagging_a_range_for_one_foot_keeps_the_other_foots_flags(editor: TrialEditor) -> None:
+    """G for the right foot over frames flagged for the left makes them "both" (it replaced
+    the left flags before, and the reviewer's work was lost without notice); one undo
+    restores the left flags exactly."""
+    editor.flag_range(20, 41, "left")
+    editor.flag_range(30, 51, "right")
+    v = editor.view()
+    assert [v.feet[k] for k in (25, 30, 40, 45)] == ["left", "both", "both", "right"]
+    assert editor.store.ranges("walk", foot="left") == [(20, 41)] and editor.store.ranges("walk", foot="right") == [(30, 51)]
+    editor.flag_range(35, 38, "left")  # a frame flagged for both stays both
+    assert [editor.view().feet[k] for k in (34, 35, 37, 38)] == ["both"] * 4
+    editor.store.undo()
+    editor.store.undo()
+    v = editor.view()
+    assert editor.store.ranges("walk", foot="left") == [(20, 41)] and not v.right.any()
+
+
 def test_accept_and_reject_proposals_are_durable_and_distinct(editor: TrialEditor, tmp_path: Path) -> None:
     assert editor.proposal_at(12) == (10, 20, "left foot off the plates")
     assert editor.accept(12) is not None
