@@ -134,13 +134,23 @@ def _check_fields(i: int, entry: Mapping[str, Any], path: Path) -> None:
         if not ok(entry[name]):
             raise SubjectFolderError(f"extension {i + 1} ({entry['cause']}) has {name}={entry[name]!r}; expected {expected}",
                                      path=path, where=f"extensions[{i}].{name}")
-    if entry["cause"] == "marker_offset" and len(entry["time_s"]) != len(entry["lab_shift_m"]):
-        raise SubjectFolderError(f"extension {i + 1} (marker_offset) has {len(entry['time_s'])} times and "
-                                 f"{len(entry['lab_shift_m'])} lab_shift_m rows; expected one row per time",
-                                 path=path, where=f"extensions[{i}].lab_shift_m")
-    if entry["cause"] == "unmeasured_force" and any(r[1] > entry["n_frames"] for r in entry.get("frames", [])):
-        raise SubjectFolderError(f"extension {i + 1} (unmeasured_force) has a frame range past n_frames={entry['n_frames']}",
-                                 path=path, where=f"extensions[{i}].frames")
+    if spec.check is not None and (problem := spec.check(entry)) is not None:
+        field_name, message = problem
+        raise SubjectFolderError(f"extension {i + 1} ({entry['cause']}) {message}", path=path, where=f"extensions[{i}].{field_name}")
+
+
+def _one_shift_per_time(entry: Mapping[str, Any]) -> tuple[str, str] | None:
+    """``marker_offset``: as many ``lab_shift_m`` rows as ``time_s`` values."""
+    if len(entry["time_s"]) != len(entry["lab_shift_m"]):
+        return "lab_shift_m", f"has {len(entry['time_s'])} times and {len(entry['lab_shift_m'])} lab_shift_m rows; expected one row per time"
+    return None
+
+
+def _frames_within(entry: Mapping[str, Any]) -> tuple[str, str] | None:
+    """``unmeasured_force``: every frame range within ``n_frames``."""
+    if any(r[1] > entry["n_frames"] for r in entry.get("frames", [])):
+        return "frames", f"has a frame range past n_frames={entry['n_frames']}"
+    return None
 
 
 def append_extension(subject_dir: str | Path, extension: Mapping[str, Any], *, source: str = "addb diagnose") -> Path:
@@ -490,6 +500,9 @@ class Correction:
         The entry's fields these read, name -> kind (:data:`FIELD_KINDS`): required, and
         checked when present; :func:`read_extensions` refuses an entry that lacks one or
         holds the wrong kind.
+    check
+        ``entry -> (field, problem)`` or None: a check across the entry's fields, after
+        theirs (:func:`read_extensions` refuses the entry with the problem).
 
     ``unmeasured_force`` extensions have none of these: their frames join the masks
     (:func:`extension_masks`).
@@ -501,6 +514,7 @@ class Correction:
     prepare: Callable[[Path, dict[str, Any]], dict[str, Any]] | None = None
     fields: Mapping[str, str] = field(default_factory=dict)
     optional: Mapping[str, str] = field(default_factory=dict)
+    check: Callable[[Mapping[str, Any]], tuple[str, str] | None] | None = None
 
 
 def _is_number(v: Any) -> bool:
@@ -532,7 +546,7 @@ FIELD_KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
 #: registry refuses one that has not, :func:`solver.diagnose.causes.base.check`); the
 #: diagnosis' cause module says how the entry is written, this table how it is applied.
 CORRECTIONS: dict[str, Correction] = {
-    "unmeasured_force": Correction(fields={"trial": "text", "n_frames": "count"}, optional={"frames": "frames"}),
+    "unmeasured_force": Correction(fields={"trial": "text", "n_frames": "count"}, optional={"frames": "frames"}, check=_frames_within),
     "body_mass": Correction(subject=_change_mass, fields={"mass_change_kg": "number"}),
     "force_time_offset": Correction(forces=_delay_forces, fields={"trial": "text", "delay_s": "number"}),
     "plate_force_offset": Correction(forces=_offset_forces, fields={"trial": "text", "plate": "text", "offset_N": "vector"},
@@ -542,7 +556,8 @@ CORRECTIONS: dict[str, Correction] = {
     "segment_mass_distribution": Correction(subject=_redistributed_model, prepare=_write_redistributed_model,
                                             optional={"model": "text", "mass_change_kg": "masses"}),
     "marker_offset": Correction(markers=_shift_marker, fields={"trial": "text", "marker": "text", "time_s": "numbers",
-                                                               "lab_shift_m": "vectors"}, optional={"shift_m": "vector"}),
+                                                               "lab_shift_m": "vectors"}, optional={"shift_m": "vector"},
+                                 check=_one_shift_per_time),
     "plate_registration": Correction(forces=_register_forces, fields={"trial": "text", "shift_m": "vector", "centre_m": "vector"},
                                      optional={"rotation_rad": "number"}),
 }
