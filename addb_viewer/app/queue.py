@@ -33,7 +33,7 @@ import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import find_subjects
-from solver.dataset.manifest import read_manifest
+from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
 from solver.io.subject import folder_is_writable
 
@@ -235,8 +235,6 @@ def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any
     """(processing state, detail, trial rows) from a subject's output folder: the dataset
     run's manifest, with the figures of each trial whose results.json is newer (the review
     app's Reprocess) taken from there; without a manifest, the results.json files."""
-    from solver.dataset.manifest import MANIFEST_NAME
-
     manifest = read_manifest(subject.out_dir)
     if manifest is not None:
         if manifest.get("status") == "failed":

@@ -107,7 +107,7 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
         "residual_moment_max_nm": _max(m),
         "hicks_frames": int((hicks_exceeded(trial) & measured).sum()) if trial.has_dynamics else None,
         "unobserved_frames": int(np.count_nonzero(trial.unobserved)),
-        "measured_frames": int(np.count_nonzero(~np.asarray(trial.unobserved, bool))) if trial.has_dynamics else None,
+        "measured_frames": int(np.count_nonzero(measured)) if trial.has_dynamics else None,
         "mass_kg": float(trial.mass_kg),
     }
 

@@ -143,9 +143,10 @@ class Workbench:
             self.table.content = queue_markdown(rows, current=self.current)
             options = ("(none)", *self.labels)
             value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
-            if tuple(self.choice.options) != options or self.choice.value != value:
+            new_options = tuple(self.choice.options) != options
+            if new_options or self.choice.value != value:
                 with self.app._quiet_updates():
-                    if tuple(self.choice.options) != options:
+                    if new_options:
                         self.choice.options = options
                     self.choice.value = value  # also after R or a background open: the dropdown names the trial shown
             return rows
