@@ -43,8 +43,9 @@ DATASET_OUTPUT_NAME = "addb_out"
 #: Processing states, as shown.
 NOT_PROCESSED, PROCESSING, FAILED, PROCESSED, KINEMATICS_ONLY = (
     "not processed", "processing", "failed", "processed", "kinematics only")  # fmt: skip
-#: Review states, as shown.
-UNREVIEWED, IN_REVIEW, REVIEWED = "unreviewed", "in review", "reviewed"
+#: Review states, as shown (the last: the subject's review record cannot be read, so its
+#: flags and review marks are unknown until it is mended; the app names the problem).
+UNREVIEWED, IN_REVIEW, REVIEWED, RECORD_UNREADABLE = "unreviewed", "in review", "reviewed", "record unreadable"
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ class QueueRow:
     detail
         The error of a failed subject, or the progress message of a running one ("" else).
     review
-        :data:`UNREVIEWED`, :data:`IN_REVIEW` or :data:`REVIEWED`.
+        :data:`UNREVIEWED`, :data:`IN_REVIEW`, :data:`REVIEWED` or :data:`RECORD_UNREADABLE`.
     reviewer
         Who marked it reviewed (or, in review, who edited last); None when nobody.
     pending
@@ -108,12 +109,15 @@ class QueueRow:
     def attention(self) -> tuple[Any, ...]:
         """Sort key: what a reviewer should look at first comes first.
 
-        Order: processed trials with pending proposals or a failed Hicks threshold, trials
-        in review, other unreviewed trials, failed subjects, running ones, unprocessed
-        ones, reviewed trials; within a group more pending frames first, then by name.
+        Order: trials whose review record cannot be read, processed trials with pending
+        proposals or a failed Hicks threshold, trials in review, other unreviewed trials,
+        failed subjects, running ones, unprocessed ones, reviewed trials; within a group
+        more pending frames first, then by name.
         """
         hicks_bad = self.hicks_linear_ok is False or self.hicks_angular_ok is False
-        if self.trial is not None and self.review != REVIEWED and ((self.pending or 0) > 0 or hicks_bad):
+        if self.trial is not None and self.review == RECORD_UNREADABLE:
+            group = -1
+        elif self.trial is not None and self.review != REVIEWED and ((self.pending or 0) > 0 or hicks_bad):
             group = 0
         elif self.trial is not None and self.review == IN_REVIEW:
             group = 1
@@ -195,8 +199,9 @@ def _pending(row: Mapping[str, Any], snapshot: Any | None) -> int | None:
     return int(build_view(snapshot, proposed).pending.sum())
 
 
-def _snapshots(subject: QueueSubject) -> dict[str, Any]:
-    """Trial -> review snapshot of the subject's record ({} when it has none or is damaged)."""
+def _snapshots(subject: QueueSubject) -> dict[str, Any] | None:
+    """Trial -> review snapshot of the subject's record ({} when it has none; None when it
+    cannot be read: damaged, or from a newer addb)."""
     from annotations import AnnotationError, AnnotationStore
 
     path = annotations_path(subject.subject_dir, subject.out_dir)
@@ -206,7 +211,7 @@ def _snapshots(subject: QueueSubject) -> dict[str, Any]:
         with AnnotationStore.open(path, reviewer="addb queue") as store:
             return store.snapshot()
     except (AnnotationError, OSError):
-        return {}
+        return None
 
 
 def _results_row(res: Path) -> dict[str, Any] | None:
@@ -274,11 +279,11 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
             continue
         snaps = _snapshots(subject)
         for r in rows:
-            snap = snaps.get(r["trial"])
-            review, reviewer = _review_state(snap)
+            snap = snaps.get(r["trial"]) if snaps is not None else None
+            review, reviewer = _review_state(snap) if snaps is not None else (RECORD_UNREADABLE, None)
             out.append(QueueRow(
                 subject, r["trial"], PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY, "", review, reviewer,
-                _pending(r, snap), int(r.get("frames") or 0), int(r.get("measured_frames") or 0),
+                _pending(r, snap) if snaps is not None else None, int(r.get("frames") or 0), int(r.get("measured_frames") or 0),
                 r.get("marker_rms_m"), r.get("hicks_linear_ok"), r.get("hicks_angular_ok"),
             ))  # fmt: skip
     return sorted(out, key=lambda row: row.attention)

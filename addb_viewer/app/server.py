@@ -27,7 +27,14 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.app.access import TOKEN_PARAM, is_loopback, new_token, start_viser
-from addb_viewer.app.camera import CameraPose, followed, framing_point, view_pose
+from addb_viewer.app.camera import (
+    DEFAULT_CANVAS,
+    CameraPose,
+    Canvas,
+    followed,
+    framed_view,
+    view_pose,
+)
 from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
 from addb_viewer.app.meshes import body_mesh
@@ -119,6 +126,11 @@ class ReviewApp:
         self._quiet = threading.local()
         self._actor = threading.local()  # the page (viser client id) whose handler runs
         self.client_names: dict[int, str] = {}
+        #: Pixels at the top of the canvas covered by a floating window (the dataset queue's).
+        self.canvas_top_px = 0.0
+        self.camera_name = "Sagittal"  # the view the camera was last put in
+        self._framed_for: dict[int, tuple[float, float]] = {}  # client id -> canvas size framed for
+        self._follow_offset: dict[int, np.ndarray] = {}  # client id -> look point minus pelvis
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
@@ -364,32 +376,93 @@ class ReviewApp:
 
     def _aim_camera(self, trial: ProcessedTrial) -> None:
         """Frame the subject from the side, for new pages and every open one."""
-        self.camera_view("Sagittal", look=framing_point(trial.body_position[:, 0, :]))
+        self.camera_view("Sagittal")
 
-    def camera_view(self, view: str, *, look: np.ndarray | None = None) -> CameraPose:
-        """Put every page's camera (and new pages') in ``view`` (Sagittal, Frontal, Top)
-        looking at ``look`` (default: the pelvis at the current frame)."""
-        if look is None:
-            t, pb = self.trial, self.playback
-            look = t.body_position[pb.frame, 0, :] if t is not None and pb is not None else np.array([0.0, 1.0, 0.0])
-            if not np.isfinite(look).all() and t is not None:
-                look = framing_point(t.body_position[:, 0, :])
-        pose = view_pose(view, look)
-        cam = self.server.initial_camera
-        cam.look_at, cam.position, cam.up = pose.look_at, pose.position, pose.up
+    def _canvas(self, client: Any | None) -> Canvas:
+        """The 3D canvas of page ``client`` as it last reported it (:data:`DEFAULT_CANVAS`
+        for new pages, and pages that have not reported a size), with the dataset queue's
+        window kept free at its top."""
+        w = h = 0
+        fov = DEFAULT_CANVAS.fov
+        if client is not None:
+            try:
+                w, h, fov = client.camera.image_width, client.camera.image_height, client.camera.fov
+            except AssertionError:  # no camera message from the page yet
+                w = h = 0
+        if w <= 0 or h <= 0:
+            w, h, fov = DEFAULT_CANVAS.width, DEFAULT_CANVAS.height, DEFAULT_CANVAS.fov
+        return Canvas(float(w), float(h), float(fov), float(self.canvas_top_px))
+
+    def camera_view(self, view: str) -> CameraPose:
+        """Put every page's camera (and new pages') in ``view`` (Sagittal, Frontal, Top),
+        framing the shown trial for each page's own canvas (:func:`framed_view`: the whole
+        trial when it fits, else the current frame with "Follow pelvis" turned on).
+        Returns the pose of new pages."""
+        self.camera_name = view
+        t, pb = self.trial, self.playback
+        if t is None:
+            pose = view_pose(view, np.array([0.0, 1.0, 0.0]))
+            self._apply_pose(None, pose)
+            return pose
+        k = pb.frame if pb is not None else 0
+        pose, fits = framed_view(view, t.body_position, self._canvas(None), k)
+        self._apply_pose(None, pose)
         for client in self.server.get_clients().values():
-            with client.atomic():
-                client.camera.up_direction = pose.up
-                client.camera.position = pose.position
-                client.camera.look_at = pose.look_at
+            fits = self._frame_page(client, view) and fits
+        if not fits and not self.panel.follow.value:
+            with self._quiet_updates():
+                self.panel.follow.value = True  # the trial leaves any fixed view: follow it
         return pose
 
+    def _frame_page(self, client: Any, view: str) -> bool:
+        """Frame the shown trial in ``view`` on one page; False when it had to follow."""
+        t, pb = self.trial, self.playback
+        if t is None:
+            return True
+        canvas = self._canvas(client)
+        pose, fits = framed_view(view, t.body_position, canvas, pb.frame if pb is not None else 0)
+        self._framed_for[client.client_id] = (canvas.width, canvas.height)
+        self._apply_pose(client, pose)
+        return fits
+
+    def _apply_pose(self, client: Any | None, pose: CameraPose) -> None:
+        """Set a page's camera (None: the camera of pages still to connect)."""
+        if client is None:
+            cam = self.server.initial_camera
+            cam.look_at, cam.position, cam.up = pose.look_at, pose.position, pose.up
+            return
+        with client.atomic():
+            client.camera.up_direction = pose.up
+            client.camera.position = pose.position
+            client.camera.look_at = pose.look_at
+        pelvis = self.trial.body_position[self.playback.frame, 0, :] if self.trial is not None and self.playback is not None else None
+        if pelvis is not None and np.isfinite(pelvis).all():
+            # following keeps where the framing put the pelvis on the screen
+            self._follow_offset[client.client_id] = np.asarray(pose.look_at) - pelvis
+
+    def _camera_moved(self, camera: Any) -> None:
+        """A page reported its camera: when its canvas changed size since it was framed (the
+        page opened, the window or a docked panel resized), frame the trial again for it,
+        and fit the dataset queue's window to the canvas."""
+        client = camera.client
+        size = (float(camera.image_width), float(camera.image_height))
+        if self.workbench is not None:
+            self.workbench.fit_to_canvas(size[0])
+        with self._lock:
+            if self.trial is None or self._framed_for.get(client.client_id) == size:
+                return
+            if not self._frame_page(client, self.camera_name) and not self.panel.follow.value:
+                with self._quiet_updates():
+                    self.panel.follow.value = True
+
     def _follow_pelvis(self, k: int) -> None:
-        """Move every page's camera with the pelvis (its orbit and zoom kept)."""
+        """Move every page's camera with the pelvis (its orbit and zoom kept, and the pelvis
+        where the framing put it on the screen)."""
         if self.trial is None:
             return
-        target = self.trial.body_position[k, 0, :]
+        pelvis = self.trial.body_position[k, 0, :]
         for client in self.server.get_clients().values():
+            target = pelvis + self._follow_offset.get(client.client_id, 0.0)
             pos, look = followed(client.camera.position, client.camera.look_at, target)
             with client.atomic():
                 client.camera.position = tuple(pos)
@@ -537,10 +610,15 @@ class ReviewApp:
         )
         field.on_update(lambda e, cid=client.client_id: self.client_names.__setitem__(cid, str(e.target.value).strip()))
         self.name_fields[client.client_id] = field
+        client.camera.on_update(self._camera_moved)
+        with self._lock:
+            self._frame_page(client, self.camera_name)  # for this page's canvas, not the default one
 
     def _client_disconnected(self, client: Any) -> None:
         self.client_names.pop(client.client_id, None)
         self.name_fields.pop(client.client_id, None)
+        self._framed_for.pop(client.client_id, None)
+        self._follow_offset.pop(client.client_id, None)
 
     def reviewer_name(self, client_id: int | None) -> str | None:
         """The name recorded with an edit from page ``client_id``: the page's "Your name",

@@ -35,9 +35,15 @@ from addb_viewer.app.queue import (
     next_to_review,
 )
 
-#: Size of the queue's floating window, px.
+#: Size of the queue's floating window, px (narrower on a narrower canvas), and its gap
+#: from the canvas' top-left corner.
 QUEUE_WIDTH_PX = 620
 QUEUE_HEIGHT_PX = 300
+QUEUE_GAP_PX = 10
+#: The narrowest the queue's window is made to fit a canvas, px.
+QUEUE_MIN_WIDTH_PX = 300
+#: A queue window narrower than this shows the compact table (:func:`queue_markdown`), px.
+COMPACT_BELOW_PX = 520
 #: Rows shown in the queue table (the dropdown lists them all).
 TABLE_ROWS = 25
 #: Seconds between two readings of the queue from disk.
@@ -51,8 +57,12 @@ def row_label(row: QueueRow) -> str:
     return f"{row.subject.rel} / {row.trial}" if row.trial else f"{row.subject.rel} ({row.processing})"
 
 
-def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tuple[str, str | None] | None = None) -> str:
-    """The queue as a markdown table (first ``limit`` rows) with a one-line summary."""
+def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tuple[str, str | None] | None = None,
+                   compact: bool = False) -> str:
+    """The queue as a markdown table (first ``limit`` rows) with a one-line summary.
+
+    ``compact`` (a window narrower than :data:`COMPACT_BELOW_PX`) leaves out the state and
+    RMS columns: a state other than "processed" follows the row's name instead."""
     n_trials = sum(r.trial is not None for r in rows)
     done = sum(r.review == REVIEWED for r in rows if r.trial is not None)
     waiting = sum(r.processing == PROCESSING for r in rows)
@@ -60,7 +70,9 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     head = f"**{len({r.subject.rel for r in rows})} subjects, {n_trials} trials: {done} reviewed"
     head += f", {waiting} processing" if waiting else ""
     head += f", {failed} failed" if failed else ""
-    lines = [head + "**", "", "| subject / trial | state | review | pending | Hicks | RMS cm |", "|---|---|---|---|---|---|"]
+    columns = ("subject / trial", "review", "pending", "Hicks") if compact else (
+        "subject / trial", "state", "review", "pending", "Hicks", "RMS cm")
+    lines = [head + "**", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for row in rows[:limit]:
         name = _md(row_label(row) if row.trial else row.subject.rel)
         name = f"**▶ {name}**" if current == (row.subject.rel, row.trial) else name
@@ -69,7 +81,11 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
         state = row.processing + (f": {row.detail}" if row.detail else "")
         rms = "-" if row.marker_rms_m is None else f"{100 * row.marker_rms_m:.2f}"
         pending = "-" if row.pending is None or row.processing != PROCESSED else str(row.pending)
-        lines.append(f"| {name} | {_md(state[:80])} | {_md(review)} | {pending} | {hicks} | {rms} |")
+        if compact:
+            name += "" if row.processing == PROCESSED else f" ({_md(state[:60])})"
+            lines.append(f"| {name} | {_md(review)} | {pending} | {hicks} |")
+        else:
+            lines.append(f"| {name} | {_md(state[:80])} | {_md(review)} | {pending} | {hicks} | {rms} |")
     if len(rows) > limit:
         lines.append(f"\n… and {len(rows) - limit} more in the list below.")
     return "\n".join(lines)
@@ -115,7 +131,9 @@ class Workbench:
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
             self.run_status = gui.add_markdown("")
-        self.panel.float(x=10, y=10, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
+        self.panel.float(x=QUEUE_GAP_PX, y=QUEUE_GAP_PX, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
+        self.width = float(QUEUE_WIDTH_PX)
+        app.canvas_top_px = QUEUE_GAP_PX + QUEUE_HEIGHT_PX  # the camera frames the subject below the window
         self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))
@@ -130,6 +148,18 @@ class Workbench:
             self.processing_done.set()
         threading.Thread(target=self._poll, name="addb-queue", daemon=True).start()
 
+    def fit_to_canvas(self, canvas_width: float) -> None:
+        """Make the queue's window no wider than the 3D canvas a page reported (less its
+        gaps), so it never covers the docked panels beside the canvas."""
+        width = float(min(QUEUE_WIDTH_PX, max(QUEUE_MIN_WIDTH_PX, canvas_width - 2 * QUEUE_GAP_PX)))
+        if abs(width - self.width) >= 1.0:
+            compact = (self.width < COMPACT_BELOW_PX, width < COMPACT_BELOW_PX)
+            self.width = width
+            self.panel.set_width(width)
+            if compact[0] != compact[1]:
+                with self._lock:
+                    self.table.content = queue_markdown(self.rows, current=self.current, compact=compact[1])
+
     # ------------------------------------------------------------------ queue
     def refresh(self) -> list[QueueRow]:
         """Read the queue again from disk and redraw it."""
@@ -140,7 +170,7 @@ class Workbench:
             rows = build_queue(self.subjects, dict(self.running))
             self.rows = rows
             self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
-            self.table.content = queue_markdown(rows, current=self.current)
+            self.table.content = queue_markdown(rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
             options = ("(none)", *self.labels)
             value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
             new_options = tuple(self.choice.options) != options
@@ -199,7 +229,7 @@ class Workbench:
                     self.rows = [dataclasses.replace(r, detail=self.running[data["rel"]])
                                  if r.subject.rel == data["rel"] and r.processing == PROCESSING else r
                                  for r in self.rows]  # fmt: skip
-                    self.table.content = queue_markdown(self.rows, current=self.current)
+                    self.table.content = queue_markdown(self.rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
                     return
             self.refresh()
             if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:

@@ -1,12 +1,28 @@
 """The camera frames the subject when a trial loads; sagittal, frontal and top views; the
-pelvis followed with the reviewer's orbit kept (poses checked against the trial's pelvis)."""
+pelvis followed with the reviewer's orbit kept (poses checked against the trial's pelvis);
+the framing keeps every frame's skeleton inside a narrow canvas below the queue's window
+(projected through the same pinhole camera three.js draws), and a trial too long to frame
+is followed with its skeleton in view."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from addb_viewer.app.camera import DISTANCE_M, followed, framing_point, view_pose
+from addb_viewer.app.camera import (
+    DEFAULT_CANVAS,
+    DISTANCE_M,
+    EDGE_PX,
+    MAX_DISTANCE_M,
+    CameraPose,
+    Canvas,
+    body_points,
+    followed,
+    framed_view,
+    framing_point,
+    project,
+    view_pose,
+)
 
 
 def test_views_look_at_the_point_from_the_anatomical_directions() -> None:
@@ -31,13 +47,70 @@ def test_framing_ignores_unknown_frames_and_following_keeps_the_offset() -> None
     assert np.allclose(same[0], 1.0) and np.allclose(same[1], 0.0)
 
 
+def _stretched(body_position: np.ndarray, factor: float) -> np.ndarray:
+    """The trial's bodies with the pelvis path stretched ``factor`` times along X (a longer
+    walk, each skeleton unchanged)."""
+    pelvis_x = body_position[:, :1, 0]
+    out = body_position.copy()
+    out[..., 0] += (factor - 1.0) * (pelvis_x - pelvis_x[0])
+    return out
+
+
+def test_the_framing_keeps_every_frame_of_the_walk_inside_a_narrow_canvas(demo_paths, make_app) -> None:
+    """A 1280 x 800 window leaves the 3D canvas about 395 px wide, and the dataset queue covers
+    its top 310 px: every frame's skeleton box (all frames, not only the sampled ones the
+    framing uses) projects inside the rest, with the gap kept, from the sagittal, frontal
+    and top views; at the default canvas the camera stays at its usual distance."""
+    bp = make_app(demo_paths).trial.body_position
+    every = body_points(bp, np.arange(len(bp)))
+    narrow = Canvas(395.0, 800.0, np.radians(75.0), top=310.0)
+    for view in ("Sagittal", "Frontal", "Top"):
+        pose, fits = framed_view(view, bp, narrow)
+        px, depth = project(every, pose, narrow)
+        assert fits and (depth > 0).all()
+        assert px[:, 0].min() >= EDGE_PX - 1e-6 and px[:, 0].max() <= narrow.width - EDGE_PX + 1e-6, view
+        assert px[:, 1].min() >= narrow.top + EDGE_PX - 1e-6 and px[:, 1].max() <= narrow.height - EDGE_PX + 1e-6, view
+        # the frames it samples centred in the free part of the canvas (to a pixel)
+        px, _ = project(body_points(bp), pose, narrow)
+        assert abs(0.5 * (px[:, 0].min() + px[:, 0].max()) - narrow.width / 2) < 1.0, view
+        assert abs(0.5 * (px[:, 1].min() + px[:, 1].max()) - (narrow.top + narrow.height) / 2) < 1.0, view
+    pose, _ = framed_view("Sagittal", bp, narrow)
+    far = np.linalg.norm(np.subtract(pose.position, pose.look_at))
+    pose, _ = framed_view("Sagittal", bp, DEFAULT_CANVAS)
+    assert DISTANCE_M <= np.linalg.norm(np.subtract(pose.position, pose.look_at)) < far
+
+
+def test_a_walk_too_long_to_frame_is_followed_with_its_skeleton_in_view(demo_paths, make_app) -> None:
+    """The walk stretched eight times (24 m) does not fit even from MAX_DISTANCE_M: the pose
+    frames the current frame, and following the pelvis from there keeps every frame's
+    skeleton inside the canvas."""
+    bp = _stretched(make_app(demo_paths).trial.body_position, 8.0)
+    canvas = Canvas(715.0, 1000.0, np.radians(75.0), top=310.0)
+    pose, fits = framed_view("Sagittal", bp, canvas, frame=100)
+    assert not fits
+    assert np.linalg.norm(np.subtract(pose.position, pose.look_at)) <= MAX_DISTANCE_M
+    offset = np.asarray(pose.look_at) - bp[100, 0]
+    position, look = np.asarray(pose.position), np.asarray(pose.look_at)
+    for k in range(len(bp)):
+        position, look = followed(position, look, bp[k, 0] + offset)
+        px, depth = project(body_points(bp, np.array([k])), CameraPose(tuple(position), tuple(look), pose.up), canvas)
+        assert (depth > 0).all() and (px[:, 0] >= 0).all() and (px[:, 0] <= canvas.width).all(), k
+        assert (px[:, 1] >= canvas.top).all() and (px[:, 1] <= canvas.height).all(), k
+
+
 def test_app_frames_the_loaded_trial_and_switches_views(demo_paths, make_app) -> None:
     app = make_app(demo_paths)
     assert app.trial is not None
     cam = app.server.initial_camera
-    assert np.allclose(cam.look_at, framing_point(app.trial.body_position[:, 0, :]))
+    pose, fits = framed_view("Sagittal", app.trial.body_position, DEFAULT_CANVAS)
+    assert fits and np.allclose(cam.look_at, pose.look_at) and np.allclose(cam.position, pose.position)
     app.seek(100)
     pose = app.camera_view("Frontal")
-    pelvis = app.trial.body_position[100, 0, :]
-    assert np.allclose(pose.look_at, pelvis) and np.allclose(cam.look_at, pelvis)
-    assert np.allclose(np.asarray(cam.position) - pelvis, [DISTANCE_M, 0.4, 0.0])
+    assert np.allclose(cam.look_at, pose.look_at) and np.allclose(cam.position, pose.position)
+    d = np.asarray(cam.position) - np.asarray(cam.look_at)
+    assert np.argmax(np.abs(d)) == 0 and d[0] >= DISTANCE_M  # from in front, along +X
+    assert not app.panel.follow.value
+    # a trial that leaves every fixed view turns following on
+    app.trial.body_position[:] = _stretched(app.trial.body_position, 8.0)
+    app.camera_view("Sagittal")
+    assert app.panel.follow.value

@@ -1,5 +1,6 @@
 """The review queue of a dataset (no browser): processing and review states, pending
-proposals, the order a reviewer works in, and the "next trial to review"."""
+proposals, the order a reviewer works in, and the "next trial to review"; a damaged review
+record named as such."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from addb_viewer.app.queue import (
     NOT_PROCESSED,
     PROCESSED,
     PROCESSING,
+    RECORD_UNREADABLE,
     REVIEWED,
     UNREVIEWED,
     build_queue,
@@ -23,6 +25,7 @@ from addb_viewer.app.queue import (
     is_dataset,
     next_to_review,
 )
+from addb_viewer.app.workbench import queue_markdown
 from addb_viewer.locations import annotations_path
 from annotations import AnnotationStore
 from solver.dataset.manifest import MANIFEST_NAME
@@ -141,3 +144,22 @@ def test_a_reprocess_after_the_dataset_run_shows_its_figures_in_the_queue(datase
     assert after.hicks_linear_ok is False and after.pending == before.pending  # proposals: the run's
     os.utime(res, ns=(manifest.stat().st_mtime_ns - 10**9,) * 2)  # older than the manifest: the manifest counts
     assert {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")].marker_rms_m == before.marker_rms_m
+
+
+def test_a_damaged_review_record_is_named_in_the_queue_not_shown_unreviewed(dataset: Path) -> None:
+    """bob's record of lab/busy cut short on disk (a full disk, a bad copy): its trials say
+    "record unreadable" (not "unreviewed", which would send a second reviewer over work
+    already done), with no pending count (the flags are unknown), and they come first."""
+    _, out, subjects = dataset_subjects(dataset)
+    record = annotations_path(dataset / "lab" / "busy", out / "lab" / "busy")
+    text = record.read_text()
+    record.write_text(text[: len(text) // 2])
+    rows = build_queue(subjects)
+    busy = [r for r in rows if r.subject.rel == "lab/busy"]
+    assert {r.trial for r in busy} == {"walk", "static"}
+    assert all(r.review == RECORD_UNREADABLE and r.pending is None for r in busy)
+    assert [(r.subject.rel, r.trial) for r in rows[:2]] == [("lab/busy", "static"), ("lab/busy", "walk")]
+    assert "record unreadable" in queue_markdown(rows) and "record unreadable" in queue_markdown(rows, compact=True)
+    # the other subjects' states are unchanged
+    by = {(r.subject.rel, r.trial): r for r in rows}
+    assert by[("lab/done", "walk")].review == REVIEWED and by[("lab/fresh", "walk")].review == UNREVIEWED

@@ -1,6 +1,8 @@
 """The review workbench in a real browser (headless Debian Chromium, Playwright): a dataset
 tree of two shared subjects without a Geometry folder, processed by ``addb process``, then
-``addb view DATASET_DIR`` in a subprocess at 1600x1000. The queue lists both subjects and
+``addb view DATASET_DIR`` in a subprocess at 1600x1000 (and a page at 1280x800, where the
+queue's window fits the canvas and the walk's skeleton is drawn below it on its first and
+last frames). The queue lists both subjects and
 their trials; opening the second works (its bones drawn, no axes fallback); the timeline's
 plots lie inside the viewport; a selection over frames 20-40 and the flag hotkey write
 exactly that range to the record on disk; Reprocess ends with the before/after table: the
@@ -19,6 +21,7 @@ import numpy as np
 import pytest
 from viewer_support import ViewProcess
 
+from addb_viewer.app.workbench import QUEUE_GAP_PX, QUEUE_HEIGHT_PX
 from addb_viewer.cli import main as cli
 from annotations import AnnotationStore
 from solver.results import load_processed
@@ -89,6 +92,28 @@ def _drag_selection(page, start: int, end: int, last_frame: int) -> None:
     assert _selection(page) == (start, end), _selection(page)
 
 
+def _skeleton_below_queue(page, when: str) -> None:
+    """The queue's window lies inside the 3D canvas, and the skeleton's observed (blue) and
+    model (orange) markers are drawn in the canvas below that window (on a canvas about
+    330-390 px wide the whole walk is framed, so the skeleton is small and its model
+    markers mostly hide behind the observed ones: a few orange pixels are enough)."""
+    from test_viewer_browser import _colored_pixels
+
+    canvas = page.locator("canvas").first.bounding_box()
+    counts = (0, 0)
+    for _ in range(60):  # the camera is framed again once the page reports its canvas
+        canvas = page.locator("canvas").first.bounding_box()
+        window = page.get_by_role("button", name="Next trial to review").bounding_box()
+        assert canvas["x"] <= window["x"] and window["x"] + window["width"] <= canvas["x"] + canvas["width"], (canvas, window)
+        top = canvas["y"] + QUEUE_GAP_PX + QUEUE_HEIGHT_PX
+        clip = {"x": canvas["x"], "y": top, "width": canvas["width"], "height": canvas["y"] + canvas["height"] - top}
+        counts = _colored_pixels(page.screenshot(clip=clip))
+        if counts[0] > 30 and counts[1] > 5:
+            break
+        page.wait_for_timeout(500)
+    assert counts[0] > 30 and counts[1] > 5, f"{when}: blue/orange marker pixels below the queue {counts} in canvas {canvas}"
+
+
 def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
     sync_api = import_tool("playwright.sync_api", reason=PLAYWRIGHT_REASON)
     url, ds, out, log = workbench
@@ -98,6 +123,19 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
             page = browser.new_page(viewport={"width": 1600, "height": 1000})
             page.goto(url)
             page.get_by_text(re.compile(r"walk · frame \d+ / \d+")).wait_for(timeout=60_000)
+
+            # on a 1280 x 800 laptop screen the queue's window fits the 3D canvas between the
+            # docked panels, and the walk's skeleton is drawn below it on its first and last
+            # frames (the camera frames the whole walk for that canvas)
+            small = browser.new_page(viewport={"width": 1280, "height": 800})
+            small.goto(url)
+            small.get_by_text(re.compile(r"walk · frame \d+ / \d+")).wait_for(timeout=60_000)
+            _skeleton_below_queue(small, "first frame")
+            last_walk = int(re.search(r"frame \d+ / (\d+)", small.get_by_text(re.compile(r"walk · frame")).first.inner_text()).group(1))
+            small.get_by_role("button", name="◀ Prev", exact=True).click()  # frame 0 -> the last (loop)
+            small.get_by_text(f"frame {last_walk} / {last_walk}").first.wait_for(timeout=20_000)
+            _skeleton_below_queue(small, "last frame")
+            small.close()
 
             # the queue lists both subjects and their trials
             for label in ("labA/walk / walk", "labA/walk / static", "labB/run / run", "labB/run / static"):
