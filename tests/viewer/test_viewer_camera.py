@@ -1,13 +1,18 @@
 """The camera frames the subject when a trial loads; sagittal, frontal and top views; the
 pelvis followed with the reviewer's orbit kept (poses checked against the trial's pelvis);
 the framing keeps every frame's skeleton inside a narrow canvas below the queue's window
-(projected through the same pinhole camera three.js draws), and a trial too long to frame
-is followed with its skeleton in view."""
+(projected through the same pinhole camera three.js draws), a trial too long to frame is
+followed with its skeleton in view, and each page is framed for the canvas it reports (again
+when that changes size, not when the reviewer orbits)."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
+from viewer_support import ProtocolClient, wait_for
+from viser import _messages
 
 from addb_viewer.app.camera import (
     DEFAULT_CANVAS,
@@ -114,3 +119,43 @@ def test_app_frames_the_loaded_trial_and_switches_views(demo_paths, make_app) ->
     app.trial.body_position[:] = _stretched(app.trial.body_position, 8.0)
     app.camera_view("Sagittal")
     assert app.panel.follow.value
+
+
+def _pose_of(client) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(client.camera.position), np.asarray(client.camera.look_at)
+
+
+def test_each_page_is_framed_for_its_own_canvas_and_again_when_it_changes_size(demo_paths, make_app) -> None:
+    """A page (a protocol client reporting a 480 x 360 canvas, fov 1 rad) is framed for that
+    canvas when it connects; when it reports another size (200 x 600) it is framed again for
+    it; a camera report of the same size (the reviewer orbiting) leaves the camera where the
+    reviewer put it."""
+    app = make_app(demo_paths)
+    bp = app.trial.body_position
+
+    def framed(width: float, height: float, fov: float) -> CameraPose:
+        return framed_view("Sagittal", bp, Canvas(width, height, fov, app.canvas_top_px))[0]
+
+    def report(page: ProtocolClient, width: int, height: int, position: tuple[float, float, float]) -> None:
+        page.send(_messages.ViewerCameraMessage(
+            wxyz=(1.0, 0.0, 0.0, 0.0), position=position, fov=1.0, near=0.01, far=100.0, image_height=height,
+            image_width=width, look_at=(0.0, 1.0, 0.0), up_direction=(0.0, 1.0, 0.0)))  # fmt: skip
+
+    page = ProtocolClient(app.port)
+    try:
+        client = wait_for(lambda: next(iter(app.server.get_clients().values()), None), what="the page connected")
+        small = framed(480, 360, 1.0)
+        wait_for(lambda: np.allclose(_pose_of(client)[0], small.position), 20, "framed for 480 x 360")
+        assert np.allclose(_pose_of(client)[1], small.look_at)
+        report(page, 200, 600, (0.0, 1.0, 3.0))
+        narrow = framed(200, 600, 1.0)
+        wait_for(lambda: np.allclose(_pose_of(client)[0], narrow.position), 20, "framed again for 200 x 600")
+        # another pose than the first (so the wait above did not pass by chance)
+        assert np.linalg.norm(np.subtract(narrow.position, small.position)) > 0.1
+        orbit = (5.0, 2.0, 4.0)
+        report(page, 200, 600, orbit)
+        wait_for(lambda: np.allclose(_pose_of(client)[0], orbit), 20, "the reviewer's orbit")
+        time.sleep(1.0)  # a re-framing would have replaced it by now
+        assert np.allclose(_pose_of(client)[0], orbit)
+    finally:
+        page.close()
