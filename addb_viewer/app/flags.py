@@ -119,6 +119,15 @@ def build_view(review: TrialReview, proposed: BoolArray) -> FlagView:
     )
 
 
+def pending_replaced(view: FlagView) -> int:
+    """Pending proposals that the next solver run fits as measured frames: once a trial has
+    any flag or is marked reviewed, the reviewer's flags replace the solver's own proposals
+    (:mod:`addb_viewer.review_masks`), so a proposal neither accepted nor rejected is then a
+    measured frame; 0 while the trial has neither (the solver keeps its proposals)."""
+    selected = bool(view.flagged.any()) or view.reviewed or view.beyond > 0
+    return int(view.pending.sum()) if selected else 0
+
+
 def toggled_foot(current: str | None, foot: str) -> str | None:
     """The foot a frame is flagged for after toggling ``foot`` (None: not flagged).
 

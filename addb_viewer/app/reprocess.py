@@ -17,6 +17,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from addb_viewer.app.flags import pending_replaced
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir, prestart_solver
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError, AnnotationStore
@@ -29,6 +30,7 @@ class ReprocessHost(Protocol):
     paths: Any
     store: AnnotationStore | None
     trial: Any
+    view: Any  # the shown trial's FlagView (None without a review record)
     trials: list[str]
     panel: Any
     playback: Any
@@ -64,6 +66,7 @@ class Reprocessor:
         self._lock = threading.Lock()
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
+        self._warned: tuple[str, int] | None = None  # (trial, pending frames) the last warning named
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
     @property
@@ -79,13 +82,28 @@ class Reprocessor:
         self._start(spec, new_work_dir(paths.jobs_dir, "process"), label="Processing the subject", trial=None)
 
     def reprocess(self, trial: str | None = None) -> None:
-        """Run the solver on ``trial`` (default: the one shown) with the current flags."""
+        """Run the solver on ``trial`` (default: the one shown) with the current flags.
+
+        When the shown trial's flags replace the solver's proposals and some proposals are
+        still pending (:func:`~addb_viewer.app.flags.pending_replaced`), the first press
+        says so and starts nothing; pressed again with the same pending frames, it runs."""
         app = self.app
         selected = app.panel.trial.value if app.panel.trial.value in app.trials else None
         name = trial or (app.trial.trial if app.trial is not None else selected)
         if name is None:
             self._say("No trial to reprocess.")
             return
+        view = app.view if app.trial is not None and app.trial.trial == name else None
+        pending = pending_replaced(view) if view is not None else 0
+        if pending and self._warned != (name, pending):
+            self._warned = (name, pending)
+            self._say(
+                f"**{pending} proposed frames of {name} are still pending.** Your flags replace the solver's own "
+                "choice, so Reprocess fits them as measured frames (with the plates' force, often none). Accept or "
+                "reject them first (All proposals), or press Reprocess again to fit them as measured."
+            )
+            return
+        self._warned = None
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
         # flags change the dynamics only: the child reuses the kinematics cached by the last
         # full run (a full run when that cache is missing or stale, e.g. after an extension)

@@ -36,7 +36,7 @@ from addb_viewer.app.camera import (
     view_pose,
 )
 from addb_viewer.app.diagnosis import diagnosis_markdown
-from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame
+from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame, pending_replaced
 from addb_viewer.app.meshes import body_mesh
 from addb_viewer.app.panel import ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
@@ -712,6 +712,13 @@ class ReviewApp:
             text += f" — {int(v.pending.sum())} pending, {int((v.proposed & v.accepted).sum())} accepted, {int(v.rejected.sum())} rejected"
         if v.beyond:
             text += f". {v.beyond} flagged frames lie past the end of this trial."
+        pending = pending_replaced(v)
+        if pending:
+            text += (
+                f". <span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
+                "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
+                "(in Reprocess and in the dataset run); accept or reject them first."
+            )
         self.panel.proposal_info.content = text
 
     def mark(self, what: str) -> None:

@@ -1,0 +1,83 @@
+"""Pending proposals before a Reprocess: once a trial has a flag (or is marked reviewed) the
+reviewer's flags replace the solver's proposals (addb_viewer.review_masks), so a proposal
+neither accepted nor rejected would be fitted as a measured frame. On the walk processed
+with dynamics (84 proposed frames), the flags panel says how many, the first Reprocess
+press warns and starts nothing, the second runs; once every proposal is decided (accepted
+or rejected) Reprocess runs at once and the warning is gone; an unflagged trial keeps the
+solver's own proposals and is never warned about."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.app import reprocess
+from addb_viewer.app.flags import pending_replaced
+from addb_viewer.app.paths import ReviewPaths
+from solver.pipeline import process_subject
+from tests.conftest import SHARED_DATA, writable_copy
+
+WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+
+
+@pytest.fixture(scope="module")
+def walk_dynamics(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("pending") / "out"
+    process_subject(WALK, out)
+    return out
+
+
+@pytest.fixture
+def started(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The solver jobs the app starts (recorded, not run)."""
+    specs: list = []
+
+    class Recorder:
+        def __init__(self, spec, work, **kw) -> None:
+            specs.append(spec)
+            self.running = False
+
+        def start(self) -> None:
+            pass
+
+        def cancel(self, *args, **kw) -> None:
+            pass
+
+        def wait(self, *args, **kw) -> bool:
+            return True
+
+    monkeypatch.setattr(reprocess, "SolverJob", Recorder)
+    return specs
+
+
+def test_reprocess_warns_once_about_pending_proposals_it_would_fit_as_measured(
+    walk_dynamics: Path, tmp_path: Path, make_app, started: list
+) -> None:
+    subject = writable_copy(WALK, tmp_path / "walk")
+    out = tmp_path / "out"
+    shutil.copytree(walk_dynamics, out)
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    n_proposed = int(app.view.proposed.sum())
+    assert n_proposed > 0 and int(app.view.pending.sum()) == n_proposed
+    # nothing flagged: the solver keeps its proposals, no warning, Reprocess runs at once
+    assert pending_replaced(app.view) == 0 and "fitted as measured" not in app.panel.proposal_info.content
+    app.jobs.reprocess()
+    assert len(started) == 1
+    # one flag outside the proposals: every proposal is now pending and would be measured
+    frame = int(np.flatnonzero(~app.view.proposed)[0])
+    app.seek(frame)
+    app.edit("flag", lambda ed, k, foot: ed.toggle(k, foot))
+    assert pending_replaced(app.view) == n_proposed
+    assert f"{n_proposed} pending proposed frames will be fitted as measured" in app.panel.proposal_info.content
+    app.jobs.reprocess()
+    assert len(started) == 1 and f"{n_proposed} proposed frames of walk are still pending" in app.panel.job_status.content
+    app.jobs.reprocess()  # pressed again: the reviewer means it
+    assert len(started) == 2 and started[-1].unmeasured_force["walk"].sum() == 1
+    # decided (every proposal accepted): no warning any more, Reprocess runs at once
+    app.edit("accept all", lambda ed, k, foot: ed.accept())
+    assert pending_replaced(app.view) == 0 and "fitted as measured" not in app.panel.proposal_info.content
+    app.jobs.reprocess()
+    assert len(started) == 3 and started[-1].unmeasured_force["walk"].sum() == n_proposed + 1
