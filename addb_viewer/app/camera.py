@@ -26,8 +26,10 @@ DISTANCE_M = 3.2
 #: Camera height above the point it looks at in the side views, m.
 ELEVATION_M = 0.4
 VIEWS = ("Sagittal", "Frontal", "Top")
-#: Farthest the framing backs off to keep a whole trial in view, m; beyond, it follows.
-MAX_DISTANCE_M = 8.0
+#: Farthest the framing backs off to keep a whole trial in view, m; beyond, it follows
+#: (farther, a skeleton is too small to judge its markers: with the 75 deg field of view a
+#: 1.8 m subject is 1.8 / (2 d tan 37.5 deg) of the canvas height, 120 px of 800 at 8 m).
+MAX_DISTANCE_M = 6.0
 #: Room kept around the body origins (the meshes reach past them), m.
 BODY_MARGIN_M = 0.2
 #: The top of the head above the pelvis origin, at least, m (no body origin marks it).

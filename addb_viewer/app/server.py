@@ -130,6 +130,8 @@ class ReviewApp:
         self.canvas_top_px = 0.0
         self.camera_name = "Sagittal"  # the view the camera was last put in
         self._framed_for: dict[int, tuple[float, float]] = {}  # client id -> canvas size framed for
+        self._canvas_widths: dict[int, float] = {}  # client id -> its canvas width, px
+        self._pages_following: set[int] = set()  # pages whose canvas cannot hold the whole trial
         self._follow_offset: dict[int, np.ndarray] = {}  # client id -> look point minus pelvis
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
@@ -396,8 +398,8 @@ class ReviewApp:
     def camera_view(self, view: str) -> CameraPose:
         """Put every page's camera (and new pages') in ``view`` (Sagittal, Frontal, Top),
         framing the shown trial for each page's own canvas (:func:`framed_view`: the whole
-        trial when it fits, else the current frame with "Follow pelvis" turned on).
-        Returns the pose of new pages."""
+        trial when it fits, else the current frame, and that page then follows the pelvis
+        whatever "Follow pelvis" says). Returns the pose of new pages."""
         self.camera_name = view
         t, pb = self.trial, self.playback
         if t is None:
@@ -405,23 +407,25 @@ class ReviewApp:
             self._apply_pose(None, pose)
             return pose
         k = pb.frame if pb is not None else 0
-        pose, fits = framed_view(view, t.body_position, self._canvas(None), k)
+        pose, _ = framed_view(view, t.body_position, self._canvas(None), k)
         self._apply_pose(None, pose)
         for client in self.server.get_clients().values():
-            fits = self._frame_page(client, view) and fits
-        if not fits and not self.panel.follow.value:
-            with self._quiet_updates():
-                self.panel.follow.value = True  # the trial leaves any fixed view: follow it
+            self._frame_page(client, view)
         return pose
 
     def _frame_page(self, client: Any, view: str) -> bool:
-        """Frame the shown trial in ``view`` on one page; False when it had to follow."""
+        """Frame the shown trial in ``view`` on one page; False when the trial does not fit
+        its canvas, and the page then follows the pelvis (until a framing fits again)."""
         t, pb = self.trial, self.playback
         if t is None:
             return True
         canvas = self._canvas(client)
         pose, fits = framed_view(view, t.body_position, canvas, pb.frame if pb is not None else 0)
         self._framed_for[client.client_id] = (canvas.width, canvas.height)
+        if fits:
+            self._pages_following.discard(client.client_id)
+        else:
+            self._pages_following.add(client.client_id)
         self._apply_pose(client, pose)
         return fits
 
@@ -446,22 +450,23 @@ class ReviewApp:
         and fit the dataset queue's window to the canvas."""
         client = camera.client
         size = (float(camera.image_width), float(camera.image_height))
-        if self.workbench is not None:
-            self.workbench.fit_to_canvas(size[0])
+        self._canvas_widths[client.client_id] = size[0]
+        if self.workbench is not None:  # one window for every page: as narrow as the narrowest
+            self.workbench.fit_to_canvas(min(self._canvas_widths.values()))
         with self._lock:
             if self.trial is None or self._framed_for.get(client.client_id) == size:
                 return
-            if not self._frame_page(client, self.camera_name) and not self.panel.follow.value:
-                with self._quiet_updates():
-                    self.panel.follow.value = True
+            self._frame_page(client, self.camera_name)
 
-    def _follow_pelvis(self, k: int) -> None:
-        """Move every page's camera with the pelvis (its orbit and zoom kept, and the pelvis
-        where the framing put it on the screen)."""
+    def _follow_pelvis(self, k: int, pages: set[int] | None = None) -> None:
+        """Move the cameras of ``pages`` (client ids; None: every page) with the pelvis (the
+        orbit and zoom kept, and the pelvis where the framing put it on the screen)."""
         if self.trial is None:
             return
         pelvis = self.trial.body_position[k, 0, :]
         for client in self.server.get_clients().values():
+            if pages is not None and client.client_id not in pages:
+                continue
             target = pelvis + self._follow_offset.get(client.client_id, 0.0)
             pos, look = followed(client.camera.position, client.camera.look_at, target)
             with client.atomic():
@@ -477,6 +482,8 @@ class ReviewApp:
         self.scene.show(k, self._banner(k))
         if self.panel.follow.value:
             self._follow_pelvis(k)
+        elif self._pages_following:  # pages whose canvas cannot hold the whole trial
+            self._follow_pelvis(k, self._pages_following)
         with self._quiet_updates():
             self.panel.frame.value = k
             self.panel.timeline_frame.value = k
@@ -619,6 +626,8 @@ class ReviewApp:
         self.name_fields.pop(client.client_id, None)
         self._framed_for.pop(client.client_id, None)
         self._follow_offset.pop(client.client_id, None)
+        self._pages_following.discard(client.client_id)
+        self._canvas_widths.pop(client.client_id, None)
 
     def reviewer_name(self, client_id: int | None) -> str | None:
         """The name recorded with an edit from page ``client_id``: the page's "Your name",

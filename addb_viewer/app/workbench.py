@@ -41,7 +41,7 @@ QUEUE_WIDTH_PX = 620
 QUEUE_HEIGHT_PX = 300
 QUEUE_GAP_PX = 10
 #: The narrowest the queue's window is made to fit a canvas, px.
-QUEUE_MIN_WIDTH_PX = 300
+QUEUE_MIN_WIDTH_PX = 120
 #: A queue window narrower than this shows the compact table (:func:`queue_markdown`), px.
 COMPACT_BELOW_PX = 520
 #: Rows shown in the queue table (the dropdown lists them all).
@@ -127,10 +127,11 @@ class Workbench:
         # would be drawn while hidden, at zero width
         self.panel = gui.add_panel()
         with self.panel.add_tab("Dataset queue"):
-            self.table = gui.add_markdown("Reading the dataset…")
+            # the controls first: on a narrow window the table wraps and scrolls below them
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
             self.run_status = gui.add_markdown("")
+            self.table = gui.add_markdown("Reading the dataset…")
         self.panel.float(x=QUEUE_GAP_PX, y=QUEUE_GAP_PX, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
         self.width = float(QUEUE_WIDTH_PX)
         app.canvas_top_px = QUEUE_GAP_PX + QUEUE_HEIGHT_PX  # the camera frames the subject below the window
@@ -149,8 +150,9 @@ class Workbench:
         threading.Thread(target=self._poll, name="addb-queue", daemon=True).start()
 
     def fit_to_canvas(self, canvas_width: float) -> None:
-        """Make the queue's window no wider than the 3D canvas a page reported (less its
-        gaps), so it never covers the docked panels beside the canvas."""
+        """Make the queue's window no wider than ``canvas_width`` (the narrowest 3D canvas
+        of the open pages, px) less its gaps, so it never covers the docked panels beside
+        the canvas (the window is one for all pages)."""
         width = float(min(QUEUE_WIDTH_PX, max(QUEUE_MIN_WIDTH_PX, canvas_width - 2 * QUEUE_GAP_PX)))
         if abs(width - self.width) >= 1.0:
             compact = (self.width < COMPACT_BELOW_PX, width < COMPACT_BELOW_PX)

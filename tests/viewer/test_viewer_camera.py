@@ -62,13 +62,13 @@ def _stretched(body_position: np.ndarray, factor: float) -> np.ndarray:
 
 
 def test_the_framing_keeps_every_frame_of_the_walk_inside_a_narrow_canvas(demo_paths, make_app) -> None:
-    """A 1280 x 800 window leaves the 3D canvas about 395 px wide, and the dataset queue covers
+    """A 1366 x 800 window leaves the 3D canvas about 480 px wide, and the dataset queue covers
     its top 310 px: every frame's skeleton box (all frames, not only the sampled ones the
     framing uses) projects inside the rest, with the gap kept, from the sagittal, frontal
-    and top views; at the default canvas the camera stays at its usual distance."""
+    and top views; at the default canvas the camera stays nearer."""
     bp = make_app(demo_paths).trial.body_position
     every = body_points(bp, np.arange(len(bp)))
-    narrow = Canvas(395.0, 800.0, np.radians(75.0), top=310.0)
+    narrow = Canvas(480.0, 800.0, np.radians(75.0), top=310.0)
     for view in ("Sagittal", "Frontal", "Top"):
         pose, fits = framed_view(view, bp, narrow)
         px, depth = project(every, pose, narrow)
@@ -115,10 +115,6 @@ def test_app_frames_the_loaded_trial_and_switches_views(demo_paths, make_app) ->
     d = np.asarray(cam.position) - np.asarray(cam.look_at)
     assert np.argmax(np.abs(d)) == 0 and d[0] >= DISTANCE_M  # from in front, along +X
     assert not app.panel.follow.value
-    # a trial that leaves every fixed view turns following on
-    app.trial.body_position[:] = _stretched(app.trial.body_position, 8.0)
-    app.camera_view("Sagittal")
-    assert app.panel.follow.value
 
 
 def _pose_of(client) -> tuple[np.ndarray, np.ndarray]:
@@ -159,3 +155,34 @@ def test_each_page_is_framed_for_its_own_canvas_and_again_when_it_changes_size(d
         assert np.allclose(_pose_of(client)[0], orbit)
     finally:
         page.close()
+
+
+def test_a_page_whose_canvas_cannot_hold_the_trial_follows_it_alone(demo_paths, make_app) -> None:
+    """The walk stretched eight times: a page follows the pelvis (its camera keeps the
+    framing's offset from the pelvis as frames change) while "Follow pelvis" stays unticked;
+    a second page at the same size does too, and once the trial fits again (the stretch
+    undone, the view chosen again) neither follows any more."""
+    app = make_app(demo_paths)
+    original = app.trial.body_position.copy()
+    app.trial.body_position[:] = _stretched(original, 8.0)
+    pages = [ProtocolClient(app.port), ProtocolClient(app.port)]
+    try:
+        clients = wait_for(lambda: len(app.server.get_clients()) == 2 and list(app.server.get_clients().values()), what="two pages")
+        wait_for(lambda: len(app._pages_following) == 2, 20, "both pages following")
+        assert not app.panel.follow.value
+        bp = app.trial.body_position
+        app.seek(50)
+        offset = {c.client_id: _pose_of(c)[1] - bp[50, 0] for c in clients}
+        app.seek(180)
+        for c in clients:
+            assert np.allclose(_pose_of(c)[1] - bp[180, 0], offset[c.client_id])
+            assert np.linalg.norm(bp[180, 0] - bp[50, 0]) > 5.0  # the pelvis moved far: the camera went with it
+        app.trial.body_position[:] = original
+        app.camera_view("Sagittal")
+        assert not app._pages_following
+        look = {c.client_id: _pose_of(c)[1] for c in clients}
+        app.seek(20)
+        assert all(np.allclose(_pose_of(c)[1], look[c.client_id]) for c in clients)  # framed, not following
+    finally:
+        for page in pages:
+            page.close()
