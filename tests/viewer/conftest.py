@@ -1,6 +1,7 @@
 """Fixtures of the viewer tests: the demo subject processed once (kinematics stage, a few
 seconds) and per-test copies of that output, so that each test has its own review
-record and nothing is written into the package or the user's cache."""
+record and nothing is written into the package or the user's cache; the shared walk
+processed once with dynamics."""
 
 from __future__ import annotations
 
@@ -21,6 +22,18 @@ def demo_processed(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     out = tmp_path_factory.mktemp("demo") / "out"
     process_kinematics(DEMO_SUBJECT, out)
+    return out
+
+
+@pytest.fixture(scope="session")
+def walk_processed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The shared walk (rajagopal2016_walk) processed with dynamics by ``process_subject``
+    (its trials' proposals, residuals and Hicks verdicts), shared, read only: copy it."""
+    from solver.pipeline import process_subject
+    from tests.conftest import SHARED_DATA
+
+    out = tmp_path_factory.mktemp("walk") / "out"
+    process_subject(SHARED_DATA / "subjects" / "rajagopal2016_walk", out)
     return out
 
 

@@ -17,17 +17,9 @@ import pytest
 from addb_viewer.app import reprocess
 from addb_viewer.app.flags import pending_replaced
 from addb_viewer.app.paths import ReviewPaths
-from solver.pipeline import process_subject
 from tests.conftest import SHARED_DATA, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
-
-
-@pytest.fixture(scope="module")
-def walk_dynamics(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("pending") / "out"
-    process_subject(WALK, out)
-    return out
 
 
 @pytest.fixture
@@ -54,11 +46,11 @@ def started(monkeypatch: pytest.MonkeyPatch) -> list:
 
 
 def test_reprocess_warns_once_about_pending_proposals_it_would_fit_as_measured(
-    walk_dynamics: Path, tmp_path: Path, make_app, started: list
+    walk_processed: Path, tmp_path: Path, make_app, started: list
 ) -> None:
     subject = writable_copy(WALK, tmp_path / "walk")
     out = tmp_path / "out"
-    shutil.copytree(walk_dynamics, out)
+    shutil.copytree(walk_processed, out)
     app = make_app(ReviewPaths.for_subject(subject, out))
     n_proposed = int(app.view.proposed.sum())
     assert n_proposed > 0 and int(app.view.pending.sum()) == n_proposed

@@ -30,17 +30,14 @@ from addb_viewer.locations import annotations_path
 from annotations import AnnotationStore
 from solver.dataset.manifest import MANIFEST_NAME
 from solver.dataset.summary import subject_rows
-from solver.pipeline import process_subject
 from tests.conftest import SHARED_DATA, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 
 
-@pytest.fixture(scope="module")
-def walk_output(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("queue") / "walk_out"
-    process_subject(WALK, out)
-    return out
+@pytest.fixture
+def walk_output(walk_processed: Path) -> Path:
+    return walk_processed
 
 
 @pytest.fixture
