@@ -618,8 +618,7 @@ class ReviewApp:
         field.on_update(lambda e, cid=client.client_id: self.client_names.__setitem__(cid, str(e.target.value).strip()))
         self.name_fields[client.client_id] = field
         client.camera.on_update(self._camera_moved)
-        with self._lock:
-            self._frame_page(client, self.camera_name)  # for this page's canvas, not the default one
+        self._camera_moved(client.camera)  # its first report: framed for its canvas, the queue fitted
 
     def _client_disconnected(self, client: Any) -> None:
         self.client_names.pop(client.client_id, None)
@@ -628,6 +627,8 @@ class ReviewApp:
         self._follow_offset.pop(client.client_id, None)
         self._pages_following.discard(client.client_id)
         self._canvas_widths.pop(client.client_id, None)
+        if self.workbench is not None and self._canvas_widths:  # the narrowest page left
+            self.workbench.fit_to_canvas(min(self._canvas_widths.values()))
 
     def reviewer_name(self, client_id: int | None) -> str | None:
         """The name recorded with an edit from page ``client_id``: the page's "Your name",

@@ -2,7 +2,8 @@
 folder) is processed in the background by the Dask dataset runner while the app is up;
 the queue lists both subjects and their trials with their states; opening the second
 subject shows it with a bone mesh for every body; "Next trial to review" moves through
-the unreviewed trials and skips a trial once it is marked reviewed."""
+the unreviewed trials and skips a trial once it is marked reviewed; the queue's window fits
+the narrowest open page."""
 
 from __future__ import annotations
 
@@ -110,3 +111,40 @@ def test_stopping_the_app_cancels_the_background_run_and_leaves_no_half_output(
         if s["status"] == "cancelled":
             assert not (out / s["rel"] / "manifest.json").exists()
     assert not list(out.rglob(".addb-work-*"))
+
+
+def test_the_queue_window_fits_the_narrowest_open_page(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
+    """One queue window for every page: two pages report 900 and 400 px wide canvases and the
+    window is 380 px (the narrow canvas less its gaps), with the compact table; when the
+    narrow page closes, it widens to the other page's canvas (620 px at most) and the full
+    table comes back."""
+    from viewer_support import ProtocolClient, wait_for
+    from viser import _messages
+
+    from addb_viewer.app.workbench import COMPACT_BELOW_PX, QUEUE_GAP_PX, QUEUE_WIDTH_PX
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, _, subjects = dataset_subjects(dataset)
+    first = subjects[0]
+    app = make_app(ReviewPaths.for_subject(first.subject_dir, first.out_dir), process_missing=False)
+    bench = Workbench(app, dataset, workers=0)
+
+    def page(width: int) -> ProtocolClient:
+        before = set(app._canvas_widths)
+        client = ProtocolClient(app.port)  # reports a 480 px canvas as it connects
+        wait_for(lambda: set(app._canvas_widths) - before, 20, "the page connected")
+        client.send(_messages.ViewerCameraMessage(
+            wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 1.0, 3.0), fov=1.0, near=0.01, far=100.0, image_height=700,
+            image_width=width, look_at=(0.0, 1.0, 0.0), up_direction=(0.0, 1.0, 0.0)))  # fmt: skip
+        return client
+
+    wide, narrow = page(900), page(400)
+    try:
+        wait_for(lambda: bench.width == 400 - 2 * QUEUE_GAP_PX, 20, "the window fitted to the narrow page")
+        assert bench.width < COMPACT_BELOW_PX and "| state |" not in bench.table.content
+        narrow.close()
+        wait_for(lambda: bench.width == QUEUE_WIDTH_PX, 20, "the window widened when the narrow page closed")
+        assert "| state |" in bench.table.content
+    finally:
+        wide.close()
+        narrow.close()
