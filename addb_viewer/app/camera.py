@@ -204,18 +204,22 @@ def framed_view(view: str, body_position: NDArray[np.float64], canvas: Canvas, f
     points = body_points(body_position)
     if not len(points):
         return view_pose(view, framing_point(np.asarray(body_position)[:, 0, :])), True
-    distance = DISTANCE_M
-    while distance <= MAX_DISTANCE_M * 1.0001:
-        pose = _centred(view, points, canvas, distance)
-        if _fits(points, pose, canvas):
-            return pose, True
-        distance *= 1.1
+    pose, fits = _backed_off(view, points, canvas, MAX_DISTANCE_M)
+    if fits:
+        return pose, True
     one = body_points(body_position, np.array([min(max(frame, 0), len(body_position) - 1)]))
-    if not len(one):
-        one = points
+    return _backed_off(view, one if len(one) else points, canvas, 4 * MAX_DISTANCE_M)[0], False
+
+
+def _backed_off(view: str, points: NDArray[np.float64], canvas: Canvas, limit: float) -> tuple[CameraPose, bool]:
+    """The nearest centred pose (:data:`DISTANCE_M`, then 10 % farther at each step, up to
+    ``limit`` m) that keeps ``points`` inside ``canvas``, and True; else the farthest one
+    tried, and False."""
     distance = DISTANCE_M
-    pose = _centred(view, one, canvas, distance)
-    while not _fits(one, pose, canvas) and distance < 4 * MAX_DISTANCE_M:
+    pose = _centred(view, points, canvas, distance)
+    while not _fits(points, pose, canvas):
+        if distance * 1.1 > limit * 1.0001:
+            return pose, False
         distance *= 1.1
-        pose = _centred(view, one, canvas, distance)
-    return pose, False
+        pose = _centred(view, points, canvas, distance)
+    return pose, True

@@ -130,7 +130,6 @@ class ReviewApp:
         self.canvas_top_px = 0.0
         self.camera_name = "Sagittal"  # the view the camera was last put in
         self._framed_for: dict[int, tuple[float, float]] = {}  # client id -> canvas size framed for
-        self._canvas_widths: dict[int, float] = {}  # client id -> its canvas width, px
         self._pages_following: set[int] = set()  # pages whose canvas cannot hold the whole trial
         self._follow_offset: dict[int, np.ndarray] = {}  # client id -> look point minus pelvis
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
@@ -318,7 +317,7 @@ class ReviewApp:
             self._sync_controls(name)
             self._setup_timeline(trial)
             self.panel.diagnosis.content = diagnosis_markdown(self.paths.out_dir, self.paths.subject_dir, name)
-            self._aim_camera(trial)
+            self.camera_view("Sagittal")  # framed from the side, for new pages and every open one
             self.render(self.playback.frame, force_plots=True)
         self.clear_error()
         if self.store is None and self.store_problem is not None:  # stays in view while flagging is off
@@ -375,10 +374,6 @@ class ReviewApp:
             p.record_name.value = f"{name}.rrd"
         self._show_flags_info()
         self._show_range_info()
-
-    def _aim_camera(self, trial: ProcessedTrial) -> None:
-        """Frame the subject from the side, for new pages and every open one."""
-        self.camera_view("Sagittal")
 
     def _canvas(self, client: Any | None) -> Canvas:
         """The 3D canvas of page ``client`` as it last reported it (:data:`DEFAULT_CANVAS`
@@ -450,9 +445,7 @@ class ReviewApp:
         and fit the dataset queue's window to the canvas."""
         client = camera.client
         size = (float(camera.image_width), float(camera.image_height))
-        self._canvas_widths[client.client_id] = size[0]
-        if self.workbench is not None:  # one window for every page: as narrow as the narrowest
-            self.workbench.fit_to_canvas(min(self._canvas_widths.values()))
+        self._fit_queue()
         with self._lock:
             if self.trial is None or self._framed_for.get(client.client_id) == size:
                 return
@@ -609,6 +602,7 @@ class ReviewApp:
 
         Prefilled with ``--reviewer`` on a loopback address (one person); empty on a
         server reached by a team, where a page must name its reviewer before editing."""
+        client.camera.on_update(self._camera_moved)
         default = self.reviewer if self.token is None else ""
         self.client_names[client.client_id] = default
         field = client.gui.add_text(
@@ -617,7 +611,6 @@ class ReviewApp:
         )
         field.on_update(lambda e, cid=client.client_id: self.client_names.__setitem__(cid, str(e.target.value).strip()))
         self.name_fields[client.client_id] = field
-        client.camera.on_update(self._camera_moved)
         self._camera_moved(client.camera)  # its first report: framed for its canvas, the queue fitted
 
     def _client_disconnected(self, client: Any) -> None:
@@ -626,9 +619,13 @@ class ReviewApp:
         self._framed_for.pop(client.client_id, None)
         self._follow_offset.pop(client.client_id, None)
         self._pages_following.discard(client.client_id)
-        self._canvas_widths.pop(client.client_id, None)
-        if self.workbench is not None and self._canvas_widths:  # the narrowest page left
-            self.workbench.fit_to_canvas(min(self._canvas_widths.values()))
+        self._fit_queue()  # to the narrowest page left (viser has removed this one)
+
+    def _fit_queue(self) -> None:
+        """Fit the dataset queue's window, one for every page, to the narrowest page's canvas."""
+        widths = [c.camera.image_width for c in self.server.get_clients().values()]
+        if self.workbench is not None and widths:
+            self.workbench.fit_to_canvas(float(min(widths)))
 
     def reviewer_name(self, client_id: int | None) -> str | None:
         """The name recorded with an edit from page ``client_id``: the page's "Your name",

@@ -160,7 +160,12 @@ class Workbench:
             self.panel.set_width(width)
             if compact[0] != compact[1]:
                 with self._lock:
-                    self.table.content = queue_markdown(self.rows, current=self.current, compact=compact[1])
+                    self._draw_table()
+
+    def _draw_table(self) -> None:
+        """Show :attr:`rows` in the queue's table (compact in a narrow window); call with
+        ``_lock`` held."""
+        self.table.content = queue_markdown(self.rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
 
     # ------------------------------------------------------------------ queue
     def refresh(self) -> list[QueueRow]:
@@ -172,7 +177,7 @@ class Workbench:
             rows = build_queue(self.subjects, dict(self.running))
             self.rows = rows
             self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
-            self.table.content = queue_markdown(rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
+            self._draw_table()
             options = ("(none)", *self.labels)
             value = next((k for k, v in self.labels.items() if v == self.current), "(none)")
             new_options = tuple(self.choice.options) != options
@@ -231,7 +236,7 @@ class Workbench:
                     self.rows = [dataclasses.replace(r, detail=self.running[data["rel"]])
                                  if r.subject.rel == data["rel"] and r.processing == PROCESSING else r
                                  for r in self.rows]  # fmt: skip
-                    self.table.content = queue_markdown(self.rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
+                    self._draw_table()
                     return
             self.refresh()
             if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:

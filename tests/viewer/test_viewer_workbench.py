@@ -130,9 +130,9 @@ def test_the_queue_window_fits_the_narrowest_open_page(dataset: Path, make_app, 
     bench = Workbench(app, dataset, workers=0)
 
     def page(width: int) -> ProtocolClient:
-        before = set(app._canvas_widths)
+        before = set(app.name_fields)
         client = ProtocolClient(app.port)  # reports a 480 px canvas as it connects
-        wait_for(lambda: set(app._canvas_widths) - before, 20, "the page connected")
+        wait_for(lambda: set(app.name_fields) - before, 20, "the page connected")
         client.send(_messages.ViewerCameraMessage(
             wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 1.0, 3.0), fov=1.0, near=0.01, far=100.0, image_height=700,
             image_width=width, look_at=(0.0, 1.0, 0.0), up_direction=(0.0, 1.0, 0.0)))  # fmt: skip
