@@ -2,8 +2,11 @@
 
 Conventions
 -----------
-* Frames are 0-based indices at the trial's own frame rate (the rate of the marker
-  file the reviewer sees). A range is half-open, ``[start, stop)``.
+* Frames are 0-based indices on the frames of the trial the record was made on, whose
+  count and rate the record keeps (:attr:`TrialReview.n_frames`, :attr:`TrialReview.rate_hz`;
+  the review app and ``addb convert`` record the solver's processed frames, 100 Hz; how
+  other rates are read: :mod:`addb_viewer.review_masks`). A range is half-open,
+  ``[start, stop)``.
 * Times are UTC, ISO 8601 with milliseconds and a ``Z`` suffix:
   ``"2026-11-21T15:59:14.123Z"``.
 * Every flag, activity range, note and "reviewed" mark carries a :class:`Provenance`:

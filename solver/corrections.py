@@ -504,8 +504,8 @@ class Correction:
         ``entry -> (field, problem)`` or None: a check across the entry's fields, after
         theirs (:func:`read_extensions` refuses the entry with the problem).
 
-    ``unmeasured_force`` extensions have none of these: their frames join the masks
-    (:func:`extension_masks`).
+    ``unmeasured_force`` extensions have no function: their frames join the masks
+    (:func:`extension_masks`); only their fields and check.
     """
 
     forces: Callable[[ForceRecording, Mapping[str, Any]], ForceRecording] | None = None

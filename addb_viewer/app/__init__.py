@@ -23,6 +23,23 @@ panel
     The GUI controls (no behaviour; :mod:`~addb_viewer.app.server` wires them).
 jobs
     The solver in a separate process, with progress and cancel.
+camera
+    Where the camera looks: the whole trial framed for each page's canvas, the anatomical
+    views, following the pelvis.
+timeline
+    The trial's timeline strip (flags per foot, proposals, measured force, selection).
+diagnosis
+    What ``addb diagnose`` found and what is applied, as the panel's "Diagnosis" folder.
+reprocess
+    Solver runs started from the page (first processing, Reprocess, Diagnose, recording).
+queue
+    A dataset's review queue (processing and review state, sorted by need); no viser.
+workbench
+    ``addb view DATASET_DIR``: the queue's window, Open and Next trial to review.
+access
+    The access token when the app listens beyond this machine.
+server_log
+    Quiets the server's log about connections closed before saying anything.
 server
     :class:`~addb_viewer.app.server.ReviewApp`: wiring, playback thread, errors in the page.
 """

@@ -9,7 +9,9 @@ Per frame t the reference model leaves nine numbers (the *rows* of the frame):
 with e_t the mean marker error (model minus observed) over the n_t markers seen, r_F and
 r_M the root residual force and moment about the pelvis origin p_t (:mod:`.data`), c_t the
 centre of mass, F_t the total plate force, m the stated mass and s_m, s_F, s_M the
-dynamics fit's standard deviations (1 cm per marker coordinate, 2 N, 2 N·m by default).
+dynamics fit's standard deviations as the judged trial was fitted with (1 cm per marker
+coordinate, 4 N, 4 N·m on the alternation the diagnosis judges on; 2 N, 2 N·m when a trial's
+settings name none).
 
 ``d`` ``(T, 3)`` is a translation of the whole body over time (``dd`` its second central
 difference / h²). The pipeline absorbs much of any force error into the motion (its
@@ -72,7 +74,7 @@ def own_noise_sigmas(ref_rows: FloatArray, evaluated: BoolArray, sigmas: Sigmas)
     moment rows over the ``evaluated`` frames, when that RMS is above 1; the marker sigma is
     kept. Used for the marker-only motion, whose residual no force shaped (on the treadmill
     run its profiled moment rows are far above those of the fitted motion, with the fitted
-    motion's 2 N·m).
+    motion's 4 N·m).
 
     Parameters
     ----------

@@ -2,8 +2,10 @@
 
 As the AddBiomechanics dataset paper proposes (Werling et al. 2024, §4): every trial is
 put on a common rate (100 Hz by default), the signals that enter accelerations are
-low-pass filtered with a 3rd-order zero-phase Butterworth filter at 30 Hz, and
-accelerations are central differences of the filtered coordinates. The force plates are
+low-pass filtered with a 3rd-order zero-phase Butterworth filter at 30 Hz; the paper's
+accelerations are central differences of the filtered coordinates (:func:`derivatives`;
+the dynamics stage's default takes them from the coordinates' natural quintic spline
+instead, :mod:`solver.dynamics.spline`). The force plates are
 filtered with the same filter (at their own rate, before resampling) so that forces and
 accelerations keep the same bandwidth.
 """

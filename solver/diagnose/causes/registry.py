@@ -1,9 +1,10 @@
 """The registered diagnosis causes, in the order they are evaluated and listed.
 
 Adding a cause is one new module beside this one (a :class:`~solver.diagnose.causes.base.Cause`
-subclass and its instance ``CAUSE``) plus one line in :data:`CAUSES` (and, when its
-extension corrects the raw recordings, its entry in :data:`solver.corrections.CORRECTIONS`);
-see solver/diagnose/README.md. :func:`~solver.diagnose.causes.base.check` refuses, when this
+subclass and its instance ``CAUSE``) plus one line in :data:`CAUSES` and its entry in :data:`solver.corrections.CORRECTIONS`
+(every cause has one: how its saved entry is applied and the entry's fields that
+:func:`solver.corrections.read_extensions` checks);
+see solver/diagnose/README.md, "Adding a cause". :func:`~solver.diagnose.causes.base.check` refuses, when this
 module is imported, a cause that lacks a part.
 """
 
