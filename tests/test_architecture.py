@@ -157,7 +157,7 @@ def layout_map(readme: str) -> dict[str, set[str]]:
                 out.setdefault(folder, set())
             else:
                 folder = parent
-        out.setdefault(folder, set()).update(re.findall(r"[\w*]+\.py", text))
+        out.setdefault(folder, set()).update(re.findall(r"(?<![\w*/])[\w*]+\.py", text))  # not a path elsewhere
     return out
 
 
@@ -168,7 +168,7 @@ def test_the_layout_map_reader_follows_indentation() -> None:
         "  sub/                parts: a.py, b*.py\n"
         "    deep.py           deep, with c.py\n"
         "  top.py              top\n"
-        "                      continued with d.py\n"
+        "                      continued with d.py (made by scripts/e.py)\n"
         "```\n"
     )
     assert layout_map(readme) == {"pkg/": {"cli.py", "top.py", "d.py"}, "pkg/sub/": {"a.py", "b*.py", "deep.py", "c.py"}}
@@ -188,3 +188,17 @@ def test_the_readme_architecture_names_every_module() -> None:
             elif f.name != "__init__.py" and not any(fnmatch.fnmatch(f.name, n) for n in names[folder]):
                 missing.append(f.relative_to(REPO).as_posix())
     assert sorted(set(missing)) == []
+
+
+def test_every_module_the_readme_architecture_names_exists() -> None:
+    """The other way: every file name (or pattern) the map writes for a folder of the packages
+    is a module of that folder, so a module renamed or removed leaves no stale line in the map."""
+    names = layout_map((REPO / "README.md").read_text())
+    stale = [
+        f"{folder}{n}"
+        for folder, written in names.items()
+        if folder.split("/")[0] in PACKAGES
+        for n in sorted(written)
+        if not any(fnmatch.fnmatch(f.name, n) for f in (REPO / folder).glob("*.py"))
+    ]
+    assert stale == []

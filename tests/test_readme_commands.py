@@ -1,7 +1,7 @@
 """The README's command-line table tells the command line as it is: every ``addb`` subcommand
 has a row, and every option of its parser is written in the usage cell of one of its rows
 (long or short form), so an option added to a parser without its line in the README fails
-the suite."""
+the suite; so does a choice of an option the table lists otherwise."""
 
 from __future__ import annotations
 
@@ -55,3 +55,33 @@ def test_every_subcommand_and_option_is_in_the_readme_table() -> None:
             if options and "-h" not in options and not any(_named(s, usage[name]) for s in options):
                 missing.append(f"{name} {'/'.join(options)}")
     assert missing == []
+
+
+def written_choices(option: str, usage: str) -> set[str]:
+    """The values written after ``option`` in a usage cell (``--fit rounds\\|band`` gives
+    {"rounds", "band"}), over every occurrence."""
+    out: set[str] = set()
+    for found in re.finditer(rf"(?<![\w-]){re.escape(option)}[ =]([\w.-]+(?:\\\|[\w.-]+)*)", usage):
+        out |= set(found.group(1).split("\\|"))
+    return out
+
+
+def test_the_choice_reader_joins_the_rows() -> None:
+    usage = "`addb x [--format mcap\\|rrd] -o F` `addb x --format b3d` [--fit N]"
+    assert written_choices("--format", usage) == {"mcap", "rrd", "b3d"}
+    assert written_choices("--fit", usage) == {"N"}
+
+
+def test_every_choice_of_an_option_is_in_the_readme_table() -> None:
+    """An option with fixed choices lists exactly its parser's choices in the table (over its
+    rows), so a choice added, renamed or dropped in the parser fails the suite."""
+    usage = usage_cells((REPO / "README.md").read_text())
+    wrong = {}
+    for name, sub in _subcommands().items():
+        for action in sub._actions:
+            if not action.choices or not action.option_strings:
+                continue
+            written = set().union(*(written_choices(s, usage.get(name, "")) for s in action.option_strings))
+            if written != {str(c) for c in action.choices}:
+                wrong[f"{name} {'/'.join(action.option_strings)}"] = (sorted(written), sorted(map(str, action.choices)))
+    assert wrong == {}
