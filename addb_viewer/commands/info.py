@@ -28,6 +28,6 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
-    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim file or an AddBiomechanics subject folder")
+    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file or a subject folder")
     p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
     p.set_defaults(handler=run)
