@@ -510,7 +510,7 @@ class ReviewApp:
         if t.has_dynamics:
             f = float(np.linalg.norm(t.residual_force[k]))
             m = float(np.linalg.norm(t.residual_moment[k]))
-            over = " · **over Hicks**" if self.hicks is not None and self.hicks[k] else ""
+            over = " · **over a Hicks limit at this frame**" if self.hicks is not None and self.hicks[k] else ""
             parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")

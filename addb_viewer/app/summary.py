@@ -5,7 +5,11 @@ Hicks thresholds (Hicks et al. 2015, "Is my model good enough?"): a residual for
 acceptable below 5 % of the peak external force, a residual moment below 1 % of the
 centre-of-mass height times the peak external force. Here they are applied frame by
 frame, with the peak of the summed plate forces as the external force (body weight when
-the trial has no plates) and the median centre-of-mass height.
+the trial has no plates) and the median centre-of-mass height, on the frames with measured
+force only: on a frame left out of the fit the residual is the force no plate measured.
+These per-frame peak limits are not results.json's verdicts (``hicks_linear_ok``,
+``hicks_angular_ok``: the residuals' RMS over the measured frames against 0.05 body weight
+and 0.1 body weight x height, :mod:`solver.dynamics.metrics`), which the dataset queue shows.
 """
 
 from __future__ import annotations
@@ -59,13 +63,14 @@ def hicks_thresholds(trial: ProcessedTrial) -> HicksThresholds:
 
 
 def hicks_exceeded(trial: ProcessedTrial) -> NDArray[np.bool_]:
-    """``(T,)`` frames whose residual force or moment exceeds its Hicks threshold
-    (all False without dynamics)."""
+    """``(T,)`` frames with measured force whose residual force or moment exceeds its Hicks
+    threshold (all False without dynamics; never a frame left out of the fit, whose residual
+    is the force no plate measured)."""
     th = hicks_thresholds(trial)
     with np.errstate(invalid="ignore"):
         f = np.linalg.norm(trial.residual_force, axis=1) > th.force_n
         m = np.linalg.norm(trial.residual_moment, axis=1) > th.moment_nm
-    return f | m
+    return (f | m) & ~np.asarray(trial.unobserved, bool)
 
 
 def _rms(x: NDArray[np.float64]) -> float | None:
@@ -105,7 +110,7 @@ def trial_summary(trial: ProcessedTrial) -> dict[str, float | int | None]:
         "residual_force_max_n": _max(f),
         "residual_moment_rms_nm": _rms(m),
         "residual_moment_max_nm": _max(m),
-        "hicks_frames": int((hicks_exceeded(trial) & measured).sum()) if trial.has_dynamics else None,
+        "hicks_frames": int(hicks_exceeded(trial).sum()) if trial.has_dynamics else None,
         "unobserved_frames": int(np.count_nonzero(trial.unobserved)),
         "measured_frames": int(np.count_nonzero(measured)) if trial.has_dynamics else None,
         "mass_kg": float(trial.mass_kg),

@@ -70,8 +70,8 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     head = f"**{len({r.subject.rel for r in rows})} subjects, {n_trials} trials: {done} reviewed"
     head += f", {waiting} processing" if waiting else ""
     head += f", {failed} failed" if failed else ""
-    columns = ("subject / trial", "review", "pending", "Hicks") if compact else (
-        "subject / trial", "state", "review", "pending", "Hicks", "RMS cm")
+    columns = ("subject / trial", "review", "pending", "Hicks RMS") if compact else (
+        "subject / trial", "state", "review", "pending", "Hicks RMS", "RMS cm")
     lines = [head + "**", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for row in rows[:limit]:
         name = _md(row_label(row) if row.trial else row.subject.rel)

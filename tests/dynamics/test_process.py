@@ -238,8 +238,9 @@ def test_the_review_apps_table_gives_the_residuals_of_results_json(walk_out: Pat
     """The Reprocess table's residual figures are over the frames with measured force, as
     results.json's: over every frame they counted the force no plate measured on the frames
     left out of the fit (hundreds of newtons on the walk) and every such frame as over a
-    Hicks threshold."""
-    from addb_viewer.app.summary import hicks_exceeded, trial_summary
+    Hicks threshold. The page's over-Hicks frames (its timeline track, status line and jump)
+    are the same measured frames."""
+    from addb_viewer.app.summary import hicks_exceeded, hicks_thresholds, trial_summary
 
     trial = load_processed(walk_out, "walk")
     r = _results(walk_out, "walk")
@@ -247,4 +248,8 @@ def test_the_review_apps_table_gives_the_residuals_of_results_json(walk_out: Pat
     assert s["residual_force_rms_n"] == pytest.approx(r["linear_residual_rms_N"], rel=1e-9)
     assert s["residual_moment_rms_nm"] == pytest.approx(r["angular_residual_rms_Nm"], rel=1e-9)
     assert s["measured_frames"] == r["n_observed_frames"]
-    assert s["hicks_frames"] < int(hicks_exceeded(trial).sum())  # the left-out frames are not counted
+    over = hicks_exceeded(trial)
+    assert s["hicks_frames"] == int(over.sum()) and not over[trial.unobserved].any()
+    th = hicks_thresholds(trial)
+    left_out_over = (np.linalg.norm(trial.residual_force, axis=1) > th.force_n) & trial.unobserved
+    assert left_out_over.sum() > 10  # the frames a count over every frame would take

@@ -84,6 +84,10 @@ def test_hicks_thresholds_and_exceeded_frames(walk) -> None:
     res[50:60, 0] = 2 * th.force_n
     dyn = dataclasses.replace(walk, residual_force=res, residual_moment=np.zeros_like(res))
     assert np.flatnonzero(hicks_exceeded(dyn)).tolist() == list(range(50, 60))
+    left_out = np.zeros(walk.n_frames, bool)
+    left_out[55:70] = True  # frames left out of the fit: their residual is the unmeasured force
+    dyn = dataclasses.replace(dyn, unobserved=left_out)
+    assert np.flatnonzero(hicks_exceeded(dyn)).tolist() == list(range(50, 55))
     assert all(not ln.values[np.isfinite(ln.values)].size for ln in residual_lines(walk))  # hidden
 
 
