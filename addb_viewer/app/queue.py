@@ -289,14 +289,26 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
     return sorted(out, key=lambda row: row.attention)
 
 
-def next_to_review(rows: list[QueueRow], after: tuple[str, str | None] | None = None) -> QueueRow | None:
+def next_to_review(
+    rows: list[QueueRow],
+    after: tuple[str, str | None] | None = None,
+    order: list[tuple[str, str | None]] | None = None,
+) -> QueueRow | None:
     """The next row that needs review after ``after`` (rel, trial) in queue order, wrapping
     around to the first; the first such row when ``after`` is no row (None, or a subject
     whose trial is not known yet). Repeated, it visits every row that needs review, and
-    never returns ``after`` itself."""
-    keys = [(r.subject.rel, r.trial) for r in rows]
+    never returns ``after`` itself.
+
+    ``order`` is the queue's order as the reviewer saw it when ``after`` was opened (keys
+    ``(rel, trial)``; default: the order of ``rows``). Editing the trial on screen moves it
+    in the queue (accepting its proposals sends it down), so "after" it is read in that
+    order: the rows it had below it come next, not those it passed on its way down. Rows not
+    in ``order`` (new since) come after it, in queue order."""
+    by_key = {(r.subject.rel, r.trial): r for r in rows}
+    keys = [k for k in (order or []) if k in by_key]
+    keys += [k for k in by_key if k not in set(keys)]
     start = keys.index(after) + 1 if after in keys else 0
-    for row in rows[start:] + rows[:start]:
-        if row.needs_review and (row.subject.rel, row.trial) != after:
-            return row
+    for key in keys[start:] + keys[:start]:
+        if by_key[key].needs_review and key != after:
+            return by_key[key]
     return None

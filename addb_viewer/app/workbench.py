@@ -118,6 +118,7 @@ class Workbench:
         self.rows: list[QueueRow] = []
         self.labels: dict[str, tuple[str, str | None]] = {}
         self.current: tuple[str, str | None] | None = None
+        self._order: list[tuple[str, str | None]] = []  # the queue order when the trial on screen was opened
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
@@ -203,11 +204,11 @@ class Workbench:
         self.app.open_subject(ReviewPaths.for_subject(subject.subject_dir, subject.out_dir), trial)
         if self.app.trial is not None:
             self.current = (rel, self.app.trial.trial)
-        self.refresh()
+        self._order = [(r.subject.rel, r.trial) for r in self.refresh()]  # as the reviewer sees it now
 
     def open_next(self) -> QueueRow | None:
         """Open the next trial that needs review (after the one shown); None when none."""
-        row = next_to_review(self.refresh(), after=self.current)
+        row = next_to_review(self.refresh(), after=self.current, order=self._order)
         if row is None:
             self.run_status.content = "Every processed trial is reviewed."
             return None

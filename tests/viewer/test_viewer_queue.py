@@ -122,6 +122,27 @@ def test_next_to_review_goes_round_every_unreviewed_row(tmp_path: Path) -> None:
     assert next_to_review([row("a", "t1", True)], after=("a", "t1")) is None  # never the row on screen
 
 
+def test_next_to_review_reads_after_in_the_order_the_reviewer_saw() -> None:
+    """The reviewer opens the top row and accepts its proposals: it sinks below rows that
+    still need review. Next goes to the row that was below it when it was opened, not past
+    the rows it overtook on its way down (the explorer's report: R skipped three trials)."""
+    from types import SimpleNamespace
+
+    def row(rel: str, needs: bool) -> SimpleNamespace:
+        return SimpleNamespace(subject=SimpleNamespace(rel=rel), trial="t", needs_review=needs)
+
+    seen = [("a", "t"), ("b", "t"), ("c", "t"), ("d", "t")]  # a on screen, at the top
+    now = [row("b", True), row("c", True), row("a", True), row("d", True), row("e", True)]  # a sank, e is new
+    assert next_to_review(now, after=("a", "t")).subject.rel == "d"  # queue order alone: past b and c
+    assert next_to_review(now, after=("a", "t"), order=seen).subject.rel == "b"
+    visits, after = [], ("a", "t")
+    for _ in range(5):
+        nxt = next_to_review(now, after=after, order=seen)
+        after = (nxt.subject.rel, nxt.trial)
+        visits.append(nxt.subject.rel)
+    assert visits == ["b", "c", "d", "e", "a"]  # every row, the new one after the seen ones
+
+
 def test_a_reprocess_after_the_dataset_run_shows_its_figures_in_the_queue(dataset: Path) -> None:
     """The review app's Reprocess rewrites a trial's results.json, not the dataset run's
     manifest: the queue takes that trial's figures from the newer results.json."""

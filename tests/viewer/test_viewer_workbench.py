@@ -21,6 +21,7 @@ from addb_viewer.app.queue import (
     REVIEWED,
     build_queue,
     dataset_subjects,
+    next_to_review,
 )
 from addb_viewer.app.workbench import Workbench, queue_markdown
 from tests.conftest import SHARED_DATA, writable_copy
@@ -74,13 +75,19 @@ def test_workbench_processes_in_the_background_and_opens_subjects_from_the_queue
     # next trial to review: another unreviewed trial; a reviewed one is skipped
     row = bench.open_next()
     assert row is not None and (row.subject.rel, row.trial) != ("labB/run", "run")
+    at_open = list(bench.rows)  # the queue as the reviewer sees it when the trial opens
     app.edit("trial reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
     done = next(r for r in bench.rows if (r.subject.rel, r.trial) == (row.subject.rel, row.trial))
     assert done.review == REVIEWED and done.reviewer == "tester"
     seen = {(row.subject.rel, row.trial)}
     for _ in range(3):
+        below = next_to_review(at_open, after=bench.current)
         nxt = bench.open_next()
         assert nxt is not None and (nxt.subject.rel, nxt.trial) not in seen
+        # marking the trial reviewed sent it to the end of the queue; Next goes to the row that
+        # was below it when it opened, not back to the top
+        assert (nxt.subject.rel, nxt.trial) == (below.subject.rel, below.trial)
+        at_open = list(bench.rows)
         seen.add((nxt.subject.rel, nxt.trial))
         app.edit("trial reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
     assert bench.open_next() is None and "Every processed trial is reviewed" in bench.run_status.content
