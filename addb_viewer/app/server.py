@@ -736,9 +736,8 @@ class ReviewApp:
                 return
             {"Set in": pb.mark_in, "Set out": pb.mark_out, "Clear marks": pb.clear_marks}[what]()
             sel = pb.selection()
-            if sel is not None:
-                with self._quiet_updates():
-                    self.panel.selection.value = (sel[0], sel[1] - 1)
+            with self._quiet_updates():  # cleared: the slider's thumbs go back together at 0
+                self.panel.selection.value = (sel[0], sel[1] - 1) if sel is not None else (0, 0)
             self.draw_timeline()
         self._show_range_info()
 

@@ -137,14 +137,25 @@ class Playback:
 
     # ------------------------------------------------------------------ in / out points
     def mark_in(self, frame: int | None = None) -> int:
-        """Set the in point (default: the current frame)."""
-        self.in_point = self.clamp(self.frame if frame is None else frame)
-        return self.in_point
+        """Set the in point (default: the current frame).
+
+        While only the out point is set, the two make a range in either order. While both
+        are set, the in point moves; past the out point it starts a new range there (the out
+        point is cleared), rather than stretching the old range to it."""
+        new = self.clamp(self.frame if frame is None else frame)
+        if self.in_point is not None and self.out_point is not None and new > self.out_point:
+            self.out_point = None
+        self.in_point = new
+        return new
 
     def mark_out(self, frame: int | None = None) -> int:
-        """Set the out point (default: the current frame)."""
-        self.out_point = self.clamp(self.frame if frame is None else frame)
-        return self.out_point
+        """Set the out point (default: the current frame); as :meth:`mark_in`, mirrored: with
+        both points set, an out point before the in point starts a new range there."""
+        new = self.clamp(self.frame if frame is None else frame)
+        if self.in_point is not None and self.out_point is not None and new < self.in_point:
+            self.in_point = None
+        self.out_point = new
+        return new
 
     def clear_marks(self) -> None:
         """Forget the in and out points."""

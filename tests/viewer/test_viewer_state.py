@@ -66,6 +66,26 @@ def test_in_out_points_give_a_half_open_range_in_either_order() -> None:
     assert pb.selection() is None
 
 
+def test_a_mark_past_the_other_end_of_a_range_starts_a_new_range() -> None:
+    """In at 10, out at 20, then in at 300 selects frame 300 (a new range), not 20-300; the
+    explorer's report: one more key then flagged 281 frames."""
+    pb = Playback(n_frames=500, rate_hz=100.0)
+    pb.mark_in(10)
+    pb.mark_out(20)
+    pb.mark_in(15)
+    assert pb.selection() == (15, 21)  # inside the range: the in point moves
+    pb.mark_in(300)
+    assert pb.selection() == (300, 301)
+    pb.mark_out(320)
+    assert pb.selection() == (300, 321)
+    pb.mark_out(5)  # mirrored
+    assert pb.selection() == (5, 6)
+    pb.clear_marks()
+    pb.mark_out(30)
+    pb.mark_in(50)  # only the other point set: either order
+    assert pb.selection() == (30, 51)
+
+
 def test_bad_trial_sizes_are_refused() -> None:
     with pytest.raises(ValueError, match="at least one frame"):
         Playback(n_frames=0, rate_hz=100.0)

@@ -107,6 +107,11 @@ def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) 
     assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(20, 41))
     assert np.flatnonzero(app.tracks.masks["flag left"]).tolist() == list(range(20, 41))
     assert not app.tracks.masks["flag right"].any()
+    app.playback.seek(200, now=0.0)
+    app.mark("Set in")  # past the selected range's end: a new range at frame 200, not 20-200
+    assert app.playback.selection() == (200, 201) and tuple(app.panel.selection.value) == (200, 200)
+    app.mark("Clear marks")
+    assert app.playback.selection() is None and tuple(app.panel.selection.value) == (0, 0)  # thumbs too
     app.select(30, 34)
     app.selection_edit("Unflag")
     assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == [*range(20, 30), *range(35, 41)]
