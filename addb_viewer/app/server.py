@@ -57,6 +57,9 @@ TICK_S = 1 / 60
 """Playback thread period (viser sends at most ~60 updates per second anyway)."""
 REFRESH_S = 1.0
 """How often the store is polled for other writers' edits."""
+UNDO_OWNERS_KEPT = 10_000
+"""Edits whose reviewer the app remembers for undo: the store's own undo depth (its default
+``max_undo``)."""
 
 
 class TrialLoadError(AddbError):
@@ -137,6 +140,8 @@ class ReviewApp:
         self.store: AnnotationStore | None = None
         #: Why the review record could not be opened (shown again with every trial loaded).
         self.store_problem: tuple[str, BaseException] | None = None
+        self._undo_owners: list[str] = []  # the reviewer of each edit the store can undo, oldest first
+        self._redo_owners: list[str] = []  # and of each it can redo
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
         self.scene: TrialScene | None = None
@@ -249,6 +254,7 @@ class ReviewApp:
         try:
             self.store = AnnotationStore.open(self.paths.annotations, reviewer=self.reviewer)
             self.store_problem = None
+            self._undo_owners, self._redo_owners = [], []  # a new store: a new history
         except AnnotationError as exc:
             self.store = None
             self.store_problem = ("The review record cannot be opened; flagging is disabled", exc)
@@ -676,6 +682,8 @@ class ReviewApp:
             self.panel.saved.content = f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}"
             return
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
+        if what not in ("undo", "redo"):
+            self._own_history(edits)
         if not edits:
             self.panel.saved.content = f"Nothing to do: {what}."
         else:
@@ -827,12 +835,42 @@ class ReviewApp:
         else:
             self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
 
+    def _own_history(self, edits: list[Edit]) -> None:
+        """Note who made each of ``edits`` that the store can undo, in the store's order (it
+        keeps one undo history for the whole server: :meth:`history` reads whose turn it is)."""
+        for e in edits:
+            if e.trial is not None and e.changed and e.op not in ("none", "trial_info"):
+                self._undo_owners.append(e.provenance.reviewer)
+                self._redo_owners.clear()
+        del self._undo_owners[: -UNDO_OWNERS_KEPT]
+
     def history(self, what: str) -> None:
-        """"Undo" or "Redo" this session's last edit."""
+        """"Undo" or "Redo" the page's reviewer's last edit.
+
+        The store undoes one edit at a time for the whole server (one history per store),
+        so on a team server the last edit may be another reviewer's: then nothing is undone
+        and the page says whose it is (undo never removes another reviewer's work)."""
         if self.store is None:
             return
-        step = self.store.undo if what == "Undo" else self.store.redo
-        self.edit(what.lower(), lambda _ed, _k, _f: step())
+        name = self.reviewer_name(getattr(self._actor, "client", None))
+        undo = what == "Undo"
+        owners = self._undo_owners if undo else self._redo_owners
+        if name is not None and owners and owners[-1] != name:
+            self.panel.saved.content = (
+                f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last "
+                f"{'edit' if undo else 'undone edit'} on this subject is {_escape(owners[-1])}'s (one "
+                "history for everyone on this server); unflag or flag your frames instead."
+            )
+            return
+        step = self.store.undo if undo else self.store.redo
+
+        def run(_ed: TrialEditor, _k: int, _f: str) -> Edit | None:
+            done = step()
+            if done is not None and owners:
+                (self._redo_owners if undo else self._undo_owners).append(owners.pop())
+            return done
+
+        self.edit(what.lower(), run)
 
     # ================================================================== GUI wiring
     @contextlib.contextmanager

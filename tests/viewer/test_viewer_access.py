@@ -168,6 +168,21 @@ def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
         wait_for(lambda: app.playback.frame == 60, what="seek to 60")
         b.set_value(p.toggle_flag, True)
         wait_for(lambda: "ben" in p.saved.content, what="B's edit")
+        # undo is the page's own: A's Undo would remove ben's flag (one history per store)
+        a.set_value(p.history, "Undo")
+        wait_for(lambda: "not undone" in p.saved.content, what="A's refused undo")
+        assert "ben's" in p.saved.content and app.store.flag("walk", 60) is not None
+        b.set_value(p.history, "Undo")
+        wait_for(lambda: app.store.flag("walk", 60) is None, what="B's undo")
+        a.set_value(p.history, "Redo")  # B's undone edit is B's to redo
+        wait_for(lambda: "not redone" in p.saved.content, what="A's refused redo")
+        a.set_value(p.history, "Undo")  # now A's own edit is the last
+        wait_for(lambda: app.store.flag("walk", 40) is None, what="A's undo")
+        a.set_value(p.history, "Redo")
+        wait_for(lambda: app.store.flag("walk", 40) is not None, what="A's redo")
+        b.set_value(p.frame, 60)
+        b.set_value(p.toggle_flag, True)
+        wait_for(lambda: app.store.flag("walk", 60) is not None, what="B's flag again")
     finally:
         a.close()
         if b is not None:
