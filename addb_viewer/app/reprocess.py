@@ -12,6 +12,7 @@ result on screen and on disk, and says why in the page.
 
 from __future__ import annotations
 
+import html
 import threading
 from typing import Any, Protocol
 
@@ -21,6 +22,7 @@ from addb_viewer.app.flags import pending_replaced
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir, prestart_solver
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError, AnnotationStore
+from solver.errors import AddbError
 
 
 class ReprocessHost(Protocol):
@@ -149,7 +151,11 @@ class Reprocessor:
         if not entry:
             self._say("The diagnosis named no cause: nothing to apply.")
             return None
-        saved = save_extension(app.paths.subject_dir, entry)
+        try:
+            saved = save_extension(app.paths.subject_dir, entry)
+        except (AddbError, OSError) as exc:  # beside the button, not only at the top of the panel
+            self._say(f"<span style='color:#c00'>**Not applied**</span>: {html.escape(str(exc), quote=False)}")
+            raise
         self._say(f"Saved `{entry['cause']}` in {saved.name}; reprocessing {name} with it…")
         self.reprocess(name)
         return entry

@@ -204,9 +204,12 @@ class ReviewApp:
 
     def open_subject(self, paths: ReviewPaths, trial: str | None = None) -> None:
         """Show another subject (the dataset queue's "Open"): a running solver run is
-        cancelled, the review record of the shown subject closed and the new one opened;
-        its ``trial`` (default: the preferred one) is loaded, or the page says it is not
-        processed yet. Errors are shown in the page."""
+        cancelled (the page says so: its subject keeps its previous result), the review
+        record of the shown subject closed and the new one opened; its ``trial`` (default:
+        the preferred one) is loaded, or the page says it is not processed yet. The last
+        edit's message goes and the Foot choice returns to "both" (they were the other
+        subject's). Errors are shown in the page."""
+        running, before = self.jobs.running, self.paths.subject_dir.name
         self.jobs.cancel(wait=True)
         with self._lock:
             self._drop_trial()
@@ -219,7 +222,12 @@ class ReviewApp:
             self.paths = paths
         self.server.gui.set_panel_label(f"addb · {paths.subject_dir.name}")
         self.panel.comparison.content = ""
-        self.panel.job_status.content = ""
+        self.panel.job_status.content = (  # the cancelled run's own line, with its subject
+            f"{before} · {self.panel.job_status.content} (you opened {paths.subject_dir.name})" if running else ""
+        )
+        self.panel.saved.content = "No edits yet."
+        with self._quiet_updates():
+            self.panel.foot.value = "both"
         try:
             self._open_store()
             self.trials = processed_trials(paths.out_dir) if paths.out_dir.is_dir() else []

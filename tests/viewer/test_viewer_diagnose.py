@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -58,7 +59,7 @@ def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_
     assert json.loads((out / "subject.json").read_text())["mass_kg"] == pytest.approx(stated + 3.0, abs=1e-9)
 
 
-def test_apply_without_a_named_cause_changes_nothing(walk_processed, make_app, tmp_path) -> None:
+def test_apply_without_a_named_cause_changes_nothing(walk_processed, make_app, tmp_path, monkeypatch) -> None:
     subject0, out0 = walk_processed
     subject = shutil.copytree(subject0, tmp_path / "walk")
     out = shutil.copytree(out0, tmp_path / "out")
@@ -67,3 +68,17 @@ def test_apply_without_a_named_cause_changes_nothing(walk_processed, make_app, t
     (out / "walk" / "diagnosis.json").write_text(json.dumps({"extension": None}))
     assert app.jobs.apply_diagnosis() is None and "named no cause" in app.panel.job_status.content
     assert not (subject / "addb_extensions.json").exists()
+    # a subject folder the app cannot write: the refusal is said beside the button too (the
+    # page's error box is at the top of the panel, scrolled out of view)
+    import solver.corrections
+    from solver.errors import SubjectFolderError
+
+    def refuse(folder, entry):
+        raise SubjectFolderError("the subject folder is read-only; copy the subject", path=Path(folder))
+
+    monkeypatch.setattr(solver.corrections, "save_extension", refuse)
+    (out / "walk" / "diagnosis.json").write_text(json.dumps({"extension": {"cause": "body_mass", "mass_change_kg": 3.0}}))
+    with pytest.raises(SubjectFolderError):
+        app.jobs.apply_diagnosis()
+    assert "Not applied" in app.panel.job_status.content and "read-only" in app.panel.job_status.content
+    assert not app.jobs.running
