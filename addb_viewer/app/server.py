@@ -140,6 +140,7 @@ class ReviewApp:
         self.store: AnnotationStore | None = None
         #: Why the review record could not be opened (shown again with every trial loaded).
         self.store_problem: tuple[str, BaseException] | None = None
+        self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
         self._undo_owners: list[str] = []  # the reviewer of each edit the store can undo, oldest first
         self._redo_owners: list[str] = []  # and of each it can redo
         self.trials: list[str] = []
@@ -614,18 +615,24 @@ class ReviewApp:
     def _client_connected(self, client: Any) -> None:
         """Give a new page its own "Your name" field (each edit keeps its reviewer's name).
 
-        Prefilled with ``--reviewer`` on a loopback address (one person); empty on a
-        server reached by a team, where a page must name its reviewer before editing."""
+        Prefilled on a loopback address (one person at this machine) with the name last typed
+        on any page, else ``--reviewer``, so a reloaded page keeps it; empty on a server
+        reached by a team, where a page must name its reviewer before editing."""
         client.camera.on_update(self._camera_moved)
-        default = self.reviewer if self.token is None else ""
+        default = (self._typed_name or self.reviewer) if self.token is None else ""
         self.client_names[client.client_id] = default
         field = client.gui.add_text(
             "Your name", initial_value=default, order=-1000.0,
             hint="Recorded with each of your edits in the review record",
         )
-        field.on_update(lambda e, cid=client.client_id: self.client_names.__setitem__(cid, str(e.target.value).strip()))
+        field.on_update(lambda e, cid=client.client_id: self._name_typed(cid, str(e.target.value).strip()))
         self.name_fields[client.client_id] = field
         self._camera_moved(client.camera)  # its first report: framed for its canvas, the queue fitted
+
+    def _name_typed(self, client_id: int, name: str) -> None:
+        self.client_names[client_id] = name
+        if name:
+            self._typed_name = name
 
     def _client_disconnected(self, client: Any) -> None:
         self.client_names.pop(client.client_id, None)

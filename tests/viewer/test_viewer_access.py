@@ -210,3 +210,25 @@ def test_store_acting_as_is_per_thread(tmp_path: Path) -> None:
             pass
     with AnnotationStore.open(tmp_path, reviewer="checker") as disk:
         assert [disk.flag("walk", k).provenance.reviewer for k in (10, 50, 70)] == ["ana", "host", "host"]
+
+
+def test_a_reloaded_page_on_loopback_keeps_the_name_typed(demo_paths, make_app) -> None:
+    """On a loopback address (one person at this machine) a new page, such as the same page
+    reloaded, starts with the name last typed instead of ``--reviewer``, so its edits are
+    not recorded under another name; a team server's pages start empty (test above)."""
+    app = make_app(demo_paths)  # reviewer "tester", no token
+    a = ProtocolClient(app.port, "/")
+    try:
+        (ida,) = wait_for(lambda: list(app.name_fields), what="page A's name field")
+        assert app.client_names[ida] == "tester"
+        a.set_value(app.name_fields[ida], "ana")
+        wait_for(lambda: app.client_names.get(ida) == "ana", what="A's name")
+    finally:
+        a.close()
+    wait_for(lambda: ida not in app.name_fields, what="A gone")
+    b = ProtocolClient(app.port, "/")  # the reload
+    try:
+        (idb,) = wait_for(lambda: list(app.name_fields), what="the reloaded page's name field")
+        assert app.name_fields[idb].value == "ana" and app.reviewer_name(idb) == "ana"
+    finally:
+        b.close()
