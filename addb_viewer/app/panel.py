@@ -18,7 +18,7 @@ from addb_viewer.app.camera import VIEWS
 from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
 from addb_viewer.app.timeline import legend_markdown
 
-#: Command label -> (hotkey, description).
+#: Command label -> (hotkey, description); a hotkey ``"shift+U"`` is U with that modifier.
 HOTKEYS: dict[str, tuple[str, str]] = {
     "Play / pause": ("space", "start or stop playback"),
     "Previous frame": ("J", "step one frame back"),
@@ -27,8 +27,10 @@ HOTKEYS: dict[str, tuple[str, str]] = {
     "Set in point": ("I", "mark the start of a range (past the end of the range: a new one)"),
     "Set out point": ("O", "mark the end of a range (before its start: a new one)"),
     "Next flagged frame": ("N", "jump to the next flagged range"),
+    "Next proposal": ("P", "jump to the next pending proposal"),
     "Next frame over Hicks threshold": ("H", "jump to the next range whose residual is too large"),
     "Undo": ("U", "undo your last edit"),
+    "Redo": ("shift+U", "redo your last undone edit"),
     "Flag selection": ("G", "flag the timeline's selected frames (selected foot)"),
     "Unflag selection": ("X", "clear the flags of the timeline's selected frames"),
     "Accept selection": ("Y", "accept the pending proposals in the timeline's selection"),
@@ -176,7 +178,9 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     h["side"].dock_left()
     h["side"].set_width(SIDE_WIDTH_PX)
     h["commands"] = {
-        label: gui.add_command(label, description=desc, hotkey=key)  # type: ignore[arg-type]
+        label: gui.add_command(  # type: ignore[arg-type]
+            label, description=desc, hotkey=key.rpartition("+")[2], modifier=key.rpartition("+")[0] or None
+        )
         for label, (key, desc) in HOTKEYS.items()
     }
     return ReviewPanel(**h)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import html
 import threading
+import time
 from typing import Any, Protocol
 
 import numpy as np
@@ -59,6 +60,10 @@ class ReprocessHost(Protocol):
         ...
 
 
+CONFIRM_AFTER_S = 1.0
+"""Least time between the pending-proposal warning and the press that goes ahead, s."""
+
+
 class Reprocessor:
     """The solver-run controls of the review app (a :class:`ReprocessHost`)."""
 
@@ -69,6 +74,7 @@ class Reprocessor:
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
         self._warned: tuple[str, int] | None = None  # (trial, pending frames) the last warning named
+        self._warned_at = 0.0  # time.monotonic() of that warning
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
     @property
@@ -88,7 +94,8 @@ class Reprocessor:
 
         When the shown trial's flags replace the solver's proposals and some proposals are
         still pending (:func:`~addb_viewer.app.flags.pending_replaced`), the first press
-        says so and starts nothing; pressed again with the same pending frames, it runs."""
+        says so and starts nothing; pressed again with the same pending frames, at least
+        :data:`CONFIRM_AFTER_S` later (a double click is not a second thought), it runs."""
         app = self.app
         selected = app.panel.trial.value if app.panel.trial.value in app.trials else None
         name = trial or (app.trial.trial if app.trial is not None else selected)
@@ -97,8 +104,10 @@ class Reprocessor:
             return
         view = app.view if app.trial is not None and app.trial.trial == name else None
         pending = pending_replaced(view) if view is not None else 0
-        if pending and self._warned != (name, pending):
-            self._warned = (name, pending)
+        now = time.monotonic()
+        if pending and (self._warned != (name, pending) or now - self._warned_at < CONFIRM_AFTER_S):
+            if self._warned != (name, pending):
+                self._warned, self._warned_at = (name, pending), now
             self._say(
                 f"**{pending} proposed frames of {name} are still pending.** Your flags replace the solver's own "
                 "choice, so Reprocess fits them as measured frames (with the plates' force, often none). Accept or "

@@ -26,6 +26,7 @@ def test_open_cancels_the_running_reprocess_and_says_so(walk_processed: Path, ma
     assert "✓ saved" in app.panel.saved.content
     before = (tmp_path / "first_out" / "walk" / "results.json").read_bytes()
     app.jobs._warned = ("walk", int(app.view.pending.sum()))  # the pending-proposal warning was seen
+    app.jobs._warned_at = -1e9  # long ago
     app.jobs.reprocess("walk")
     assert app.jobs.running
     app.open_subject(subjects["second"], "walk")

@@ -66,6 +66,9 @@ def test_reprocess_warns_once_about_pending_proposals_it_would_fit_as_measured(
     assert f"{n_proposed} pending proposed frames will be fitted as measured" in app.panel.proposal_info.content
     app.jobs.reprocess()
     assert len(started) == 1 and f"{n_proposed} proposed frames of walk are still pending" in app.panel.job_status.content
+    app.jobs.reprocess()  # at once (a double click): still only the warning
+    assert len(started) == 1
+    app.jobs._warned_at -= reprocess.CONFIRM_AFTER_S  # the warning read: a second press later
     app.jobs.reprocess()  # pressed again: the reviewer means it
     assert len(started) == 2 and started[-1].unmeasured_force["walk"].sum() == 1
     # decided (every proposal accepted): no warning any more, Reprocess runs at once

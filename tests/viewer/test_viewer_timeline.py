@@ -133,12 +133,28 @@ def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) 
 
 
 def test_selection_hotkeys_edit_the_selection(dyn_paths, make_app) -> None:
-    """The G and X commands run the same edits as the buttons (their trigger handlers)."""
+    """The G and X commands run the same edits as the buttons (their trigger handlers); U and
+    Shift+U undo and redo, P jumps to the next pending proposal."""
     from addb_viewer.app.panel import HOTKEYS
+
+    def press(label: str) -> None:
+        for cb in app.panel.commands[label]._impl.trigger_cb:  # as viser calls them
+            cb(type("Event", (), {"client_id": None, "client": None})())
 
     app = make_app(dyn_paths)
     assert HOTKEYS["Flag selection"][0] == "G" and HOTKEYS["Unflag selection"][0] == "X"
+    assert HOTKEYS["Redo"][0] == "shift+U" and HOTKEYS["Next proposal"][0] == "P"
+    redo = app.panel.commands["Redo"]
+    assert (redo.hotkey, redo.modifier) == ("U", "shift")
     app.select(50, 59)
-    for cb in app.panel.commands["Flag selection"]._impl.trigger_cb:  # as viser calls them
-        cb(type("Event", (), {"client_id": None, "client": None})())
+    press("Flag selection")
     assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(50, 60))
+    press("Undo")
+    assert not app.store.mask("walk", app.trial.n_frames).any()
+    press("Redo")
+    assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(50, 60))
+    app.playback.seek(0, now=0.0)
+    press("Next proposal")
+    pending = app.view.pending
+    run_starts = [i for i in range(1, pending.size) if pending[i] and not pending[i - 1]]
+    assert run_starts and app.playback.frame == run_starts[0]  # the next pending run after frame 0
