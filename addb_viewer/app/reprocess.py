@@ -13,8 +13,10 @@ result on screen and on disk, and says why in the page.
 from __future__ import annotations
 
 import html
+import json
 import threading
 import time
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -58,6 +60,24 @@ class ReprocessHost(Protocol):
     def set_trial_options(self, selected: str) -> None:
         """Fill the trial list with :attr:`trials` and select ``selected``."""
         ...
+
+
+def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[tuple[str, float]]:
+    """The output's trials other than ``trial`` whose dynamics were made with another body
+    mass than ``mass_kg`` (their ``results.json`` ``mass_kg``, rounded to 0.01 kg), as
+    ``(name, mass)``: after a Reprocess of one trial the subject's mass fit (over every
+    trial) may move, while only that trial's files are rewritten."""
+    out = []
+    for path in sorted(Path(out_dir).glob("*/results.json")):
+        if path.parent.name == trial:
+            continue
+        try:
+            mass = json.loads(path.read_text(encoding="utf-8")).get("mass_kg")
+        except (OSError, ValueError):
+            continue
+        if isinstance(mass, (int, float)) and round(float(mass), 2) != round(float(mass_kg), 2):
+            out.append((path.parent.name, float(mass)))
+    return out
 
 
 CONFIRM_AFTER_S = 1.0
@@ -141,8 +161,6 @@ class Reprocessor:
         """Save the extension the trial's diagnosis chose (``addb diagnose --apply``) and
         reprocess the trial with it (the before/after table follows); returns the saved
         entry, None when the diagnosis named no cause."""
-        import json
-
         from solver.corrections import save_extension
 
         app = self.app
@@ -266,6 +284,15 @@ class Reprocessor:
         app.load_trial(trial, frame=frame)
         after = trial_summary(app.trial)
         app.panel.comparison.content = "**Reprocess result**\n\n" + comparison_markdown(before or {}, after)
+        stale = other_mass_trials(app.paths.out_dir, trial, after["mass_kg"])
+        if stale:
+            app.panel.comparison.content += (
+                f"\n\n<span style='color:#c00'>**The fitted body mass is now {after['mass_kg']:.2f} kg**</span> "
+                "(the mass fit uses every trial with your flags); "
+                + ", ".join(f"{name} ({mass:.2f} kg)" for name, mass in stale)
+                + " still hold results made with the old mass and the scaled model is the new one: reprocess "
+                "them too (pick each and press Reprocess)."
+            )
 
     def cancel(self, *, wait: bool = False) -> None:
         """Cancel the running solver (no-op when none); ``wait`` for its end."""
