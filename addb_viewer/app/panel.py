@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import viser
 
 from addb_viewer.app.camera import VIEWS
+from addb_viewer.app.plots import shading_legend
 from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
 from addb_viewer.app.timeline import legend_markdown
 
@@ -175,6 +176,8 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["selection_info"] = gui.add_markdown("Drag the ends of Selection to choose frames.")
         h["selection_edit"] = gui.add_button_group("Selected frames", ("Flag", "Unflag", "Accept", "Reject"))
         h["plots_folder"] = gui.add_folder("Plots")
+        with h["plots_folder"]:
+            gui.add_markdown(shading_legend())
     h["side"].dock_left()
     h["side"].set_width(SIDE_WIDTH_PX)
     h["commands"] = {

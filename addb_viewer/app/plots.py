@@ -25,16 +25,27 @@ from numpy.typing import NDArray
 
 from addb_viewer.app.scene import FOOT_COLORS, plate_feet
 from addb_viewer.app.summary import G, hicks_thresholds
+from addb_viewer.app.timeline import TRACKS
 from solver.results import ProcessedTrial
 from solver.sampling import frame_interval
 
 FloatArray = NDArray[np.float64]
 
-FLAG_FILL = "rgba(255, 140, 0, 0.28)"
-PROPOSAL_FILL = "rgba(150, 60, 220, 0.55)"
+FLAG_FILL = "rgba(90, 90, 90, 0.22)"
+"""Flagged frames (either foot): grey over the full height (:func:`shading_legend`)."""
+PROPOSAL_FILL = "rgba({}, {}, {}, 0.6)".format(*TRACKS["proposal"])
+"""Pending proposals: the timeline's proposal colour (orange), in a band at the top."""
 PROPOSAL_BAND = 0.88
 """Proposals are shaded in the top 12 % of a chart (flags over the full height)."""
 CURSOR_COLOR = "rgba(20, 20, 20, 0.9)"
+
+
+def shading_legend() -> str:
+    """What the charts' shading means (a line above them)."""
+    r, g, b = TRACKS["proposal"]
+    return (f"<small>charts: <span style='color:rgb(90,90,90)'>■</span> flagged frames (full height), "
+            f"<span style='color:rgb({r},{g},{b})'>■</span> pending proposals (band at the top), "
+            "dashed: Hicks' per-frame limits</small>")  # fmt: skip
 
 
 @dataclass(frozen=True)
