@@ -155,18 +155,19 @@ class Workbench:
         of the open pages, px) less its gaps, so it never covers the docked panels beside
         the canvas (the window is one for all pages)."""
         width = float(min(QUEUE_WIDTH_PX, max(QUEUE_MIN_WIDTH_PX, canvas_width - 2 * QUEUE_GAP_PX)))
-        if abs(width - self.width) >= 1.0:
-            compact = (self.width < COMPACT_BELOW_PX, width < COMPACT_BELOW_PX)
+        with self._lock:  # the table drawn for the new width before the width is published
+            if abs(width - self.width) < 1.0:
+                return
+            if (self.width < COMPACT_BELOW_PX) != (width < COMPACT_BELOW_PX):
+                self._draw_table(width)
             self.width = width
-            self.panel.set_width(width)
-            if compact[0] != compact[1]:
-                with self._lock:
-                    self._draw_table()
+        self.panel.set_width(width)
 
-    def _draw_table(self) -> None:
-        """Show :attr:`rows` in the queue's table (compact in a narrow window); call with
-        ``_lock`` held."""
-        self.table.content = queue_markdown(self.rows, current=self.current, compact=self.width < COMPACT_BELOW_PX)
+    def _draw_table(self, width: float | None = None) -> None:
+        """Show :attr:`rows` in the queue's table (compact in a window narrower than
+        :data:`COMPACT_BELOW_PX`; ``width`` default :attr:`width`); call with ``_lock`` held."""
+        width = self.width if width is None else width
+        self.table.content = queue_markdown(self.rows, current=self.current, compact=width < COMPACT_BELOW_PX)
 
     # ------------------------------------------------------------------ queue
     def refresh(self) -> list[QueueRow]:
