@@ -77,6 +77,13 @@ class FlagView:
         """Number of frames T."""
         return int(self.flagged.size)
 
+    @property
+    def agreed(self) -> BoolArray:
+        """``(T,)`` proposals the reviewer's flags cover and that are not rejected: accepted,
+        or flagged by hand. Every proposal is pending, agreed or rejected, and the timeline,
+        the status line and the Flags summary count it so."""
+        return self.proposed & self.flagged & ~self.rejected
+
 
 def build_view(review: TrialReview, proposed: BoolArray) -> FlagView:
     """:class:`FlagView` of a store snapshot and the solver's ``(T,)`` proposals."""

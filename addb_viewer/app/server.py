@@ -739,7 +739,7 @@ class ReviewApp:
             f"Automatic proposals: {n_prop} frames"
         )
         if n_prop:
-            text += f" — {int(v.pending.sum())} pending, {int((v.proposed & v.accepted).sum())} accepted, {int(v.rejected.sum())} rejected"
+            text += f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
         if v.beyond:
             text += f". {v.beyond} flagged frames lie past the end of this trial."
         pending = pending_replaced(v)

@@ -67,7 +67,8 @@ class TrackData:
     masks
         Track name -> bool mask (the proposal track's mask is "any proposal").
     proposal_state
-        ``(T,)`` int: 0 none, 1 pending, 2 accepted, 3 rejected.
+        ``(T,)`` int: 0 none, 1 pending, 2 accepted (or flagged by hand:
+        :attr:`~addb_viewer.app.flags.FlagView.agreed`), 3 rejected.
     """
 
     masks: dict[str, BoolArray]
@@ -122,7 +123,7 @@ def track_data(trial: ProcessedTrial, view: FlagView | None, hicks: BoolArray | 
     proposed = view.proposed if view is not None else np.asarray(trial.proposed, bool)
     state[proposed] = 1
     if view is not None:
-        state[view.proposed & view.accepted] = 2
+        state[view.agreed] = 2
         state[view.rejected] = 3
     masks["proposal"] = state > 0
     feet = plate_feet(trial)
@@ -210,5 +211,5 @@ def legend_markdown() -> str:
     def chip(c: tuple[int, int, int]) -> str:
         return f"<span style='color:rgb{c}'>■</span>"
 
-    return (f"<small>proposal: {chip(TRACKS['proposal'])} pending, {chip(ACCEPTED)} accepted, "
+    return (f"<small>proposal: {chip(TRACKS['proposal'])} pending, {chip(ACCEPTED)} accepted or flagged, "
             f"{chip(REJECTED)} rejected; hover a run for its frames and reason</small>")  # fmt: skip

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from viewer_support import ProtocolClient, wait_for
 
-from addb_viewer.app.flags import REJECTED_NOTE, TrialEditor, toggled_foot
+from addb_viewer.app.flags import REJECTED_NOTE, TrialEditor, describe_frame, toggled_foot
 from annotations import AnnotationError, AnnotationStore
 
 T = 100
@@ -95,6 +95,18 @@ def test_accept_and_reject_proposals_are_durable_and_distinct(editor: TrialEdito
     # undo brings the rejected proposal back
     editor.store.undo()
     assert editor.view().pending[30:35].all()
+
+
+def test_every_proposal_is_pending_agreed_or_rejected(editor: TrialEditor) -> None:
+    """A proposal flagged by hand (not through Accept) is no longer pending and counts as
+    agreed, as the status line calls it "accepted" and the timeline colours it (the
+    verification run found 15 such frames of the walk in no category of the Flags summary)."""
+    editor.flag_range(12, 16, "left")  # by hand, inside the proposal 10-20
+    editor.reject(31)
+    v = editor.view()
+    assert v.agreed[12:16].all() and not v.accepted[12:16].any() and not v.pending[12:16].any()
+    assert int(v.pending.sum()) + int(v.agreed.sum()) + int(v.rejected.sum()) == int(v.proposed.sum())
+    assert "proposal (accepted)" in describe_frame(v, 13, ())
 
 
 def test_accept_all_in_one_edit(editor: TrialEditor) -> None:
