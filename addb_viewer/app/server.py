@@ -22,6 +22,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterator
 from datetime import datetime
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -210,7 +211,7 @@ class ReviewApp:
         the preferred one) is loaded, or the page says it is not processed yet. The last
         edit's message goes and the Foot choice returns to "both" (they were the other
         subject's). Errors are shown in the page."""
-        running, before = self.jobs.running, self.paths.subject_dir.name
+        running, before = self.jobs.running, self._subject_label(self.paths)
         self.jobs.cancel(wait=True)
         with self._lock:
             self._drop_trial()
@@ -224,7 +225,7 @@ class ReviewApp:
         self.server.gui.set_panel_label(f"addb · {paths.subject_dir.name}")
         self.panel.comparison.content = ""
         self.panel.job_status.content = (  # the cancelled run's own line, with its subject
-            f"{before} · {self.panel.job_status.content} (you opened {paths.subject_dir.name})" if running else ""
+            f"{before} · {self.panel.job_status.content} (you opened {self._subject_label(paths)})" if running else ""
         )
         self.panel.saved.content = "No edits yet."
         with self._quiet_updates():
@@ -244,6 +245,15 @@ class ReviewApp:
             self.load_trial(name)
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not open the subject", exc)
+
+    def _subject_label(self, paths: ReviewPaths) -> str:
+        """A subject's name as the reviewer knows it: its place in the dataset queue
+        (``labB/run``), else its folder's name."""
+        if self.workbench is not None:
+            for s in self.workbench.subjects:
+                if Path(s.subject_dir).resolve() == Path(paths.subject_dir).resolve():
+                    return s.rel
+        return paths.subject_dir.name
 
     def after_processing(self) -> None:
         """Called once the first processing run has written the output folder."""
@@ -830,7 +840,8 @@ class ReviewApp:
             self.panel.range_info.content = "Range: no in/out points (press I / O)"
             self.panel.selection_info.content = "Drag the ends of Selection to choose frames."
         else:
-            text = f"frames {sel[0]}–{sel[1] - 1} ({sel[1] - sel[0]} frames)"
+            n = sel[1] - sel[0]
+            text = f"frames {sel[0]}–{sel[1] - 1} ({n} frame{'' if n == 1 else 's'})"
             self.panel.range_info.content = f"Range: {text}"
             self.panel.selection_info.content = f"Selected: {text}; G flag · X unflag · Y accept · Z reject"
 

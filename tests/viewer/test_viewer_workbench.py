@@ -155,3 +155,15 @@ def test_the_queue_window_fits_the_narrowest_open_page(dataset: Path, make_app, 
     finally:
         wide.close()
         narrow.close()
+
+
+def test_a_subject_is_named_by_its_place_in_the_dataset(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
+    """Messages about a subject (a run cancelled by Open) name it as the queue does
+    (``labB/run``), not by its folder's name alone (``run``, also the trial's name)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, _, subjects = dataset_subjects(dataset)
+    app = make_app(ReviewPaths.for_subject(subjects[0].subject_dir, subjects[0].out_dir), process_missing=False)
+    paths = ReviewPaths.for_subject(subjects[1].subject_dir, subjects[1].out_dir)
+    assert app._subject_label(paths) == paths.subject_dir.name  # no dataset: the folder's name
+    Workbench(app, dataset, workers=0)
+    assert app._subject_label(paths) == subjects[1].rel and "/" in subjects[1].rel
