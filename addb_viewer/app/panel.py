@@ -40,6 +40,10 @@ HOTKEYS: dict[str, tuple[str, str]] = {
 
 #: Width of the timeline-and-plots panel docked left of the 3D view, px.
 SIDE_WIDTH_PX = 560
+#: The Foot choice a page starts with (and a newly opened subject).
+DEFAULT_FOOT = "both"
+#: The Edits line before the shown subject's first edit.
+NO_EDITS = "No edits yet."
 
 LEGEND = (
     "<small>"
@@ -128,7 +132,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["views"] = gui.add_button_group("View", VIEWS)
         h["follow"] = gui.add_checkbox("Follow pelvis", initial_value=False)
     with gui.add_folder("Flags (unmeasured force)"):
-        h["foot"] = gui.add_dropdown("Foot", ("both", "left", "right"), initial_value="both")
+        h["foot"] = gui.add_dropdown("Foot", ("both", "left", "right"), initial_value=DEFAULT_FOOT)
         h["toggle_flag"] = gui.add_button("Toggle flag at this frame", hint="hotkey F")
         h["marks"] = gui.add_button_group("Range", ("Set in", "Set out", "Clear marks"))
         h["range_info"] = gui.add_markdown("Range: no in/out points")
@@ -138,7 +142,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["proposal_all"] = gui.add_button_group("All proposals", ("Accept all", "Reject all"))
         h["reviewed"] = gui.add_checkbox("Trial reviewed", initial_value=False)
         h["history"] = gui.add_button_group("Edits", ("Undo", "Redo"))
-        h["saved"] = gui.add_markdown("No edits yet.")
+        h["saved"] = gui.add_markdown(NO_EDITS)
     with gui.add_folder("Reprocess"):
         h["reprocess"] = gui.add_button("Reprocess", hint="run the solver on this trial with the current flags")
         h["progress"] = gui.add_progress_bar(0.0, animated=True, visible=False)

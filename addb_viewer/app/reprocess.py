@@ -124,9 +124,9 @@ class Reprocessor:
             return
         view = app.view if app.trial is not None and app.trial.trial == name else None
         pending = pending_replaced(view) if view is not None else 0
-        now = time.monotonic()
-        if pending and (self._warned != (name, pending) or now - self._warned_at < CONFIRM_AFTER_S):
-            if self._warned != (name, pending):
+        now, warned = time.monotonic(), self._warned == (name, pending)
+        if pending and not (warned and now - self._warned_at >= CONFIRM_AFTER_S):
+            if not warned:
                 self._warned, self._warned_at = (name, pending), now
             self._say(
                 f"**{pending} proposed frames of {name} are still pending.** Your flags replace the solver's own "

@@ -39,7 +39,7 @@ from addb_viewer.app.camera import (
 from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame, pending_replaced
 from addb_viewer.app.meshes import body_mesh
-from addb_viewer.app.panel import ReviewPanel, build_panel
+from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
 from addb_viewer.app.reprocess import Reprocessor
@@ -227,9 +227,9 @@ class ReviewApp:
         self.panel.job_status.content = (  # the cancelled run's own line, with its subject
             f"{before} · {self.panel.job_status.content} (you opened {self._subject_label(paths)})" if running else ""
         )
-        self.panel.saved.content = "No edits yet."
+        self.panel.saved.content = NO_EDITS
         with self._quiet_updates():
-            self.panel.foot.value = "both"
+            self.panel.foot.value = DEFAULT_FOOT
         try:
             self._open_store()
             self.trials = processed_trials(paths.out_dir) if paths.out_dir.is_dir() else []
@@ -433,12 +433,12 @@ class ReviewApp:
             self._frame_page(client, view)
         return pose
 
-    def _frame_page(self, client: Any, view: str) -> bool:
-        """Frame the shown trial in ``view`` on one page; False when the trial does not fit
-        its canvas, and the page then follows the pelvis (until a framing fits again)."""
+    def _frame_page(self, client: Any, view: str) -> None:
+        """Frame the shown trial in ``view`` on one page; when the trial does not fit its
+        canvas the page follows the pelvis instead (until a framing fits again)."""
         t, pb = self.trial, self.playback
         if t is None:
-            return True
+            return
         canvas = self._canvas(client)
         pose, fits = framed_view(view, t.body_position, canvas, pb.frame if pb is not None else 0)
         self._framed_for[client.client_id] = (canvas.width, canvas.height)
@@ -447,7 +447,6 @@ class ReviewApp:
         else:
             self._pages_following.add(client.client_id)
         self._apply_pose(client, pose)
-        return fits
 
     def _apply_pose(self, client: Any | None, pose: CameraPose) -> None:
         """Set a page's camera (None: the camera of pages still to connect)."""
