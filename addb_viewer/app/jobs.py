@@ -11,8 +11,9 @@ those lines and calls back; :meth:`SolverJob.cancel` terminates the child. The s
 writes its output folder atomically, so a cancelled or failed run leaves the previous
 result in place.
 
-A reprocess of one trial asks the solver for that trial only: the solver stages it and
-then replaces, by renames, that trial's folder, the model and subject.json in the output
+A job names the trials to write (a Reprocess: the edited trial and every other trial with
+dynamics, :func:`addb_viewer.app.reprocess.dynamics_trials`): the solver stages them and
+then replaces, by renames, those trials' folders, the model and subject.json in the output
 folder (the other trials stay).
 
 Warm children. Python's start and the solver's imports take about 1 s, half the walk's

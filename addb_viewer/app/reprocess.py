@@ -4,9 +4,13 @@ and the "Record to Rerun" export, with their progress, cancel and results in the
 One run at a time. A Reprocess gives the solver the reviewer's flags of unmeasured force
 (:func:`addb_viewer.review_masks.unmeasured_force`: the trials flagged or marked reviewed, at
 their processed frames) and the trial's name; the solver reruns the dynamics stage only, on the
-kinematics cached by the last full run (:func:`solver.pipeline.reprocess_dynamics`), and replaces only that trial's folder (plus the
-model and subject.json) in the output folder when it succeeds; the app then reloads the
-trial at the same frame and shows the before/after table. A failed or cancelled run leaves the previous
+kinematics cached by the last full run (:func:`solver.pipeline.reprocess_dynamics`). That stage
+fits the body mass and the segment masses over every trial with force plates, and the scaled
+model it writes carries them, so the run rewrites the folder of every such trial
+(:func:`dynamics_trials`), not only the edited one: a trial left as it was would hold joint
+torques made with the old masses beside the new model. Each folder (plus the model and
+subject.json) is replaced in the output folder when the run succeeds; the app then reloads
+the trial at the same frame and shows the before/after table. A failed or cancelled run leaves the previous
 result on screen and on disk, and says why in the page.
 """
 
@@ -62,11 +66,28 @@ class ReprocessHost(Protocol):
         ...
 
 
+def dynamics_trials(subject_dir: str | Path, out_dir: str | Path) -> list[str]:
+    """The output's trials with dynamics (a ``mass_kg`` in their ``results.json``) that are
+    still trials of the subject (a folder ``SUBJECT/trials/<name>``), sorted: those a
+    Reprocess rewrites, since the dynamics stage fits the body mass and the segment masses
+    over all of them and writes one scaled model for all (:mod:`addb_viewer.app.reprocess`)."""
+    out = []
+    for path in sorted(Path(out_dir).glob("*/results.json")):
+        try:
+            has_mass = "mass_kg" in json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError, TypeError):
+            continue
+        if has_mass and (Path(subject_dir) / "trials" / path.parent.name).is_dir():
+            out.append(path.parent.name)
+    return out
+
+
 def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[tuple[str, float]]:
     """The output's trials other than ``trial`` whose dynamics were made with another body
     mass than ``mass_kg`` (their ``results.json`` ``mass_kg``, rounded to 0.01 kg), as
-    ``(name, mass)``: after a Reprocess of one trial the subject's mass fit (over every
-    trial) may move, while only that trial's files are rewritten."""
+    ``(name, mass)``. A Reprocess rewrites every trial with dynamics (:func:`dynamics_trials`),
+    so this is empty after one, unless a trial's folder is left in the output while the
+    subject no longer has that trial."""
     out = []
     for path in sorted(Path(out_dir).glob("*/results.json")):
         if path.parent.name == trial:
@@ -137,8 +158,10 @@ class Reprocessor:
         self._warned = None
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
         # flags change the dynamics only: the child reuses the kinematics cached by the last
-        # full run (a full run when that cache is missing or stale, e.g. after an extension)
-        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name,), self._masks(), dynamics_only=True)
+        # full run (a full run when that cache is missing or stale, e.g. after an extension);
+        # every trial with dynamics is rewritten, since the masses are fitted over all of them
+        others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != name]
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name, *others), self._masks(), dynamics_only=True)
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
     def diagnose(self, trial: str | None = None) -> None:
@@ -284,14 +307,19 @@ class Reprocessor:
         app.load_trial(trial, frame=frame)
         after = trial_summary(app.trial)
         app.panel.comparison.content = "**Reprocess result**\n\n" + comparison_markdown(before or {}, after)
+        others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != trial]
+        if others:
+            app.panel.comparison.content += (
+                f"\n\nRewritten too, with the masses refitted over every trial with force plates: {', '.join(others)}."
+            )
         stale = other_mass_trials(app.paths.out_dir, trial, after["mass_kg"])
         if stale:
             app.panel.comparison.content += (
                 f"\n\n<span style='color:#c00'>**The fitted body mass is now {after['mass_kg']:.2f} kg**</span> "
                 "(the mass fit uses every trial with your flags); "
                 + ", ".join(f"{name} ({mass:.2f} kg)" for name, mass in stale)
-                + " still hold results made with the old mass and the scaled model is the new one: reprocess "
-                "them too (pick each and press Reprocess)."
+                + " still hold results made with the old mass (their trials are no longer in the subject folder) "
+                "and the scaled model is the new one."
             )
 
     def cancel(self, *, wait: bool = False) -> None:

@@ -1,6 +1,8 @@
 """A Reprocess of one trial refits the subject's body mass over every trial (with the
-reviewer's flags) but rewrites only that trial's files: the page names the other trials whose
-results were made with the old mass (the OpenCap subject: DJ1 beside a reprocessed walking1)."""
+reviewer's flags). The solver's ``reprocess_dynamics`` writes only the trials it is given, so
+the review app gives it every trial with dynamics: on the OpenCap subject, flags on walking1
+move the fitted mass and DJ1 is rewritten with it; the page says so, and would name a trial
+left with the old mass."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addb_viewer.app.reprocess import other_mass_trials
+from addb_viewer.app.reprocess import dynamics_trials, other_mass_trials
 from tests.conftest import SHARED_DATA
 
 pytestmark = pytest.mark.slow
@@ -35,16 +37,19 @@ def test_the_trials_left_with_the_old_mass_are_named(tmp_path: Path) -> None:
     assert abs(new - old) > 0.05  # the flags moved the subject's fitted mass
     assert (out / "DJ1" / "DJ1_id.sto").read_bytes() == before  # DJ1 was not rewritten
     assert other_mass_trials(out, "walking1", new) == [("DJ1", pytest.approx(old))]
+    assert dynamics_trials(OPENCAP, out) == ["DJ1", "walking1"]  # what the review app's Reprocess writes
     shutil.rmtree(out)
 
 
-def test_the_reprocess_table_names_them(tmp_path: Path, make_app) -> None:
+def test_a_reprocess_rewrites_every_trial_with_dynamics(tmp_path: Path, make_app) -> None:
     from addb_viewer.app.paths import ReviewPaths
     from solver.pipeline import process_subject
     from tests.conftest import writable_copy
 
     subject = writable_copy(OPENCAP, tmp_path / "opencap")
     process_subject(subject, tmp_path / "out")
+    old = json.loads((tmp_path / "out" / "subject.json").read_text())["fitted_mass_kg"]
+    dj1_before = (tmp_path / "out" / "DJ1" / "DJ1_id.sto").read_bytes()
     app = make_app(ReviewPaths.for_subject(subject, tmp_path / "out"))
     app.load_trial("walking1")
     app.select(20, 59)
@@ -52,5 +57,36 @@ def test_the_reprocess_table_names_them(tmp_path: Path, make_app) -> None:
     app.edit("accept all", lambda ed, _k, _f: ed.accept())  # no pending proposal: no warning
     app.jobs.reprocess("walking1")
     assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    out = tmp_path / "out"
     table = app.panel.comparison.content
-    assert "Reprocess result" in table and "The fitted body mass is now" in table and "DJ1 (" in table, table
+    new = json.loads((out / "subject.json").read_text())["fitted_mass_kg"]
+    assert abs(new - old) > 0.05, (old, new)  # the flags moved the fitted mass ...
+    for trial in ("walking1", "DJ1"):  # ... and every trial's dynamics were made with it
+        assert json.loads((out / trial / "results.json").read_text())["mass_kg"] == pytest.approx(new, abs=1e-9)
+    assert (out / "DJ1" / "DJ1_id.sto").read_bytes() != dj1_before
+    assert other_mass_trials(out, "walking1", new) == []
+    assert "Reprocess result" in table and "Rewritten too" in table and "DJ1" in table, table
+    assert "The fitted body mass is now" not in table, table  # no trial left with the old mass
+
+
+def test_a_trial_left_with_the_old_mass_is_named(tmp_path: Path, make_app) -> None:
+    """A trial folder left in the output after its trial left the subject folder is not
+    rewritten (the solver no longer has it): the table names it with its old mass."""
+    from addb_viewer.app.paths import ReviewPaths
+    from solver.pipeline import process_subject
+    from tests.conftest import writable_copy
+
+    subject = writable_copy(OPENCAP, tmp_path / "opencap")
+    process_subject(subject, tmp_path / "out")
+    old = json.loads((tmp_path / "out" / "subject.json").read_text())["fitted_mass_kg"]
+    shutil.rmtree(subject / "trials" / "DJ1")
+    app = make_app(ReviewPaths.for_subject(subject, tmp_path / "out"))
+    app.load_trial("walking1")
+    app.select(20, 59)
+    app.selection_edit("Flag")
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())
+    app.jobs.reprocess("walking1")
+    assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    table = app.panel.comparison.content
+    assert "Rewritten too" not in table, table
+    assert "The fitted body mass is now" in table and f"DJ1 ({old:.2f} kg)" in table, table
