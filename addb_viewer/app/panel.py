@@ -38,8 +38,11 @@ HOTKEYS: dict[str, tuple[str, str]] = {
     "Reject selection": ("Z", "reject the pending proposals in the timeline's selection"),
 }
 
-#: Width of the timeline-and-plots panel docked left of the 3D view, px.
-SIDE_WIDTH_PX = 560
+#: Widths of the timeline-and-plots panel docked left of the 3D view and of the control
+#: panel docked right of it, px: with viser's borders (8 px) they leave a 1280 px wide page
+#: (a laptop) a 3D view of 512 px (560 and viser's "large" 384 left 328 px), a 1920 px page
+#: 1152 px. A reviewer can drag either panel's inner edge or fold it away (its arrow).
+SIDE_WIDTH_PX, MAIN_WIDTH_PX = 440, 320
 #: The Foot choice a page starts with (and a newly opened subject).
 DEFAULT_FOOT = "both"
 #: The Edits line before the shown subject's first edit.
@@ -118,6 +121,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     gui = server.gui
     gui.configure_theme(titlebar_content=None, control_width="large", dark_mode=False, show_share_button=False)
     gui.main_panel.dock_right()
+    gui.main_panel.set_width(MAIN_WIDTH_PX)
     gui.set_panel_label(title)
     h: dict = {}
     h["status"] = gui.add_markdown("Starting…")
