@@ -60,8 +60,6 @@ class Line:
         ``(T,)`` values (NaN drawn as 0).
     color
         CSS colour.
-    scale
-        "y" (left axis) or "y2" (right axis).
     dash
         Dash pattern in pixels, () for a solid line.
     """
@@ -69,7 +67,6 @@ class Line:
     label: str
     values: FloatArray
     color: str
-    scale: str = "y"
     dash: tuple[float, ...] = ()
 
 
@@ -152,8 +149,10 @@ class Chart:
         ``(T,)`` s.
     lines
         The quantities to draw.
-    units
-        Axis labels of the "y" and (if used) "y2" scales.
+    unit
+        Label of the y axis, on the left. Every chart has that one axis, of the same
+        width, so that the plot areas and the frame cursors line up across the charts (a
+        second axis on the right would narrow one chart's plot area).
     note
         Appended to the title (e.g. "no dynamics yet").
     """
@@ -164,7 +163,7 @@ class Chart:
         title: str,
         time: FloatArray,
         lines: list[Line],
-        units: tuple[str, ...],
+        unit: str,
         *,
         note: str = "",
         height: int = 150,
@@ -181,16 +180,13 @@ class Chart:
             "shade": {"auto": False, "range": (0.0, 1.0)},
             "cursor": {"auto": False, "range": (0.0, 1.0)},
         }
-        axes: list[dict] = [{}]
-        for i, unit in enumerate(units):
-            key = "y" if i == 0 else "y2"
-            vals = [ln.values for ln in lines if ln.scale == key and np.isfinite(ln.values).any()]
-            scales[key] = {"auto": False, "range": _range(vals, floor_zero=True)}
-            axes.append({"scale": key, "label": unit, "side": 3 if i == 0 else 1, "size": 50})
+        vals = [ln.values for ln in lines if np.isfinite(ln.values).any()]
+        scales["y"] = {"auto": False, "range": _range(vals, floor_zero=True)}
+        axes: list[dict] = [{}, {"scale": "y", "label": unit, "side": 3, "size": 50}]
         for ln in lines:
             series.append(
                 {
-                    "label": ln.label, "stroke": ln.color, "width": 1.5, "scale": ln.scale,
+                    "label": ln.label, "stroke": ln.color, "width": 1.5, "scale": "y",
                     "dash": ln.dash, "points": {"show": False},
                     "show": bool(np.isfinite(ln.values).any()),
                 }
@@ -264,7 +260,8 @@ def grf_lines(trial: ProcessedTrial) -> list[Line]:
 
 
 def residual_lines(trial: ProcessedTrial) -> list[Line]:
-    """Residual force and moment magnitudes and their Hicks thresholds."""
+    """Residual force (N) and moment (N·m) magnitudes and their Hicks thresholds, on one
+    axis (the chart's frame cursor then lines up with the other charts')."""
     th = hicks_thresholds(trial)
     f = np.linalg.norm(trial.residual_force, axis=1)
     m = np.linalg.norm(trial.residual_moment, axis=1)
@@ -273,8 +270,8 @@ def residual_lines(trial: ProcessedTrial) -> list[Line]:
     return [
         Line("|F| residual (N)", f, "rgb(220, 20, 60)"),
         Line("Hicks F (N)", th.force_n * ones, "rgb(220, 20, 60)", dash=(5, 4)),
-        Line("|M| residual (N·m)", m, "rgb(30, 100, 220)", scale="y2"),
-        Line("Hicks M (N·m)", th.moment_nm * ones, "rgb(30, 100, 220)", scale="y2", dash=(5, 4)),
+        Line("|M| residual (N·m)", m, "rgb(30, 100, 220)"),
+        Line("Hicks M (N·m)", th.moment_nm * ones, "rgb(30, 100, 220)", dash=(5, 4)),
     ]
 
 
@@ -313,13 +310,13 @@ class TrialPlots:
         self.no_dyn = "" if trial.has_dynamics else "no dynamics yet"
         h = CHART_HEIGHT
         self.charts = [
-            Chart(gui, "Vertical GRF: left · right · m(a+g) dashed", t, grf_lines(trial), ("N",), note=no_plates, height=h),
-            Chart(gui, "Residual |F| (N, red) · |M| (N·m, blue); dashed: Hicks", t, residual_lines(trial), ("N", "N·m"),
+            Chart(gui, "Vertical GRF: left · right · m(a+g) dashed", t, grf_lines(trial), "N", note=no_plates, height=h),
+            Chart(gui, "Residual |F| (N, red) · |M| (N·m, blue); dashed: Hicks", t, residual_lines(trial), "N, N·m",
                   note=self.no_dyn, height=h),
             Chart(
                 gui, "Marker RMS (cm)", t,
                 [Line("marker RMS (cm)", 100 * trial.marker_rms_per_frame, "rgb(0, 120, 120)")],
-                ("cm",), height=h,
+                "cm", height=h,
             ),
         ]  # fmt: skip
         names = tuple(trial.coordinate_names)
@@ -330,7 +327,7 @@ class TrialPlots:
 
     def _torque_chart(self, coordinate: str) -> Chart:
         return Chart(self.gui, f"Joint torque: {coordinate}", self.trial.time, [torque_line(self.trial, coordinate)],
-                     ("N·m",), note=self.no_dyn, height=CHART_HEIGHT)  # fmt: skip
+                     "N·m", note=self.no_dyn, height=CHART_HEIGHT)  # fmt: skip
 
     def show_torque(self, coordinate: str) -> None:
         """Show ``coordinate``'s generalized force in the last chart (same cursor and shading)."""

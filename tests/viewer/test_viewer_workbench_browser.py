@@ -4,7 +4,7 @@ tree of two shared subjects without a Geometry folder, processed by ``addb proce
 docked panels leave the 3D view 40 % of the width, the queue's window fits it and the
 walk's skeleton is drawn below it on its first and last frames). The queue lists both subjects and
 their trials; opening the second works (its bones drawn, no axes fallback); the timeline's
-plots lie inside the viewport; a selection dragged over frames 20-40 (each end within a
+plots lie inside the viewport and their frame cursors line up at the last frame; a selection dragged over frames 20-40 (each end within a
 pixel's frames) and the flag hotkey write exactly the selected range to the record on disk; Reprocess ends with the before/after table: the
 frames with measured force drop to the frames the reviewer did not flag (the flags replace
 the solver's own choice, and the range adds frames that were in the fit) and the residuals
@@ -97,6 +97,18 @@ def _drag_selection(page, start: int, end: int, last_frame: int) -> tuple[int, i
     return reached
 
 
+def _cursor_column(page, chart) -> int:
+    """The page x of a chart's frame cursor: the pixel column with the most near-black
+    pixels (the cursor is a dark vertical line through the plot area; grid lines are light)."""
+    import imageio.v3 as iio
+
+    box = chart.bounding_box()
+    img = iio.imread(page.screenshot(clip=box)).astype(int)[..., :3]
+    dark = (img.max(axis=2) < 90).sum(axis=0)
+    assert dark.max() > 0.3 * img.shape[0], (box, int(dark.max()))  # a line over most of the height
+    return int(round(box["x"])) + int(np.argmax(dark))
+
+
 def _close_webgl_notice(page) -> None:
     """Headless Chromium renders WebGL in software, and viser says so in a notice over the
     top-left of the 3D view, where the queue's controls are: close it (a machine with a GPU
@@ -179,6 +191,18 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
                 box = charts.nth(i).bounding_box()
                 assert box and box["x"] >= 0 and box["y"] >= 0 and box["width"] > 300 and box["height"] > 60, box
                 assert box["x"] + box["width"] <= 1600 and box["y"] + box["height"] <= 1000, (i, box)
+
+            # the charts' frame cursors line up (one axis per chart, all on the left): at the
+            # last frame (◀ Prev from frame 0), where a right axis would move one chart's
+            last_run = int(re.search(r"frame \d+ / (\d+)", page.get_by_text(re.compile(r"run · run · frame")).inner_text()).group(1))
+            page.get_by_role("button", name="◀ Prev", exact=True).click()
+            page.get_by_text(f"frame {last_run} / {last_run}").first.wait_for(timeout=20_000)
+            page.wait_for_timeout(1500)
+            columns = [_cursor_column(page, charts.nth(i)) for i in range(charts.count())]
+            box = charts.nth(0).bounding_box()
+            assert max(columns) - min(columns) <= 2 and columns[0] > box["x"] + box["width"] / 2, (columns, box)
+            page.get_by_role("button", name="Next ▶", exact=True).click()  # back to frame 0
+            page.get_by_text(f"frame 0 / {last_run}").first.wait_for(timeout=20_000)
 
             # the timeline's proposals carry their reason on hover (a title on each run)
             tip = page.locator("div.run[data-track='proposal']").first.get_attribute("title")
