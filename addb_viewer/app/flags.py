@@ -135,6 +135,15 @@ def pending_replaced(view: FlagView) -> int:
     return int(view.pending.sum()) if selected else 0
 
 
+def rejections_ignored(view: FlagView) -> int:
+    """Rejected proposals that the next solver run does not take: while a trial has no flag
+    and is not marked reviewed, the solver keeps its own proposals
+    (:mod:`addb_viewer.review_masks`), rejected ones included; 0 once it has either (then
+    :func:`pending_replaced` applies)."""
+    selected = bool(view.flagged.any()) or view.reviewed or view.beyond > 0
+    return 0 if selected else int(view.rejected.sum())
+
+
 def toggled_foot(current: str | None, foot: str) -> str | None:
     """The foot a frame is flagged for after toggling ``foot`` (None: not flagged).
 

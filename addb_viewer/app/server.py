@@ -37,7 +37,13 @@ from addb_viewer.app.camera import (
     view_pose,
 )
 from addb_viewer.app.diagnosis import diagnosis_markdown
-from addb_viewer.app.flags import FlagView, TrialEditor, describe_frame, pending_replaced
+from addb_viewer.app.flags import (
+    FlagView,
+    TrialEditor,
+    describe_frame,
+    pending_replaced,
+    rejections_ignored,
+)
 from addb_viewer.app.meshes import body_mesh
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
@@ -235,16 +241,58 @@ class ReviewApp:
             self.trials = processed_trials(paths.out_dir) if paths.out_dir.is_dir() else []
             if not self.trials:
                 self.set_status(f"**{paths.subject_dir.name}** has not been processed yet (see the dataset queue).")
-                with self._quiet_updates():
-                    self.panel.trial.options = ("(none)",)
-                    self.panel.trial.value = "(none)"
-                    self.panel.trial.disabled = True
+                self._clear_trial_controls()
                 return
             name = trial if trial in self.trials else _preferred(self.trials)
             self.set_trial_options(name)
             self.load_trial(name)
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not open the subject", exc)
+
+    def _clear_trial_controls(self) -> None:
+        """Empty the trial's controls when no trial is shown (a subject not processed, or
+        failed): no trial to pick, no timeline, frame or selection, no flag counts, no
+        reviewed box; the previous trial's would read as this subject's."""
+        p = self.panel
+        with self._quiet_updates():
+            p.trial.options = ("(none)",)
+            p.trial.value = "(none)"
+            p.trial.disabled = True
+            for slider in (p.frame, p.timeline_frame):
+                slider.value = 0
+                slider.disabled = True
+            p.selection.value = (0, 0)
+            p.selection.disabled = True
+            p.reviewed.value = False
+            p.reviewed.disabled = True
+        p.timeline.content = ""
+        p.proposal_info.content = "No trial shown."
+        p.range_info.content = "Range: no in/out points (press I / O)"
+        p.selection_info.content = "Drag the ends of Selection to choose frames."
+        p.diagnosis.content = ""
+
+    def _trial_picked(self, name: str) -> None:
+        """The Playback folder's Trial list: load ``name``; the dataset queue then marks it
+        as the trial shown (its ▶ and Open follow)."""
+        self.load_trial(name)
+        if self.workbench is not None:
+            self.workbench.refresh()
+
+    def reload_shown(self, why: str) -> None:
+        """Load the shown trial again from the output folder, at the frame shown (its output
+        was rewritten by a run other than this page's Reprocess: the dataset's background
+        run), and say ``why`` in the solver-run line. No-op when no trial is shown."""
+        with self._lock:
+            if self.trial is None:
+                return
+            name, frame = self.trial.trial, self.playback.frame if self.playback is not None else 0
+        try:
+            self.trials = processed_trials(self.paths.out_dir)
+            self.set_trial_options(name)
+            self.load_trial(name, frame=frame)
+            self.panel.job_status.content = why
+        except Exception as exc:  # noqa: BLE001 - shown in the page
+            self.show_error("Could not reload the trial", exc)
 
     def _subject_label(self, paths: ReviewPaths) -> str:
         """A subject's name as the reviewer knows it: its place in the dataset queue
@@ -396,6 +444,7 @@ class ReviewApp:
             p.speed.value = self.playback.speed
             p.loop.value = self.playback.loop
             p.reviewed.value = bool(self.view and self.view.reviewed)
+            p.reviewed.disabled = False
             p.record_name.value = f"{name}.rrd"
         self._show_flags_info()
         self._show_range_info()
@@ -708,7 +757,12 @@ class ReviewApp:
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
         if what not in ("undo", "redo"):
             self._own_history(edits)
-        if not edits:
+        if not edits and what in ("undo", "redo"):
+            self.panel.saved.content = (
+                f"Nothing to {what}: the history holds the edits made since this subject was opened "
+                "(opening another subject starts a new one)."
+            )
+        elif not edits:
             self.panel.saved.content = f"Nothing to do: {what}."
         else:
             e = edits[-1]
@@ -751,6 +805,13 @@ class ReviewApp:
             text += f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
         if v.beyond:
             text += f". {v.beyond} flagged frames lie past the end of this trial."
+        ignored = rejections_ignored(v)
+        if ignored:
+            text += (
+                f". <span style='color:#c00'>**{ignored} rejected proposed frames are still left out of the fit**</span>: "
+                "the solver keeps its own choice until the trial has a flag or is marked reviewed; tick "
+                "Trial reviewed to fit them as measured"
+            )
         pending = pending_replaced(v)
         if pending:
             text += (
@@ -927,7 +988,7 @@ class ReviewApp:
     def _wire(self) -> None:
         p = self.panel
         on = self._guard
-        p.trial.on_update(on("Trial", lambda e: self.load_trial(e.target.value)))
+        p.trial.on_update(on("Trial", lambda e: self._trial_picked(e.target.value)))
         p.frame.on_update(on("Seek", lambda e: self.seek(int(e.target.value))))
         p.timeline_frame.on_update(on("Seek", lambda e: self.seek(int(e.target.value))))
         p.selection.on_update(on("Selection", lambda e: self.select(*(int(v) for v in e.target.value))))

@@ -174,8 +174,10 @@ class Workbench:
         """Read the queue again from disk and redraw it."""
         with self._lock:
             shown = getattr(self.app, "trial", None)
-            if self.current is not None and self.current[1] is None and shown is not None:
-                self.current = (self.current[0], shown.trial)  # the subject's trial has loaded since it was opened
+            if self.current is not None and shown is not None:
+                # the subject's trial has loaded since it was opened, or the reviewer picked
+                # another in the Playback folder's Trial list
+                self.current = (self.current[0], shown.trial)
             rows = build_queue(self.subjects, dict(self.running))
             self.rows = rows
             self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
@@ -201,11 +203,32 @@ class Workbench:
     def open(self, rel: str, trial: str | None = None) -> None:
         """Show subject ``rel`` (its ``trial``, default the preferred one) in the app."""
         subject: QueueSubject = self.by_rel[rel]
+        paths = ReviewPaths.for_subject(subject.subject_dir, subject.out_dir)
         self.current = (rel, trial)
-        self.app.open_subject(ReviewPaths.for_subject(subject.subject_dir, subject.out_dir), trial)
+        if trial is not None and self._shown(paths) and trial in self.app.trials:
+            # another trial of the subject on screen: its review record (and the undo
+            # history in it) stays open, a running Reprocess goes on
+            self.app.set_trial_options(trial)
+            self.app.load_trial(trial)
+        else:
+            self.app.open_subject(paths, trial)
+            if self.app.trial is None and subject.rel in self._failed:
+                self.app.set_status(f"**{rel}** failed: {self._failed[subject.rel]}")
         if self.app.trial is not None:
             self.current = (rel, self.app.trial.trial)
         self._order = [(r.subject.rel, r.trial) for r in self.refresh()]  # as the reviewer sees it now
+
+    def _shown(self, paths: ReviewPaths) -> bool:
+        """Whether ``paths`` is the subject on screen (same subject and output folders)."""
+        now = self.app.paths
+        return (Path(now.subject_dir).resolve(), Path(now.out_dir).resolve()) == (
+            Path(paths.subject_dir).resolve(), Path(paths.out_dir).resolve())  # fmt: skip
+
+    @property
+    def _failed(self) -> dict[str, str]:
+        """The failed subjects' errors in full, by their place in the dataset (the queue's
+        table shows the first 80 characters)."""
+        return {r.subject.rel: r.detail for r in self.rows if r.processing == FAILED}
 
     def open_next(self) -> QueueRow | None:
         """Open the next trial that needs review (after the one shown); None when none."""
@@ -241,8 +264,14 @@ class Workbench:
                     self._draw_table()
                     return
             self.refresh()
-            if kind == "done" and self.current is not None and self.current[0] == data["rel"] and self.app.trial is None:
-                self.open(data["rel"])  # the subject on screen was waiting for its output
+            if kind == "done" and self.current is not None and self.current[0] == data["rel"]:
+                if self.app.trial is None:
+                    self.open(data["rel"])  # the subject on screen was waiting for its output
+                elif data.get("status") == "ok":  # its output was rewritten (e.g. its review changed)
+                    self.app.reload_shown(
+                        f"{data['rel']} was processed again in the background (its review changed): "
+                        "the trial shown was reloaded with the new results."
+                    )
 
         try:
             dataset = self.dataset_dir

@@ -1,0 +1,132 @@
+"""Reviewer flows of ``addb view DATASET_DIR`` found by an exploration of the workbench, each
+on a dataset of the shared walk (``labA/walk``) and a copy whose marker file has a garbage
+frame (``labA/broken``), processed once by ``addb process`` and copied for each test:
+
+* another trial of the subject on screen opened from the queue keeps its review record
+  open, so Undo still reaches the edits made before (it answered "Nothing to do");
+* a subject whose background run finishes while one of its trials is on screen is reloaded
+  (the page showed the old residuals beside a queue row with the new ones);
+* a failed subject opened from the queue empties the previous trial's controls and says its
+  error in full (the table cuts it at 80 characters, losing the file and line);
+* a trial picked in the Playback folder's Trial list becomes the queue's current row;
+* rejected proposals of a trial with no flag, not marked reviewed, are said to be still left
+  out of the fit (the solver keeps its own choice until then)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addb_viewer.app.paths import ReviewPaths
+from addb_viewer.app.queue import dataset_subjects
+from addb_viewer.app.workbench import Workbench
+from addb_viewer.cli import main as cli
+from solver.results import load_processed
+from tests.conftest import SHARED_DATA, writable_copy
+
+pytestmark = pytest.mark.slow
+BAD_LINE = 106  # the marker file's line of frame 100 (6 header lines)
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The dataset and its output tree (``addb_out``), processed once."""
+    root = tmp_path_factory.mktemp("flows")
+    ds = root / "ds"
+    writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", ds / "labA" / "walk")
+    broken = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", ds / "labA" / "broken")
+    trc = broken / "trials" / "walk" / "markers.trc"
+    lines = trc.read_text(encoding="utf-8").splitlines(keepends=True)
+    assert lines[BAD_LINE - 1].startswith("100\t")
+    lines[BAD_LINE - 1] = "100\t0.99000\tgarbage here\n"
+    trc.write_text("".join(lines), encoding="utf-8")
+    assert cli(["process", str(ds), "--out", str(ds / "addb_out"), "--workers", "1"]) == 1  # the broken subject fails
+    return ds
+
+
+@pytest.fixture
+def dataset(processed: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    return Path(shutil.copytree(processed, tmp_path / "ds"))
+
+
+def _bench(dataset: Path, make_app, workers: int = 0) -> tuple[object, Workbench]:
+    _, _, subjects = dataset_subjects(dataset)
+    walk = next(s for s in subjects if s.rel == "labA/walk")
+    app = make_app(ReviewPaths.for_subject(walk.subject_dir, walk.out_dir), process_missing=False)
+    app.load_trial("walk")
+    bench = Workbench(app, dataset, workers=workers)
+    bench.current = ("labA/walk", "walk")
+    return app, bench
+
+
+def _flagged(app) -> list[int]:
+    return np.flatnonzero(app.store.mask("walk", app.trial.n_frames if app.trial.trial == "walk" else 238)).tolist()
+
+
+def test_opening_another_trial_of_the_subject_keeps_the_undo_history(dataset: Path, make_app) -> None:
+    app, bench = _bench(dataset, make_app)
+    proposed = set(np.flatnonzero(app.trial.proposed).tolist())
+    app.select(100, 109)
+    app.selection_edit("Flag")
+    assert set(range(100, 110)) <= set(_flagged(app))
+    bench.open("labA/walk", "static")
+    assert app.trial.trial == "static"
+    bench.open("labA/walk", "walk")
+    app.history("Undo")
+    assert not set(range(100, 110)) & (set(_flagged(app)) - proposed), app.panel.saved.content
+
+
+def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Path, make_app) -> None:
+    """Flags edited before the workbench starts change the subject's review: the background
+    run processes it again, and the trial on screen shows the new result."""
+    _, _, subjects = dataset_subjects(dataset)
+    walk = next(s for s in subjects if s.rel == "labA/walk")
+    app = make_app(ReviewPaths.for_subject(walk.subject_dir, walk.out_dir), process_missing=False)
+    app.load_trial("walk")
+    before = app.trial
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())
+    app.select(100, 129)
+    app.selection_edit("Flag")
+    bench = Workbench(app, dataset, workers=1)
+    bench.current = ("labA/walk", "walk")
+    assert bench.processing_done.wait(600), bench.run_status.content
+    after = load_processed(walk.out_dir, "walk")
+    assert after.unobserved[100:130].all() and not before.unobserved[100:130].all()  # processed again
+    assert app.trial.trial == "walk" and np.array_equal(app.trial.unobserved, after.unobserved)
+    assert "reloaded" in app.panel.job_status.content, app.panel.job_status.content
+
+
+def test_a_failed_subject_empties_the_trial_controls_and_says_its_error(dataset: Path, make_app) -> None:
+    app, bench = _bench(dataset, make_app)
+    app.select(100, 109)
+    app.selection_edit("Flag")
+    bench.open("labA/broken")
+    assert app.trial is None
+    status = app.panel.status.content
+    assert "failed" in status and f"markers.trc:{BAD_LINE}" in status, status
+    p = app.panel
+    assert p.timeline.content == "" and p.reviewed.disabled and not p.reviewed.value and p.frame.disabled
+    assert "flagged" not in p.proposal_info.content, p.proposal_info.content
+    bench.open("labA/walk", "walk")  # and back: the controls work again
+    assert app.trial.trial == "walk" and not p.reviewed.disabled and not p.frame.disabled and p.timeline.content
+
+
+def test_a_trial_picked_in_the_trial_list_becomes_the_queue_row(dataset: Path, make_app) -> None:
+    app, bench = _bench(dataset, make_app)
+    app._trial_picked("static")
+    assert bench.current == ("labA/walk", "static")
+    assert bench.choice.value == "labA/walk / static", bench.choice.value
+
+
+def test_rejections_alone_are_said_to_leave_the_solver_its_choice(dataset: Path, make_app) -> None:
+    app, _ = _bench(dataset, make_app)
+    n = int(app.trial.proposed.sum())
+    assert n > 0
+    app.edit("reject all", lambda ed, _k, _f: ed.reject())
+    assert f"{n} rejected proposed frames are still left out of the fit" in app.panel.proposal_info.content
+    app.edit("reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
+    assert "still left out" not in app.panel.proposal_info.content
