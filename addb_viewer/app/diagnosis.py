@@ -16,6 +16,7 @@ here raises: the review goes on whatever these files hold.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +62,34 @@ def _applied(subject_dir: Path, trial: str) -> list[str]:
     return lines
 
 
+def kept_reports(out_dir: str | Path, trials: list[str] | tuple[str, ...]) -> dict[str, tuple[bytes, int]]:
+    """The diagnosis reports of ``trials`` (content and modification time, ns), read before
+    a Reprocess replaces their folders (the solver writes a trial's folder anew, without
+    the report): :func:`restore_reports` puts them back after it."""
+    kept = {}
+    for trial in trials:
+        path = Path(out_dir) / trial / DIAGNOSIS_FILE
+        try:
+            kept[trial] = (path.read_bytes(), path.stat().st_mtime_ns)
+        except OSError:
+            continue
+    return kept
+
+
+def restore_reports(out_dir: str | Path, kept: dict[str, tuple[bytes, int]]) -> None:
+    """Put back the reports :func:`kept_reports` read, with their old modification times
+    (so :func:`diagnosis_markdown` says they were made on earlier results), where the trial's
+    folder has no report now. The evidence behind a correction applied from the page stays."""
+    for trial, (data, mtime_ns) in kept.items():
+        path = Path(out_dir) / trial / DIAGNOSIS_FILE
+        if path.parent.is_dir() and not path.exists():
+            try:
+                path.write_bytes(data)
+                os.utime(path, ns=(mtime_ns, mtime_ns))
+            except OSError:
+                continue
+
+
 def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str) -> str:
     """Markdown of the "Diagnosis" folder for ``trial``.
 
@@ -87,6 +116,12 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
         if problem is not None or not isinstance(report, dict) or report.get("schema") != "addb.diagnosis":
             blocks.append(problem or f"`{path.name}` is not an addb diagnosis")
         else:
+            results = path.with_name("results.json")
+            if results.is_file() and results.stat().st_mtime_ns > path.stat().st_mtime_ns:
+                blocks.append(
+                    "<span style='color:#c00'>**Made on earlier results**</span> (the trial was reprocessed "
+                    "since): press **Diagnose this trial** for the current ones."
+                )
             blocks += _report_blocks(report)
     applied = _applied(Path(subject_dir), trial)
     if applied:
@@ -98,6 +133,13 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
 def _report_blocks(report: dict[str, Any]) -> list[str]:
     chosen = report.get("chosen")
     blocks = [f"**Chosen cause: `{chosen}`**" if chosen else "**No cause stands out.**", str(report.get("reason", ""))]
+    judged = (report.get("settings") or {}).get("judged_fit") or {}
+    if judged.get("rebuilt"):  # as `addb diagnose` prints it: its figures are not the page's
+        blocks.append(
+            f"Judged on the `{judged.get('fit')}` dynamics fit the diagnosis is calibrated on, run again for it: "
+            f"the trial was processed with the `{judged.get('processed_fit')}` fit, so the figures below differ "
+            "from the page's and results.json's."
+        )
     candidates = report.get("candidates") or []
     if candidates:
         blocks.append("Candidates (held-out evidence):")

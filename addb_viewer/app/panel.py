@@ -155,7 +155,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["comparison"] = gui.add_markdown("")
     h["diagnosis_folder"] = gui.add_folder("Diagnosis", expand_by_default=False)
     with h["diagnosis_folder"]:
-        h["diagnose"] = gui.add_button("Diagnose this trial", hint="why its residuals remain: eight candidate causes, "
+        h["diagnose"] = gui.add_button("Diagnose this trial", hint="why its residuals remain: the candidate causes of docs/diagnose, "
                                        "fitted and cross-validated (about 10 s; progress and Cancel above)")
         h["apply_diagnosis"] = gui.add_button("Apply the named cause and reprocess", hint="saves the correction in "
                                               "addb_extensions.json (as addb diagnose --apply) and reprocesses")

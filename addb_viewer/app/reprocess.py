@@ -25,6 +25,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from addb_viewer.app.diagnosis import kept_reports, restore_reports
 from addb_viewer.app.flags import pending_replaced
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir, prestart_solver
 from addb_viewer.app.summary import comparison_markdown, trial_summary
@@ -58,6 +59,14 @@ class ReprocessHost(Protocol):
     def load_trial(self, name: str, *, frame: int = 0) -> None:
         """Load ``OUT/<name>`` and show it from ``frame``."""
         ...
+    def reload_shown(self, why: str) -> None:
+        """Load the shown trial again from the output folder at the frame shown; say ``why``."""
+        ...
+
+    def clear_error(self) -> None:
+        """Hide the page's error area."""
+        ...
+
     def show_diagnosis(self, trial: str | None) -> None:
         """Show ``trial``'s diagnosis report when that trial is on screen (None: nothing)."""
         ...
@@ -101,6 +110,19 @@ def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[t
     return out
 
 
+def already_saved(subject_dir: str | Path, entry: dict) -> bool:
+    """Whether the subject's ``addb_extensions.json`` holds ``entry`` already (every field of
+    the diagnosis' entry equal; the file adds ``source`` and ``created``). An unreadable file
+    counts as not holding it (saving then says why)."""
+    from solver.corrections import read_extensions
+
+    try:
+        saved = read_extensions(subject_dir)
+    except AddbError:
+        return False
+    return any(all(s.get(k) == v for k, v in entry.items()) for s in saved)
+
+
 CONFIRM_AFTER_S = 1.0
 """Least time between the pending-proposal warning and the press that goes ahead, s."""
 
@@ -116,6 +138,7 @@ class Reprocessor:
         self.finished = threading.Event()
         self._warned: tuple[str, int] | None = None  # (trial, pending frames) the last warning named
         self._warned_at = 0.0  # time.monotonic() of that warning
+        self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
     @property
@@ -162,6 +185,7 @@ class Reprocessor:
         # every trial with dynamics is rewritten, since the masses are fitted over all of them
         others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != name]
         spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name, *others), self._masks(), dynamics_only=True)
+        self._kept = kept_reports(app.paths.out_dir, (name, *others))  # the solver rewrites those folders without them
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
     def diagnose(self, trial: str | None = None) -> None:
@@ -200,6 +224,24 @@ class Reprocessor:
         entry = report.get("extension")
         if not entry:
             self._say("The diagnosis named no cause: nothing to apply.")
+            return None
+        # nothing is saved unless the Reprocess that uses it can start: a correction saved
+        # twice (a second press while the first run goes on) is applied twice by every
+        # later processing
+        if self.running:
+            self._say("A solver run is already in progress; the correction was not saved (press again once it ends).")
+            return None
+        view = app.view if app.trial is not None and app.trial.trial == name else None
+        pending = pending_replaced(view) if view is not None else 0
+        if pending:
+            self._say(
+                f"**{pending} proposed frames of {name} are still pending**: accept or reject them first "
+                "(All proposals); the correction was not saved."
+            )
+            return None
+        if already_saved(app.paths.subject_dir, entry):
+            self._say(f"`{entry['cause']}` is already saved for this subject; reprocessing {name} with it…")
+            self.reprocess(name)
             return None
         try:
             saved = save_extension(app.paths.subject_dir, entry)
@@ -269,6 +311,7 @@ class Reprocessor:
                 if trial is None:
                     app.after_processing()
                 else:
+                    restore_reports(app.paths.out_dir, self._kept)
                     self._install(trial, before, work)
             elif result.status == "cancelled":
                 p.job_status.content = f"{label}: cancelled; the previous result is kept."
@@ -301,12 +344,18 @@ class Reprocessor:
             app.trials = sorted([*app.trials, trial])
             app.set_trial_options(trial if showing else app.trial.trial)
         if not showing:
-            self._say(f"{trial} was reprocessed; pick it in the trial list to see it.")
+            shown = app.trial.trial
+            if shown in dynamics_trials(app.paths.subject_dir, app.paths.out_dir):
+                # rewritten by the same run (its masses are fitted over every trial)
+                app.reload_shown(f"{trial} was reprocessed, and {shown} (shown) rewritten with it and reloaded; "
+                                 f"pick {trial} in the trial list to see it.")  # fmt: skip
+            else:
+                self._say(f"{trial} was reprocessed; pick it in the trial list to see it.")
             return
         frame = app.playback.frame if app.playback is not None else 0
         app.load_trial(trial, frame=frame)
         after = trial_summary(app.trial)
-        app.panel.comparison.content = "**Reprocess result**\n\n" + comparison_markdown(before or {}, after)
+        app.panel.comparison.content = f"**Reprocess result: {trial}**\n\n" + comparison_markdown(before or {}, after)
         others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != trial]
         if others:
             app.panel.comparison.content += (
@@ -353,7 +402,11 @@ class Reprocessor:
                 f"(addb_viewer.recording.rerun_writer: {exc})."
             )
             return
-        path = app.paths.recording_file(file_name)  # refuses names leaving the folder
+        try:
+            path = app.paths.recording_file(file_name)  # refuses names leaving the folder
+        except AddbError as exc:  # beside the button (the last success message would stay there)
+            status.content = f"<span style='color:#c00'>**Not recorded**</span>: {html.escape(str(exc), quote=False)}"
+            raise
         review = review_state(app.store.review(trial.trial)) if app.store is not None else None
         status.content = f"Recording {trial.trial} to {path}…"
 
@@ -363,6 +416,7 @@ class Reprocessor:
                 search = trial_search_path(trial, app.paths.subject_dir, app.geometry)
                 write_rerun(trial, path, annotations=review, mesh_path=search)
                 status.content = f"✓ wrote {path} ({path.stat().st_size / 1e6:.1f} MB)"
+                app.clear_error()  # an earlier refusal's error no longer applies
             except Exception as exc:  # noqa: BLE001 - shown in the page
                 status.content = f"<span style='color:#c00'>Recording failed</span>: {exc}"
                 app.show_error("Record to Rerun", exc)

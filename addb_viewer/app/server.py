@@ -148,8 +148,9 @@ class ReviewApp:
         #: Why the review record could not be opened (shown again with every trial loaded).
         self.store_problem: tuple[str, BaseException] | None = None
         self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
-        self._undo_owners: list[str] = []  # the reviewer of each edit the store can undo, oldest first
-        self._redo_owners: list[str] = []  # and of each it can redo
+        # (reviewer, trial) of each edit the store can undo, oldest first, and of each it can redo
+        self._undo_owners: list[tuple[str, str]] = []
+        self._redo_owners: list[tuple[str, str]] = []
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
         self.scene: TrialScene | None = None
@@ -767,7 +768,8 @@ class ReviewApp:
         else:
             e = edits[-1]
             when = datetime.now().strftime("%H:%M:%S")
-            self.panel.saved.content = f"✓ saved: {what} — {e.provenance.reviewer}, edit #{e.seq}, {when}"
+            on = f" on {e.trial}" if e.trial else ""  # the message stays when the reviewer picks another trial
+            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, edit #{e.seq}, {when}"
         self.refresh_flags()
 
     def refresh_flags(self) -> None:
@@ -926,27 +928,34 @@ class ReviewApp:
         keeps one undo history for the whole server: :meth:`history` reads whose turn it is)."""
         for e in edits:
             if e.trial is not None and e.changed and e.op not in ("none", "trial_info"):
-                self._undo_owners.append(e.provenance.reviewer)
+                self._undo_owners.append((e.provenance.reviewer, e.trial))
                 self._redo_owners.clear()
         del self._undo_owners[: -UNDO_OWNERS_KEPT]
 
     def history(self, what: str) -> None:
         """"Undo" or "Redo" the page's reviewer's last edit.
 
-        The store undoes one edit at a time for the whole server (one history per store),
-        so on a team server the last edit may be another reviewer's: then nothing is undone
-        and the page says whose it is (undo never removes another reviewer's work)."""
+        The store undoes one edit at a time for the whole server (one history per store,
+        over every trial of the subject), so the last edit may be another reviewer's (on a
+        team server) or on another trial than the one shown: then nothing is undone and the
+        page says whose it is, or which trial to open (undo never removes another reviewer's
+        work, nor frames the reviewer cannot see)."""
         if self.store is None:
             return
         name = self.reviewer_name(getattr(self._actor, "client", None))
         undo = what == "Undo"
         owners = self._undo_owners if undo else self._redo_owners
-        if name is not None and owners and owners[-1] != name:
+        last = "edit" if undo else "undone edit"
+        refused = f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last {last}"
+        if name is not None and owners and owners[-1][0] != name:
             self.panel.saved.content = (
-                f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last "
-                f"{'edit' if undo else 'undone edit'} on this subject is {_escape(owners[-1])}'s (one "
-                "history for everyone on this server); unflag or flag your frames instead."
+                f"{refused} on this subject is {_escape(owners[-1][0])}'s (one history for everyone on this "
+                "server); unflag or flag your frames instead."
             )
+            return
+        shown = self.trial.trial if self.trial is not None else None
+        if owners and owners[-1][1] != shown:
+            self.panel.saved.content = f"{refused} is on trial {_escape(owners[-1][1])}: open it to {what.lower()} it."
             return
         step = self.store.undo if undo else self.store.redo
 

@@ -179,10 +179,14 @@ def test_record_to_rerun(demo_paths, make_app) -> None:
     status = app.panel.record_status
     with pytest.raises(Exception, match="plain file or folder name"):
         app.jobs.record("../outside")
+    assert "Not recorded" in status.content  # beside the button, not only at the top of the panel
+    app._guard("Record to Rerun", lambda _e: app.jobs.record("a/b"))(None)  # as the button's handler
+    assert app.panel.error.visible and "Not recorded" in status.content
     app.edit("flag", lambda ed, _k, _f: ed.flag_range(20, 41, "right"))
     app.jobs.record("my walk")
     wait_for(lambda: "✓ wrote" in status.content or "failed" in status.content, timeout=120, what="recording")
     assert "✓ wrote" in status.content, status.content
+    assert not app.panel.error.visible  # the refusal's error went with the recording made since
     rec = Recording(demo_paths.recordings_dir / "my walk.rrd")
     trial = load_processed(demo_paths.out_dir, "walk")
     np.testing.assert_array_equal(per_frame_points(rec, "/world/markers/observed", trial), trial.observed.astype(np.float32))

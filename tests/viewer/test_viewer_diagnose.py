@@ -43,6 +43,9 @@ def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_
     # the panel states the report's verdict and its reason (not one of either)
     verdict = f"**Chosen cause: `{report['chosen']}`**" if report["chosen"] else "**No cause stands out.**"
     assert verdict in shown and report["reason"] and report["reason"] in shown, shown
+    # processed with the default fit, judged on the alternation: the page says its figures differ
+    judged = report["settings"]["judged_fit"]
+    assert judged["rebuilt"] and f"Judged on the `{judged['fit']}` dynamics fit" in shown, shown
     # Apply: a correction the diagnosis names (here written into its report: +3 kg of body mass)
     report["extension"] = {"cause": "body_mass", "trial": None, "mass_change_kg": 3.0}
     (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
@@ -53,6 +56,10 @@ def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_
     assert [e["cause"] for e in saved] == ["body_mass"] and saved[0]["mass_change_kg"] == 3.0
     assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
     assert "Reprocess result" in app.panel.comparison.content
+    # the report behind the correction is kept (the solver rewrote the trial's folder without
+    # it) and said to be made on the results before the Reprocess
+    assert json.loads((out / "walk" / "diagnosis.json").read_text())["extension"] == report["extension"]
+    assert "Made on earlier results" in app.panel.diagnosis.content and verdict in app.panel.diagnosis.content
     # the reprocess used the corrected stated mass (the fitted mass comes from the forces alone:
     # with the same frames left out it does not move; until the masks had one owner it moved
     # only because the app's Reprocess dropped the solver's proposals of a trial nobody flagged)
@@ -82,3 +89,30 @@ def test_apply_without_a_named_cause_changes_nothing(walk_processed, make_app, t
         app.jobs.apply_diagnosis()
     assert "Not applied" in app.panel.job_status.content and "read-only" in app.panel.job_status.content
     assert not app.jobs.running
+
+
+def test_apply_saves_a_correction_once(walk_processed, make_app, tmp_path) -> None:
+    """A second press while the first one's run goes on, a press with pending proposals the
+    Reprocess would only warn about, and a press for a correction already saved save
+    nothing (every later processing would apply a duplicate twice)."""
+    subject0, out0 = walk_processed
+    subject = shutil.copytree(subject0, tmp_path / "walk")
+    out = shutil.copytree(out0, tmp_path / "out")
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    report = {"extension": {"cause": "body_mass", "trial": None, "mass_change_kg": 3.0}}
+    (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
+    assert app.jobs.apply_diagnosis() == report["extension"]
+    assert app.jobs.apply_diagnosis() is None and "not saved" in app.panel.job_status.content  # the run goes on
+    assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    assert len(read_extensions(subject)) == 1
+    (out / "walk" / "diagnosis.json").write_text(json.dumps(report))  # the Reprocess replaced the trial's folder
+    assert app.jobs.apply_diagnosis() is None  # already saved: reprocessed with it, not saved again
+    assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    assert len(read_extensions(subject)) == 1
+    # flags with pending proposals: the Reprocess would only warn, so nothing is saved
+    app.select(100, 109)
+    app.selection_edit("Flag")
+    report = {"extension": {"cause": "body_mass", "trial": None, "mass_change_kg": 1.0}}
+    (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
+    assert app.jobs.apply_diagnosis() is None and "still pending" in app.panel.job_status.content
+    assert len(read_extensions(subject)) == 1

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from addb_viewer.app.reprocess import dynamics_trials, other_mass_trials
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA, writable_copy
 
 pytestmark = pytest.mark.slow
 
@@ -90,3 +90,28 @@ def test_a_trial_left_with_the_old_mass_is_named(tmp_path: Path, make_app) -> No
     table = app.panel.comparison.content
     assert "Rewritten too" not in table, table
     assert "The fitted body mass is now" in table and f"DJ1 ({old:.2f} kg)" in table, table
+
+
+def test_the_trial_shown_is_reloaded_when_another_is_reprocessed(tmp_path: Path, make_app) -> None:
+    """Reprocess walking1 (its flags) while DJ1 is on screen: DJ1 is rewritten by the same run
+    (the masses are fitted over both), so the page reloads it (it kept the old numbers)."""
+    from addb_viewer.app.paths import ReviewPaths
+    from solver.pipeline import process_subject
+    from solver.results import load_processed
+
+    subject = writable_copy(OPENCAP, tmp_path / "opencap")
+    out = tmp_path / "out"
+    process_subject(subject, out)
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    app.load_trial("walking1")
+    app.select(20, 59)
+    app.selection_edit("Flag")
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())
+    app.load_trial("DJ1", frame=120)
+    old = app.trial.mass_kg
+    app.jobs.reprocess("walking1")
+    assert app.jobs.finished.wait(600) and app.jobs.last_result.status == "done", app.jobs.last_result
+    disk = load_processed(out, "DJ1")
+    assert abs(disk.mass_kg - old) > 0.05  # DJ1 was rewritten with the new mass ...
+    assert app.trial.trial == "DJ1" and app.trial.mass_kg == disk.mass_kg  # ... and the page shows it
+    assert app.playback.frame == 120 and "reloaded" in app.panel.job_status.content, app.panel.job_status.content

@@ -106,7 +106,7 @@ def _cursor_column(page, chart) -> int:
     img = iio.imread(page.screenshot(clip=box)).astype(int)[..., :3]
     dark = (img.max(axis=2) < 90).sum(axis=0)
     assert dark.max() > 0.3 * img.shape[0], (box, int(dark.max()))  # a line over most of the height
-    return int(round(box["x"])) + int(np.argmax(dark))
+    return round(box["x"]) + int(np.argmax(dark))
 
 
 def _close_webgl_notice(page) -> None:

@@ -9,6 +9,8 @@ frame (``labA/broken``), processed once by ``addb process`` and copied for each 
 * a failed subject opened from the queue empties the previous trial's controls and says its
   error in full (the table cuts it at 80 characters, losing the file and line);
 * a trial picked in the Playback folder's Trial list becomes the queue's current row;
+* Undo whose last edit is on another trial than the one shown undoes nothing and names that
+  trial (it removed frames the reviewer could not see, saying only "saved: undo");
 * rejected proposals of a trial with no flag, not marked reviewed, are said to be still left
   out of the fit (the solver keeps its own choice until then)."""
 
@@ -130,3 +132,19 @@ def test_rejections_alone_are_said_to_leave_the_solver_its_choice(dataset: Path,
     assert f"{n} rejected proposed frames are still left out of the fit" in app.panel.proposal_info.content
     app.edit("reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
     assert "still left out" not in app.panel.proposal_info.content
+
+
+def test_undo_of_an_edit_on_another_trial_names_it(dataset: Path, make_app) -> None:
+    app, _ = _bench(dataset, make_app)
+    app.load_trial("static")
+    app.select(10, 19)
+    app.selection_edit("Flag")
+    assert "on static" in app.panel.saved.content  # the saved line names the trial
+    app.load_trial("walk")
+    app.history("Undo")
+    assert "not undone" in app.panel.saved.content and "trial static" in app.panel.saved.content
+    static = app.store.mask("static", 10_000)
+    assert static[10:20].all()  # still flagged
+    app.load_trial("static")
+    app.history("Undo")
+    assert not app.store.mask("static", 10_000)[10:20].any()
