@@ -799,8 +799,10 @@ class ReviewApp:
             self.panel.proposal_info.content = "Flags unavailable."
             return
         n_prop = int(v.proposed.sum())
+        no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
         text = (
-            f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right). "
+            f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right"
+            + (f", {no_foot} without a foot" if no_foot else "") + "). "
             f"Automatic proposals: {n_prop} frames"
         )
         if n_prop:

@@ -3,7 +3,9 @@ beside the 3D view, with the playhead and the selected range.
 
 Tracks, top to bottom (:data:`TRACKS`): the reviewer's unmeasured-force flags per foot
 (left, right; "both" and "no foot said" count for each), the solver's proposals (pending,
-accepted, rejected), frames with measured force per foot (vertical ground reaction force
+accepted, rejected), the frames the last fit left out as without measured force (whatever
+chose them: the solver's proposals, the reviewer's flags, a saved ``unmeasured_force``
+correction), frames with measured force per foot (vertical ground reaction force
 applied to that foot above 20 N on a frame the dynamics fit trusts), foot contact from
 the kinematics per foot (the foot's lowest body origin at stance level and nearly still relative to the ground
 under it: :func:`kinematic_contact`), and the
@@ -38,6 +40,7 @@ TRACKS: dict[str, tuple[int, int, int]] = {
     "flag left": (40, 110, 255),
     "flag right": (240, 60, 60),
     "proposal": (255, 150, 0),
+    "left out": (90, 90, 90),
     "force left": (120, 160, 235),
     "force right": (235, 140, 140),
     "contact left": (70, 70, 160),
@@ -126,6 +129,7 @@ def track_data(trial: ProcessedTrial, view: FlagView | None, hicks: BoolArray | 
         state[view.agreed] = 2
         state[view.rejected] = 3
     masks["proposal"] = state > 0
+    masks["left out"] = np.asarray(trial.unobserved, bool) if trial.has_dynamics else none
     feet = plate_feet(trial)
     measured = ~np.asarray(trial.unobserved, bool) if trial.has_dynamics else np.ones(n, bool)
     for foot in ("left", "right"):

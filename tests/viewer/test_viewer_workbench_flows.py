@@ -100,6 +100,10 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     assert after.unobserved[100:130].all() and not before.unobserved[100:130].all()  # processed again
     assert app.trial.trial == "walk" and np.array_equal(app.trial.unobserved, after.unobserved)
     assert "reloaded" in app.panel.job_status.content, app.panel.job_status.content
+    # the timeline's "left out" track shows the flagged frames the fit left out (not proposals)
+    assert app.tracks.masks["left out"][100:130].all() and not app.tracks.masks["proposal"][100:130].any()
+    assert np.array_equal(app.tracks.masks["left out"], after.unobserved)
+    assert "without a foot" in app.panel.proposal_info.content  # the accepted proposals
 
 
 def test_a_failed_subject_empties_the_trial_controls_and_says_its_error(dataset: Path, make_app) -> None:
