@@ -131,6 +131,11 @@ class Workbench:
             # the controls first: on a narrow window the table wraps and scrolls below them
             self.choice = gui.add_dropdown("Open", ("(none)",), initial_value="(none)")
             self.next_button = gui.add_button("Next trial to review", hint=f"hotkey {NEXT_HOTKEY}")
+            self.again_button = gui.add_button(
+                "Process changed subjects",
+                hint="run the background processing again: subjects whose inputs or review changed "
+                "(a failed subject after its files were mended) are processed, the others skipped",
+            )
             self.run_status = gui.add_markdown("")
             self.table = gui.add_markdown("Reading the dataset…")
         self.panel.float(x=QUEUE_GAP_PX, y=QUEUE_GAP_PX, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
@@ -140,10 +145,12 @@ class Workbench:
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))
         self.next_button.on_click(guard("Next trial to review", lambda e: self.open_next()))
+        self.again_button.on_click(guard("Process changed subjects", lambda e: self.process_again()))
         self.command.on_trigger(guard("Next trial to review", lambda e: self.open_next()))
         app.workbench = self
         self.refresh()
         n = (os.cpu_count() or 2) - 1 if workers is None else workers
+        self.workers = max(n, 0)
         if n > 0:
             threading.Thread(target=self._process, args=(max(n, 1),), name="addb-dataset", daemon=True).start()
         else:
@@ -244,6 +251,24 @@ class Workbench:
             self.open(*self.labels[label])
 
     # ------------------------------------------------------------------ background processing
+    def process_again(self) -> bool:
+        """Run the background processing again (the "Process changed subjects" button): the
+        dataset runner processes the subjects whose inputs or review changed since their
+        output (a failed subject whose files were mended, a review edited here) and skips
+        the others. Returns whether a run started; not while one runs, nor with no workers
+        (``--workers 0``: the page says so)."""
+        if self.workers <= 0:
+            self.run_status.content = "This server processes nothing in the background (`--workers 0`)."
+            return False
+        with self._lock:
+            if not self.processing_done.is_set():
+                self.run_status.content = "Background processing is running already."
+                return False
+            self.processing_done.clear()
+        self.run_status.content = "Background processing: starting…"
+        threading.Thread(target=self._process, args=(self.workers,), name="addb-dataset", daemon=True).start()
+        return True
+
     def _process(self, workers: int) -> None:
         from addb_viewer.review_masks import review_digest, subject_masks
         from solver.dataset.runner import DatasetOptions, process_dataset

@@ -9,6 +9,8 @@ frame (``labA/broken``), processed once by ``addb process`` and copied for each 
 * a failed subject opened from the queue empties the previous trial's controls and says its
   error in full (the table cuts it at 80 characters, losing the file and line);
 * a trial picked in the Playback folder's Trial list becomes the queue's current row;
+* "Process changed subjects" processes a failed subject again once its file is mended (the
+  background run at the start skips a subject that failed on the same inputs);
 * Undo whose last edit is on another trial than the one shown undoes nothing and names that
   trial (it removed frames the reviewer could not see, saying only "saved: undo");
 * rejected proposals of a trial with no flag, not marked reviewed, are said to be still left
@@ -152,3 +154,23 @@ def test_undo_of_an_edit_on_another_trial_names_it(dataset: Path, make_app) -> N
     app.load_trial("static")
     app.history("Undo")
     assert not app.store.mask("static", 10_000)[10:20].any()
+
+
+def test_a_mended_subject_is_processed_again_from_the_page(dataset: Path, make_app) -> None:
+    from addb_viewer.app.queue import FAILED, PROCESSED
+
+    app, bench = _bench(dataset, make_app, workers=1)
+    assert bench.processing_done.wait(600), bench.run_status.content
+
+    def state() -> str:
+        return next(r.processing for r in bench.refresh() if r.subject.rel == "labA/broken" and r.trial in (None, "walk"))
+
+    assert state() == FAILED  # the same inputs failed before: not run again
+    shutil.copy(SHARED_DATA / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "markers.trc",
+                dataset / "labA" / "broken" / "trials" / "walk" / "markers.trc")  # fmt: skip
+    assert bench.process_again()
+    assert not bench.process_again() and "running already" in bench.run_status.content
+    assert bench.processing_done.wait(600), bench.run_status.content
+    assert state() == PROCESSED, bench.run_status.content
+    bench.workers = 0
+    assert not bench.process_again() and "--workers 0" in bench.run_status.content
