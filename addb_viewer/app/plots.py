@@ -276,7 +276,7 @@ def residual_lines(trial: ProcessedTrial) -> list[Line]:
 
 
 #: Height of each chart, px (four charts and the timeline fit beside the 3D view at 1000 px).
-CHART_HEIGHT = 96
+CHART_HEIGHT = 90
 #: The joint torque shown first (when the model has it).
 DEFAULT_TORQUE = "knee_angle_r"
 

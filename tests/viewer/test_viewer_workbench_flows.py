@@ -159,7 +159,7 @@ def test_undo_of_an_edit_on_another_trial_names_it(dataset: Path, make_app) -> N
 def test_a_mended_subject_is_processed_again_from_the_page(dataset: Path, make_app) -> None:
     from addb_viewer.app.queue import FAILED, PROCESSED
 
-    app, bench = _bench(dataset, make_app, workers=1)
+    _, bench = _bench(dataset, make_app, workers=1)
     assert bench.processing_done.wait(600), bench.run_status.content
 
     def state() -> str:
