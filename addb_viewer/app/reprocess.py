@@ -59,6 +59,7 @@ class ReprocessHost(Protocol):
     def load_trial(self, name: str, *, frame: int = 0) -> None:
         """Load ``OUT/<name>`` and show it from ``frame``."""
         ...
+
     def reload_shown(self, why: str) -> None:
         """Load the shown trial again from the output folder at the frame shown; say ``why``."""
         ...
@@ -179,6 +180,9 @@ class Reprocessor:
             )
             return
         self._warned = None
+        if self.running:  # before the reports of the running one's trials are read again
+            self._say("A solver run is already in progress; cancel it first.")
+            return
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
         # flags change the dynamics only: the child reuses the kinematics cached by the last
         # full run (a full run when that cache is missing or stale, e.g. after an extension);
