@@ -281,8 +281,9 @@ class ReviewApp:
 
     def reload_shown(self, why: str) -> None:
         """Load the shown trial again from the output folder, at the frame shown (its output
-        was rewritten by a run other than this page's Reprocess: the dataset's background
-        run), and say ``why`` in the solver-run line. No-op when no trial is shown."""
+        was rewritten by another run: the dataset's background run, or a Reprocess of
+        another trial of the subject, which rewrites every trial with dynamics), and say
+        ``why`` in the solver-run line. No-op when no trial is shown."""
         with self._lock:
             if self.trial is None:
                 return
