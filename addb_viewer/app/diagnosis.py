@@ -130,6 +130,13 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
     return "\n\n".join(blocks)
 
 
+def _listed(lines: Any) -> str:
+    """Text lines of the CLI's report as a markdown list that wraps in the narrow panel (a
+    code block kept their columns but ran 700-1,800 px wide in a 262 px box, the numbers
+    off to the right): runs of spaces collapsed, underscores escaped."""
+    return "\n".join("- " + " ".join(str(line).split()).replace("_", "\\_") for line in lines)
+
+
 def _report_blocks(report: dict[str, Any]) -> list[str]:
     chosen = report.get("chosen")
     blocks = [f"**Chosen cause: `{chosen}`**" if chosen else "**No cause stands out.**", str(report.get("reason", ""))]
@@ -143,11 +150,11 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
     candidates = report.get("candidates") or []
     if candidates:
         blocks.append("Candidates (held-out evidence):")
-        blocks.append("```\n" + "\n".join(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]) + "\n```")
+        blocks.append(_listed(candidate_line(c) for c in candidates[:SHOWN_CANDIDATES]))
     others = report.get("also_standing_out") or []
     if others:
         blocks.append(STANDING_OUT_HEADING)
-        blocks.append("```\n" + "\n".join(standing_out_line(e) for e in others) + "\n```")
+        blocks.append(_listed(standing_out_line(e) for e in others))
     if chosen:
         held = report.get("held_out") or {}
         rows = [
@@ -159,7 +166,7 @@ def _report_blocks(report: dict[str, Any]) -> list[str]:
             before, after = held_out_labels(held)
             rows += [metric_row(before, held.get("before")), metric_row(after, held.get("after"))]
         blocks.append("Before and after the extension:")
-        blocks.append("```\n" + "\n".join(r.strip() for r in rows) + "\n```")
+        blocks.append(_listed(rows))
         if held.get("note"):
             blocks.append(f"Held-out figures: {held['note']}.")
     return blocks

@@ -44,6 +44,8 @@ QUEUE_GAP_PX = 10
 QUEUE_MIN_WIDTH_PX = 120
 #: A queue window narrower than this shows the compact table (:func:`queue_markdown`), px.
 COMPACT_BELOW_PX = 520
+#: What "Next trial to review" says when no trial needs review.
+ALL_REVIEWED = "Every processed trial is reviewed."
 #: Rows shown in the queue table (the dropdown lists them all).
 TABLE_ROWS = 25
 #: Seconds between two readings of the queue from disk.
@@ -187,6 +189,7 @@ class Workbench:
                 self.current = (self.current[0], shown.trial)
             rows = build_queue(self.subjects, dict(self.running))
             self.rows = rows
+            self._forget_all_reviewed(rows)
             self.labels = {row_label(r): (r.subject.rel, r.trial) for r in rows}
             self._draw_table()
             options = ("(none)", *self.labels)
@@ -241,10 +244,16 @@ class Workbench:
         """Open the next trial that needs review (after the one shown); None when none."""
         row = next_to_review(self.refresh(), after=self.current, order=self._order)
         if row is None:
-            self.run_status.content = "Every processed trial is reviewed."
+            self.run_status.content = ALL_REVIEWED
             return None
         self.open(row.subject.rel, row.trial)
         return row
+
+    def _forget_all_reviewed(self, rows: list[QueueRow]) -> None:
+        """Take back "Every processed trial is reviewed." once the queue has a trial to review
+        again (a trial unticked, a subject processed since)."""
+        if self.run_status.content == ALL_REVIEWED and next_to_review(rows, after=None) is not None:
+            self.run_status.content = ""
 
     def _chosen(self, label: str) -> None:
         if label in self.labels and self.labels[label] != self.current:

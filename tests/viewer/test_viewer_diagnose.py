@@ -43,6 +43,9 @@ def test_diagnose_button_writes_and_shows_the_report_and_apply_reprocesses(walk_
     # the panel states the report's verdict and its reason (not one of either)
     verdict = f"**Chosen cause: `{report['chosen']}`**" if report["chosen"] else "**No cause stands out.**"
     assert verdict in shown and report["reason"] and report["reason"] in shown, shown
+    # the candidates are a list that wraps in the panel (a code block ran far off its right edge)
+    first = report["candidates"][0]["cause"].replace("_", "\\_")
+    assert f"- {first} score" in shown and "```" not in shown, shown
     # processed with the default fit, judged on the alternation: the page says its figures differ
     judged = report["settings"]["judged_fit"]
     assert judged["rebuilt"] and f"Judged on the `{judged['fit']}` dynamics fit" in shown, shown

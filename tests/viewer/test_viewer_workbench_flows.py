@@ -13,6 +13,7 @@ frame (``labA/broken``), processed once by ``addb process`` and copied for each 
   background run at the start skips a subject that failed on the same inputs);
 * Undo whose last edit is on another trial than the one shown undoes nothing and names that
   trial (it removed frames the reviewer could not see, saying only "saved: undo");
+* "Every processed trial is reviewed." goes once a trial needs review again;
 * rejected proposals of a trial with no flag, not marked reviewed, are said to be still left
   out of the fit (the solver keeps its own choice until then)."""
 
@@ -174,3 +175,16 @@ def test_a_mended_subject_is_processed_again_from_the_page(dataset: Path, make_a
     assert state() == PROCESSED, bench.run_status.content
     bench.workers = 0
     assert not bench.process_again() and "--workers 0" in bench.run_status.content
+
+
+def test_all_reviewed_is_taken_back_when_a_trial_needs_review_again(dataset: Path, make_app) -> None:
+    from addb_viewer.app.workbench import ALL_REVIEWED
+
+    app, bench = _bench(dataset, make_app)
+    for trial in ("walk", "static"):
+        app.load_trial(trial)
+        app.edit("reviewed", lambda ed, _k, _f: ed.set_reviewed(True))
+    assert bench.open_next() is None and bench.run_status.content == ALL_REVIEWED
+    app.edit("not reviewed", lambda ed, _k, _f: ed.set_reviewed(False))  # static again
+    bench.refresh()
+    assert bench.run_status.content == ""
