@@ -586,6 +586,8 @@ class ReviewApp:
             f = float(np.linalg.norm(t.residual_force[k]))
             m = float(np.linalg.norm(t.residual_moment[k]))
             over = " · **over a Hicks limit at this frame**" if self.hicks is not None and self.hicks[k] else ""
+            if t.unobserved[k]:  # its residual is the force no plate measured, not judged by Hicks
+                over = " · left out of the fit (no measured force)"
             parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")

@@ -107,6 +107,8 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     assert app.tracks.masks["left out"][100:130].all() and not app.tracks.masks["proposal"][100:130].any()
     assert np.array_equal(app.tracks.masks["left out"], after.unobserved)
     assert "without a foot" in app.panel.proposal_info.content  # the accepted proposals
+    app.seek(110)  # a flagged frame the fit left out: the status line says so
+    assert "left out of the fit" in app.panel.status.content, app.panel.status.content
 
 
 def test_a_failed_subject_empties_the_trial_controls_and_says_its_error(dataset: Path, make_app) -> None:
