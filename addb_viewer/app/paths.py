@@ -126,9 +126,8 @@ class ReviewPaths:
         return confine(self.out_dir, safe_name(trial, what="trial name"))
 
     def recording_file(self, file_name: str, *, suffix: str = ".rrd") -> Path:
-        """A recording file inside :attr:`recordings_dir` (``suffix`` added if missing, in
-        any case: ``walk.RRD`` is ``walk.RRD``, not ``walk.RRD.rrd``)."""
+        """A recording file inside :attr:`recordings_dir` (``suffix`` added if missing)."""
         name = safe_name(file_name.strip(), what="recording file name")
-        if not name.lower().endswith(suffix.lower()):
+        if not name.endswith(suffix):
             name += suffix
         return confine(self.recordings_dir, name)

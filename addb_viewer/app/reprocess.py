@@ -406,8 +406,11 @@ class Reprocessor:
                 f"(addb_viewer.recording.rerun_writer: {exc})."
             )
             return
+        name = file_name.strip()
+        if name.lower().endswith(".rrd"):  # walk.RRD is walk.rrd, not walk.RRD.rrd
+            name = name[: -len(".rrd")] + ".rrd"
         try:
-            path = app.paths.recording_file(file_name)  # refuses names leaving the folder
+            path = app.paths.recording_file(name)  # refuses names leaving the folder
         except AddbError as exc:  # beside the button (the last success message would stay there)
             status.content = f"<span style='color:#c00'>**Not recorded**</span>: {html.escape(str(exc), quote=False)}"
             raise

@@ -187,6 +187,10 @@ def test_record_to_rerun(demo_paths, make_app) -> None:
     wait_for(lambda: "✓ wrote" in status.content or "failed" in status.content, timeout=120, what="recording")
     assert "✓ wrote" in status.content, status.content
     assert not app.panel.error.visible  # the refusal's error went with the recording made since
+    app.jobs.record("Case.RRD")  # its suffix in any case: not Case.RRD.rrd
+    wait_for(lambda: "Case" in status.content and ("✓ wrote" in status.content or "failed" in status.content),
+             timeout=120, what="recording")  # fmt: skip
+    assert (demo_paths.recordings_dir / "Case.rrd").is_file(), status.content
     rec = Recording(demo_paths.recordings_dir / "my walk.rrd")
     trial = load_processed(demo_paths.out_dir, "walk")
     np.testing.assert_array_equal(per_frame_points(rec, "/world/markers/observed", trial), trial.observed.astype(np.float32))
