@@ -201,9 +201,9 @@ def test_review_panel_lists_the_markers_standing_out(walk: tuple[Path, dict]) ->
     assert len(others) >= 3  # the shoulders, the elbows, the clavicles...
     assert all(e["cause"] == "marker_offset" for e in others)
     text = diagnosis_markdown(subject / "addb_out", subject, "walk")
-    block = text.split("Other markers that stand out", 1)[1].split("```")[1]
-    listed = [line for line in block.splitlines() if line.strip()]
-    assert len(listed) == len(others)
+    block = text.split("Other markers that stand out", 1)[1].split("\n\n")[1]  # the list after the heading
+    listed = [line.replace("\\_", "_") for line in block.splitlines() if line.startswith("- ")]
+    assert len(listed) == len(others), block
     for line, e in zip(listed, others):
         assert f"marker {e['parameters']['marker']} on {e['parameters']['body']}" in line
 
