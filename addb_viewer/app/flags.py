@@ -126,13 +126,19 @@ def build_view(review: TrialReview, proposed: BoolArray) -> FlagView:
     )
 
 
+def flags_replace_proposals(view: FlagView) -> bool:
+    """Whether the reviewer's flags replace the solver's own proposals in the next solver
+    run: once the trial has any flag (past its end too) or is marked reviewed
+    (:mod:`addb_viewer.review_masks`)."""
+    return bool(view.flagged.any()) or view.reviewed or view.beyond > 0
+
+
 def pending_replaced(view: FlagView) -> int:
     """Pending proposals that the next solver run fits as measured frames: once a trial has
     any flag or is marked reviewed, the reviewer's flags replace the solver's own proposals
     (:mod:`addb_viewer.review_masks`), so a proposal neither accepted nor rejected is then a
     measured frame; 0 while the trial has neither (the solver keeps its proposals)."""
-    selected = bool(view.flagged.any()) or view.reviewed or view.beyond > 0
-    return int(view.pending.sum()) if selected else 0
+    return int(view.pending.sum()) if flags_replace_proposals(view) else 0
 
 
 def rejections_ignored(view: FlagView) -> int:
@@ -140,8 +146,7 @@ def rejections_ignored(view: FlagView) -> int:
     and is not marked reviewed, the solver keeps its own proposals
     (:mod:`addb_viewer.review_masks`), rejected ones included; 0 once it has either (then
     :func:`pending_replaced` applies)."""
-    selected = bool(view.flagged.any()) or view.reviewed or view.beyond > 0
-    return 0 if selected else int(view.rejected.sum())
+    return 0 if flags_replace_proposals(view) else int(view.rejected.sum())
 
 
 def toggled_foot(current: str | None, foot: str) -> str | None:

@@ -76,20 +76,26 @@ class ReprocessHost(Protocol):
         ...
 
 
+def _recorded_masses(out_dir: str | Path) -> dict[str, Any]:
+    """Trial name -> the ``mass_kg`` of its ``results.json``, for the output's trials whose
+    results record one (the trials with dynamics), in name order; unreadable files left out."""
+    masses = {}
+    for path in sorted(Path(out_dir).glob("*/results.json")):
+        try:
+            results = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(results, dict) and "mass_kg" in results:
+            masses[path.parent.name] = results["mass_kg"]
+    return masses
+
+
 def dynamics_trials(subject_dir: str | Path, out_dir: str | Path) -> list[str]:
     """The output's trials with dynamics (a ``mass_kg`` in their ``results.json``) that are
     still trials of the subject (a folder ``SUBJECT/trials/<name>``), sorted: those a
     Reprocess rewrites, since the dynamics stage fits the body mass and the segment masses
     over all of them and writes one scaled model for all (:mod:`addb_viewer.app.reprocess`)."""
-    out = []
-    for path in sorted(Path(out_dir).glob("*/results.json")):
-        try:
-            has_mass = "mass_kg" in json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError, TypeError):
-            continue
-        if has_mass and (Path(subject_dir) / "trials" / path.parent.name).is_dir():
-            out.append(path.parent.name)
-    return out
+    return [name for name in _recorded_masses(out_dir) if (Path(subject_dir) / "trials" / name).is_dir()]
 
 
 def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[tuple[str, float]]:
@@ -98,17 +104,11 @@ def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[t
     ``(name, mass)``. A Reprocess rewrites every trial with dynamics (:func:`dynamics_trials`),
     so this is empty after one, unless a trial's folder is left in the output while the
     subject no longer has that trial."""
-    out = []
-    for path in sorted(Path(out_dir).glob("*/results.json")):
-        if path.parent.name == trial:
-            continue
-        try:
-            mass = json.loads(path.read_text(encoding="utf-8")).get("mass_kg")
-        except (OSError, ValueError):
-            continue
-        if isinstance(mass, (int, float)) and round(float(mass), 2) != round(float(mass_kg), 2):
-            out.append((path.parent.name, float(mass)))
-    return out
+    return [
+        (name, float(mass))
+        for name, mass in _recorded_masses(out_dir).items()
+        if name != trial and isinstance(mass, int | float) and round(float(mass), 2) != round(float(mass_kg), 2)
+    ]
 
 
 def already_saved(subject_dir: str | Path, entry: dict) -> bool:

@@ -268,8 +268,7 @@ class ReviewApp:
             p.reviewed.disabled = True
         p.timeline.content = ""
         p.proposal_info.content = "No trial shown."
-        p.range_info.content = "Range: no in/out points (press I / O)"
-        p.selection_info.content = "Drag the ends of Selection to choose frames."
+        self._show_range_info()  # no playback: the no-range lines
         p.diagnosis.content = ""
 
     def _trial_picked(self, name: str) -> None:
