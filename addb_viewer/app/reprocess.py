@@ -98,6 +98,12 @@ def dynamics_trials(subject_dir: str | Path, out_dir: str | Path) -> list[str]:
     return [name for name in _recorded_masses(out_dir) if (Path(subject_dir) / "trials" / name).is_dir()]
 
 
+def written_trials(subject_dir: str | Path, out_dir: str | Path, trial: str) -> tuple[str, ...]:
+    """The trials a Reprocess of ``trial`` writes: ``trial`` first, then every other trial
+    with dynamics (:func:`dynamics_trials`)."""
+    return (trial, *[t for t in dynamics_trials(subject_dir, out_dir) if t != trial])
+
+
 def other_mass_trials(out_dir: str | Path, trial: str, mass_kg: float) -> list[tuple[str, float]]:
     """The output's trials other than ``trial`` whose dynamics were made with another body
     mass than ``mass_kg`` (their ``results.json`` ``mass_kg``, rounded to 0.01 kg), as
@@ -187,9 +193,9 @@ class Reprocessor:
         # flags change the dynamics only: the child reuses the kinematics cached by the last
         # full run (a full run when that cache is missing or stale, e.g. after an extension);
         # every trial with dynamics is rewritten, since the masses are fitted over all of them
-        others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != name]
-        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, (name, *others), self._masks(), dynamics_only=True)
-        self._kept = kept_reports(app.paths.out_dir, (name, *others))  # the solver rewrites those folders without them
+        trials = written_trials(app.paths.subject_dir, app.paths.out_dir, name)
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, trials, self._masks(), dynamics_only=True)
+        self._kept = kept_reports(app.paths.out_dir, trials)  # the solver rewrites those folders without them
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
     def diagnose(self, trial: str | None = None) -> None:
@@ -360,7 +366,7 @@ class Reprocessor:
         app.load_trial(trial, frame=frame)
         after = trial_summary(app.trial)
         app.panel.comparison.content = f"**Reprocess result: {trial}**\n\n" + comparison_markdown(before or {}, after)
-        others = [t for t in dynamics_trials(app.paths.subject_dir, app.paths.out_dir) if t != trial]
+        others = written_trials(app.paths.subject_dir, app.paths.out_dir, trial)[1:]
         if others:
             app.panel.comparison.content += (
                 f"\n\nRewritten too, with the masses refitted over every trial with force plates: {', '.join(others)}."

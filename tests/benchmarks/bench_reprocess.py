@@ -55,7 +55,7 @@ from bench_kinematics import (  # this folder; the reference needs ``pip install
 )
 
 from addb_viewer.app.jobs import JobSpec, SolverJob, prestart_solver, wait_for_spare
-from addb_viewer.app.reprocess import dynamics_trials
+from addb_viewer.app.reprocess import written_trials
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from solver.pipeline import FIT_CHOICES, options_for_fit, process_subject, reprocess_dynamics
 from solver.results import load_processed
@@ -94,8 +94,7 @@ def _job_to_table(subject: Path, out: Path, trial: str, flags: dict[str, np.ndar
         prestart_solver()
         assert wait_for_spare(120), "the warm solver child did not start"
     t0 = time.perf_counter()
-    trials = (trial, *[t for t in dynamics_trials(subject, out) if t != trial])  # as Reprocessor.reprocess
-    job = SolverJob(JobSpec(subject, out, trials, flags, dynamics_only=dynamics_only), work,
+    job = SolverJob(JobSpec(subject, out, written_trials(subject, out, trial), flags, dynamics_only=dynamics_only), work,
                     on_progress=lambda m, f: None, on_done=lambda r: None)  # fmt: skip
     job.start()
     result = job.wait(600)
