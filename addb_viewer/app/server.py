@@ -28,14 +28,7 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.app.access import TOKEN_PARAM, is_loopback, new_token, start_viser
-from addb_viewer.app.camera import (
-    DEFAULT_CANVAS,
-    CameraPose,
-    Canvas,
-    followed,
-    framed_view,
-    view_pose,
-)
+from addb_viewer.app.camera import CameraPose
 from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import (
     FlagView,
@@ -45,6 +38,7 @@ from addb_viewer.app.flags import (
     rejections_ignored,
 )
 from addb_viewer.app.meshes import body_mesh
+from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
@@ -136,12 +130,7 @@ class ReviewApp:
         self._quiet = threading.local()
         self._actor = threading.local()  # the page (viser client id) whose handler runs
         self.client_names: dict[int, str] = {}
-        #: Pixels at the top of the canvas covered by a floating window (the dataset queue's).
-        self.canvas_top_px = 0.0
-        self.camera_name = "Sagittal"  # the view the camera was last put in
-        self._framed_for: dict[int, tuple[float, float]] = {}  # client id -> canvas size framed for
-        self._pages_following: set[int] = set()  # pages whose canvas cannot hold the whole trial
-        self._follow_offset: dict[int, np.ndarray] = {}  # client id -> look point minus pelvis
+        self.cameras = PageCameras(self.server)
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
@@ -450,95 +439,24 @@ class ReviewApp:
         self._show_flags_info()
         self._show_range_info()
 
-    def _canvas(self, client: Any | None) -> Canvas:
-        """The 3D canvas of page ``client`` as it last reported it (:data:`DEFAULT_CANVAS`
-        for new pages, and pages that have not reported a size), with the dataset queue's
-        window kept free at its top."""
-        w = h = 0
-        fov = DEFAULT_CANVAS.fov
-        if client is not None:
-            try:
-                w, h, fov = client.camera.image_width, client.camera.image_height, client.camera.fov
-            except AssertionError:  # no camera message from the page yet
-                w = h = 0
-        if w <= 0 or h <= 0:
-            w, h, fov = DEFAULT_CANVAS.width, DEFAULT_CANVAS.height, DEFAULT_CANVAS.fov
-        return Canvas(float(w), float(h), float(fov), float(self.canvas_top_px))
+    def _shown_bodies(self) -> tuple[np.ndarray | None, int]:
+        """The shown trial's body origins ``(T, B, 3)`` (None when no trial is shown) and
+        the frame shown, as :class:`PageCameras` takes them."""
+        t, pb = self.trial, self.playback
+        return (t.body_position if t is not None else None), (pb.frame if pb is not None else 0)
 
     def camera_view(self, view: str) -> CameraPose:
         """Put every page's camera (and new pages') in ``view`` (Sagittal, Frontal, Top),
-        framing the shown trial for each page's own canvas (:func:`framed_view`: the whole
-        trial when it fits, else the current frame, and that page then follows the pelvis
-        whatever "Follow pelvis" says). Returns the pose of new pages."""
-        self.camera_name = view
-        t, pb = self.trial, self.playback
-        if t is None:
-            pose = view_pose(view, np.array([0.0, 1.0, 0.0]))
-            self._apply_pose(None, pose)
-            return pose
-        k = pb.frame if pb is not None else 0
-        pose, _ = framed_view(view, t.body_position, self._canvas(None), k)
-        self._apply_pose(None, pose)
-        for client in self.server.get_clients().values():
-            self._frame_page(client, view)
-        return pose
-
-    def _frame_page(self, client: Any, view: str) -> None:
-        """Frame the shown trial in ``view`` on one page; when the trial does not fit its
-        canvas the page follows the pelvis instead (until a framing fits again)."""
-        t, pb = self.trial, self.playback
-        if t is None:
-            return
-        canvas = self._canvas(client)
-        pose, fits = framed_view(view, t.body_position, canvas, pb.frame if pb is not None else 0)
-        self._framed_for[client.client_id] = (canvas.width, canvas.height)
-        if fits:
-            self._pages_following.discard(client.client_id)
-        else:
-            self._pages_following.add(client.client_id)
-        self._apply_pose(client, pose)
-
-    def _apply_pose(self, client: Any | None, pose: CameraPose) -> None:
-        """Set a page's camera (None: the camera of pages still to connect)."""
-        if client is None:
-            cam = self.server.initial_camera
-            cam.look_at, cam.position, cam.up = pose.look_at, pose.position, pose.up
-            return
-        with client.atomic():
-            client.camera.up_direction = pose.up
-            client.camera.position = pose.position
-            client.camera.look_at = pose.look_at
-        pelvis = self.trial.body_position[self.playback.frame, 0, :] if self.trial is not None and self.playback is not None else None
-        if pelvis is not None and np.isfinite(pelvis).all():
-            # following keeps where the framing put the pelvis on the screen
-            self._follow_offset[client.client_id] = np.asarray(pose.look_at) - pelvis
+        framing the shown trial for each page's own canvas (:meth:`PageCameras.show_view`).
+        Returns the pose of new pages."""
+        return self.cameras.show_view(view, *self._shown_bodies())
 
     def _camera_moved(self, camera: Any) -> None:
-        """A page reported its camera: when its canvas changed size since it was framed (the
-        page opened, the window or a docked panel resized), frame the trial again for it,
-        and fit the dataset queue's window to the canvas."""
-        client = camera.client
-        size = (float(camera.image_width), float(camera.image_height))
+        """A page reported its camera: frame the trial again for it if its canvas changed
+        size (:meth:`PageCameras.resized`), and fit the dataset queue's window to the canvas."""
         self._fit_queue()
         with self._lock:
-            if self.trial is None or self._framed_for.get(client.client_id) == size:
-                return
-            self._frame_page(client, self.camera_name)
-
-    def _follow_pelvis(self, k: int, pages: set[int] | None = None) -> None:
-        """Move the cameras of ``pages`` (client ids; None: every page) with the pelvis (the
-        orbit and zoom kept, and the pelvis where the framing put it on the screen)."""
-        if self.trial is None:
-            return
-        pelvis = self.trial.body_position[k, 0, :]
-        for client in self.server.get_clients().values():
-            if pages is not None and client.client_id not in pages:
-                continue
-            target = pelvis + self._follow_offset.get(client.client_id, 0.0)
-            pos, look = followed(client.camera.position, client.camera.look_at, target)
-            with client.atomic():
-                client.camera.position = tuple(pos)
-                client.camera.look_at = tuple(look)
+            self.cameras.resized(camera, *self._shown_bodies())
 
     # ================================================================== drawing
     def render(self, k: int, *, force_plots: bool = False) -> None:
@@ -548,9 +466,9 @@ class ReviewApp:
             return
         self.scene.show(k, self._banner(k))
         if self.panel.follow.value:
-            self._follow_pelvis(k)
-        elif self._pages_following:  # pages whose canvas cannot hold the whole trial
-            self._follow_pelvis(k, self._pages_following)
+            self.cameras.follow(self.trial.body_position[k, 0, :])
+        elif self.cameras.following:  # pages whose canvas cannot hold the whole trial
+            self.cameras.follow(self.trial.body_position[k, 0, :], self.cameras.following)
         with self._quiet_updates():
             self.panel.frame.value = k
             self.panel.timeline_frame.value = k
@@ -671,7 +589,6 @@ class ReviewApp:
             self.playback.pause(time.monotonic())
         self.seek(target)
 
-    # ================================================================== flags
     # ================================================================== reviewers
     def _client_connected(self, client: Any) -> None:
         """Give a new page its own "Your name" field (each edit keeps its reviewer's name).
@@ -698,9 +615,7 @@ class ReviewApp:
     def _client_disconnected(self, client: Any) -> None:
         self.client_names.pop(client.client_id, None)
         self.name_fields.pop(client.client_id, None)
-        self._framed_for.pop(client.client_id, None)
-        self._follow_offset.pop(client.client_id, None)
-        self._pages_following.discard(client.client_id)
+        self.cameras.forget(client.client_id)
         self._fit_queue()  # to the narrowest page left (viser has removed this one)
 
     def _fit_queue(self) -> None:

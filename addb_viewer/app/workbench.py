@@ -142,7 +142,7 @@ class Workbench:
             self.table = gui.add_markdown("Reading the dataset…")
         self.panel.float(x=QUEUE_GAP_PX, y=QUEUE_GAP_PX, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
         self.width = float(QUEUE_WIDTH_PX)
-        app.canvas_top_px = QUEUE_GAP_PX + QUEUE_HEIGHT_PX  # the camera frames the subject below the window
+        app.cameras.canvas_top_px = QUEUE_GAP_PX + QUEUE_HEIGHT_PX  # the camera frames the subject below the window
         self.command = gui.add_command("Next trial to review", description="open the next trial that needs review", hotkey=NEXT_HOTKEY)  # type: ignore[arg-type]
         guard = app._guard
         self.choice.on_update(guard("Open", lambda e: self._chosen(e.target.value)))

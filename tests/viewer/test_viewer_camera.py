@@ -130,7 +130,7 @@ def test_each_page_is_framed_for_its_own_canvas_and_again_when_it_changes_size(d
     bp = app.trial.body_position
 
     def framed(width: float, height: float, fov: float) -> CameraPose:
-        return framed_view("Sagittal", bp, Canvas(width, height, fov, app.canvas_top_px))[0]
+        return framed_view("Sagittal", bp, Canvas(width, height, fov, app.cameras.canvas_top_px))[0]
 
     def report(page: ProtocolClient, width: int, height: int, position: tuple[float, float, float]) -> None:
         page.send(_messages.ViewerCameraMessage(
@@ -168,7 +168,7 @@ def test_a_page_whose_canvas_cannot_hold_the_trial_follows_it_alone(demo_paths, 
     pages = [ProtocolClient(app.port), ProtocolClient(app.port)]
     try:
         clients = wait_for(lambda: len(app.server.get_clients()) == 2 and list(app.server.get_clients().values()), what="two pages")
-        wait_for(lambda: len(app._pages_following) == 2, 20, "both pages following")
+        wait_for(lambda: len(app.cameras.following) == 2, 20, "both pages following")
         assert not app.panel.follow.value
         bp = app.trial.body_position
         app.seek(50)
@@ -179,7 +179,7 @@ def test_a_page_whose_canvas_cannot_hold_the_trial_follows_it_alone(demo_paths, 
             assert np.linalg.norm(bp[180, 0] - bp[50, 0]) > 5.0  # the pelvis moved far: the camera went with it
         app.trial.body_position[:] = original
         app.camera_view("Sagittal")
-        assert not app._pages_following
+        assert not app.cameras.following
         look = {c.client_id: _pose_of(c)[1] for c in clients}
         app.seek(20)
         assert all(np.allclose(_pose_of(c)[1], look[c.client_id]) for c in clients)  # framed, not following
