@@ -42,7 +42,7 @@ from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
-from addb_viewer.app.reprocess import Reprocessor
+from addb_viewer.app.reprocess import CONFIRM_AFTER_S, Reprocessor
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
@@ -140,6 +140,8 @@ class ReviewApp:
         # (reviewer, trial) of each edit the store can undo, oldest first, and of each it can redo
         self._undo_owners: list[tuple[str, str]] = []
         self._redo_owners: list[tuple[str, str]] = []
+        self._review_warned: tuple[str, int] | None = None  # (trial, pending frames) the last "Trial reviewed" warning named
+        self._review_warned_at = 0.0  # time.monotonic() of that warning
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
         self.scene: TrialScene | None = None
@@ -688,6 +690,12 @@ class ReviewApp:
             on = f" on {e.trial}" if e.trial else ""  # the message stays when the reviewer picks another trial
             self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, edit #{e.seq}, {when}"
         self.refresh_flags()
+        pending = pending_replaced(self.view) if edits and self.view is not None else 0
+        if pending:  # the edit made (or left) the trial's flags replace the solver's proposals
+            self.panel.saved.content += (
+                f"<br><span style='color:#c00'>{pending} pending proposed frames are now fitted as measured</span> "
+                "(your flags replace the solver's choice): accept or reject them (Y / Z)."
+            )
 
     def refresh_flags(self) -> None:
         """Re-read the trial's flags from the store and redraw what shows them."""
@@ -931,9 +939,7 @@ class ReviewApp:
         p.range_flags.on_click(on("Range flags", lambda e: self.range_edit(e.target.value)))
         p.proposal_here.on_click(on("Proposal", lambda e: self._proposal(e.target.value, here=True)))
         p.proposal_all.on_click(on("Proposals", lambda e: self._proposal(e.target.value, here=False)))
-        p.reviewed.on_update(on("Reviewed", lambda e: self.edit(
-            "trial reviewed" if e.target.value else "trial not reviewed",
-            lambda ed, _k, _f: ed.set_reviewed(bool(e.target.value)))))
+        p.reviewed.on_update(on("Reviewed", lambda e: self.set_reviewed(bool(e.target.value))))
         p.history.on_click(on("Undo", lambda e: self.history(e.target.value)))
         p.reprocess.on_click(on("Reprocess", lambda e: self.jobs.reprocess()))
         p.diagnose.on_click(on("Diagnose", lambda e: self.jobs.diagnose()))
@@ -974,6 +980,36 @@ class ReviewApp:
         with self._lock:
             if self.playback is not None:
                 fn(self.playback)
+
+    def set_reviewed(self, reviewed: bool) -> None:
+        """Tick or untick "Trial reviewed" on the trial shown.
+
+        A trial marked reviewed has its reviewer's flags replace the solver's own choice of
+        unmeasured frames (:mod:`addb_viewer.review_masks`), in Reprocess and in the dataset
+        run, so a proposal neither accepted nor rejected is then fitted as a measured frame.
+        With such pending proposals the first tick therefore says so and leaves the box
+        unticked; ticked again with the same pending frames, at least
+        :data:`~addb_viewer.app.reprocess.CONFIRM_AFTER_S` later (a double click is not a
+        second thought), it marks the trial reviewed."""
+        v, t = self.view, self.trial
+        pending = int(v.pending.sum()) if reviewed and v is not None and t is not None and not v.reviewed else 0
+        if pending:
+            now, warned = time.monotonic(), self._review_warned == (t.trial, pending)
+            if not (warned and now - self._review_warned_at >= CONFIRM_AFTER_S):
+                if not warned:
+                    self._review_warned, self._review_warned_at = (t.trial, pending), now
+                with self._quiet_updates():
+                    self.panel.reviewed.value = False
+                self.panel.saved.content = (
+                    f"<span style='color:#c00'>**not marked reviewed: {pending} proposed frames of {_escape(t.trial)} "
+                    "are still pending.**</span> A trial marked reviewed has your flags replace the solver's own "
+                    "choice, so they would be fitted as measured frames (with the plates' force, often none) by "
+                    "Reprocess and the dataset run. Accept or reject them first (Y / Z, All proposals), or tick "
+                    "Trial reviewed again to mark it reviewed as it is."
+                )
+                return
+        self._review_warned = None
+        self.edit("trial reviewed" if reviewed else "trial not reviewed", lambda ed, _k, _f: ed.set_reviewed(reviewed))
 
     def toggle_flag(self) -> None:
         """Toggle the selected foot's flag on the current frame."""

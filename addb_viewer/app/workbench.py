@@ -113,6 +113,7 @@ class Workbench:
 
     def __init__(self, app: Any, dataset_dir: str | Path, out_dir: str | Path | None = None, *, workers: int | None = None) -> None:
         self.app = app
+        self._given = (dataset_dir, out_dir)  # as asked: the subject folders are read again from them
         self.dataset_dir, self.out_dir, self.subjects = dataset_subjects(dataset_dir, out_dir)
         self.by_rel = {s.rel: s for s in self.subjects}
         self.running: dict[str, str] = {}
@@ -202,6 +203,14 @@ class Workbench:
                     self.choice.value = value  # also after R or a background open: the dropdown names the trial shown
             return rows
 
+    def rediscover(self) -> None:
+        """Read the dataset's subject folders again: a subject folder added (or removed)
+        since the app started joins the queue (the background run finds it as it scans
+        the dataset)."""
+        _, _, subjects = dataset_subjects(*self._given)
+        with self._lock:
+            self.subjects, self.by_rel = subjects, {s.rel: s for s in subjects}
+
     def _poll(self) -> None:
         while not self._stop.wait(REFRESH_S):
             try:
@@ -275,6 +284,10 @@ class Workbench:
                 return False
             self.processing_done.clear()
         self.run_status.content = "Background processing: starting…"
+        try:
+            self.rediscover()  # subject folders added since
+        except Exception as exc:  # noqa: BLE001 - the run reads the dataset itself and says what fails
+            self.run_status.content = f"Background processing: starting (the queue's subject list not read again: {exc})…"
         threading.Thread(target=self._process, args=(self.workers,), name="addb-dataset", daemon=True).start()
         return True
 
@@ -283,6 +296,8 @@ class Workbench:
         from solver.dataset.runner import DatasetOptions, process_dataset
 
         def event(kind: str, data: dict[str, Any]) -> None:
+            if kind == "queued" and not set(data["rels"]) <= set(self.by_rel):
+                self.rediscover()  # the run found subject folders the queue has not listed yet
             with self._lock:
                 if kind == "queued":
                     self.running.update(dict.fromkeys(data["rels"], "queued"))
@@ -301,10 +316,16 @@ class Workbench:
             if kind == "done" and self.current is not None and self.current[0] == data["rel"]:
                 if self.app.trial is None:
                     self.open(data["rel"])  # the subject on screen was waiting for its output
-                elif data.get("status") == "ok":  # its output was rewritten (e.g. its review changed)
+                elif data.get("status") in ("ok", "kinematics_only"):  # its output was rewritten
                     self.app.reload_shown(
-                        f"{data['rel']} was processed again in the background (its review changed): "
+                        f"{data['rel']} was processed again in the background (its inputs or its review changed): "
                         "the trial shown was reloaded with the new results."
+                    )
+                elif data.get("status") == "failed":  # the page still shows the output it had before
+                    self.app.show_error(
+                        f"{data['rel']} failed when processed again in the background; the trial shown is its "
+                        "earlier output",
+                        self._failed.get(data["rel"], "see the dataset queue"),
                     )
 
         try:

@@ -76,3 +76,40 @@ def test_reprocess_warns_once_about_pending_proposals_it_would_fit_as_measured(
     assert pending_replaced(app.view) == 0 and "fitted as measured" not in app.panel.proposal_info.content
     app.jobs.reprocess()
     assert len(started) == 3 and started[-1].unmeasured_force["walk"].sum() == n_proposed + 1
+
+
+def test_trial_reviewed_warns_once_about_pending_proposals_and_flags_say_what_they_replace(
+    walk_processed: Path, tmp_path: Path, make_app
+) -> None:
+    """Ticking "Trial reviewed" makes the flags replace the solver's proposals as a flag
+    does: with pending proposals the first tick leaves the box unticked and says why, a
+    double click changes nothing, a second tick later marks the trial; a flag edit that
+    leaves pending proposals fitted as measured says so beside its "saved" line."""
+    subject = writable_copy(WALK, tmp_path / "walk")
+    out = tmp_path / "out"
+    shutil.copytree(walk_processed, out)
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    p = app.panel
+    n_proposed = int(app.view.pending.sum())
+    assert n_proposed > 0
+    app.set_reviewed(True)
+    assert not app.view.reviewed and not p.reviewed.value
+    assert f"not marked reviewed: {n_proposed} proposed frames of walk are still pending" in p.saved.content
+    app.set_reviewed(True)  # at once: a double click
+    assert not app.view.reviewed
+    app._review_warned_at -= reprocess.CONFIRM_AFTER_S  # the warning read: ticked again later
+    app.set_reviewed(True)
+    assert app.view.reviewed and p.reviewed.value and "✓ saved: trial reviewed" in p.saved.content
+    assert f"{n_proposed} pending proposed frames are now fitted as measured" in p.saved.content
+    app.set_reviewed(False)  # unticking never asks
+    assert not app.view.reviewed and "fitted as measured" not in p.saved.content
+    # a flag outside the proposals: the saved line says what it did to the pending ones
+    frame = int(np.flatnonzero(~app.view.proposed)[0])
+    app.seek(frame)
+    app.toggle_flag()
+    assert f"{n_proposed} pending proposed frames are now fitted as measured" in p.saved.content
+    # the proposals decided: ticking marks at once, without a warning
+    app.edit("accept all", lambda ed, k, foot: ed.accept())
+    assert "fitted as measured" not in p.saved.content
+    app.set_reviewed(True)
+    assert app.view.reviewed and "not marked reviewed" not in p.saved.content
