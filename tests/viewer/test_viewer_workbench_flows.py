@@ -10,7 +10,9 @@ frame (``labA/broken``), processed once by ``addb process`` and copied for each 
   error in full (the table cuts it at 80 characters, losing the file and line);
 * a trial picked in the Playback folder's Trial list becomes the queue's current row;
 * "Process changed subjects" processes a failed subject again once its file is mended (the
-  background run at the start skips a subject that failed on the same inputs);
+  background run at the start skips a subject that failed on the same inputs), lists a
+  subject folder added since the app started (it was processed but never shown), and says
+  so when the subject on screen fails (the page went on showing its earlier output silently);
 * Undo whose last edit is on another trial than the one shown undoes nothing and names that
   trial (it removed frames the reviewer could not see, saying only "saved: undo");
 * "Every processed trial is reviewed." goes once a trial needs review again;
@@ -160,7 +162,7 @@ def test_undo_of_an_edit_on_another_trial_names_it(dataset: Path, make_app) -> N
 
 
 def test_a_mended_subject_is_processed_again_from_the_page(dataset: Path, make_app) -> None:
-    from addb_viewer.app.queue import FAILED, PROCESSED
+    from addb_viewer.app.queue import FAILED, KINEMATICS_ONLY, PROCESSED
 
     _, bench = _bench(dataset, make_app, workers=1)
     assert bench.processing_done.wait(600), bench.run_status.content
@@ -171,10 +173,24 @@ def test_a_mended_subject_is_processed_again_from_the_page(dataset: Path, make_a
     assert state() == FAILED  # the same inputs failed before: not run again
     shutil.copy(SHARED_DATA / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "markers.trc",
                 dataset / "labA" / "broken" / "trials" / "walk" / "markers.trc")  # fmt: skip
+    # a subject folder added while the app runs, and the subject on screen broken on disk
+    writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", dataset / "labB" / "added")
+    trc = dataset / "labA" / "walk" / "trials" / "walk" / "markers.trc"
+    lines = trc.read_text(encoding="utf-8").splitlines(keepends=True)
+    lines[BAD_LINE - 1] = "100\t0.99000\tgarbage here\n"
+    trc.write_text("".join(lines), encoding="utf-8")
     assert bench.process_again()
     assert not bench.process_again() and "running already" in bench.run_status.content
     assert bench.processing_done.wait(600), bench.run_status.content
     assert state() == PROCESSED, bench.run_status.content
+    added = [r for r in bench.rows if r.subject.rel == "labB/added"]
+    assert {r.trial: r.processing for r in added} == {"static": KINEMATICS_ONLY, "walk": PROCESSED}, added
+    assert "labB/added / walk" in bench.labels  # Open lists it
+    # the page still shows the walk's earlier output, and says that its subject failed
+    app = bench.app
+    assert app.trial is not None and app.trial.trial == "walk" and app.panel.error.visible
+    error = app.panel.error.content
+    assert "labA/walk failed when processed again in the background" in error and f"markers.trc:{BAD_LINE}" in error, error
     bench.workers = 0
     assert not bench.process_again() and "--workers 0" in bench.run_status.content
 
