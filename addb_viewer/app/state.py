@@ -137,25 +137,34 @@ class Playback:
 
     # ------------------------------------------------------------------ in / out points
     def mark_in(self, frame: int | None = None) -> int:
-        """Set the in point (default: the current frame).
+        """Set the in point (default: the current frame): the start of the selected range.
 
         While only the out point is set, the two make a range in either order. While both
-        are set, the in point moves; past the out point it starts a new range there (the out
-        point is cleared), rather than stretching the old range to it."""
+        are set, the range's start moves there; past the range's end it starts a new range
+        there (the out point is cleared), rather than stretching the old range to it. The
+        points are kept in order (:attr:`in_point` <= :attr:`out_point`), so a range marked
+        end first (I at 140, O at 100) is the range 100-140 for the marks after it."""
         new = self.clamp(self.frame if frame is None else frame)
         if self.in_point is not None and self.out_point is not None and new > self.out_point:
             self.out_point = None
         self.in_point = new
+        self._order_points()
         return new
 
     def mark_out(self, frame: int | None = None) -> int:
         """Set the out point (default: the current frame); as :meth:`mark_in`, mirrored: with
-        both points set, an out point before the in point starts a new range there."""
+        both points set, the range's end moves there, and a point before the range's start
+        starts a new range there."""
         new = self.clamp(self.frame if frame is None else frame)
         if self.in_point is not None and self.out_point is not None and new < self.in_point:
             self.in_point = None
         self.out_point = new
+        self._order_points()
         return new
+
+    def _order_points(self) -> None:
+        if self.in_point is not None and self.out_point is not None and self.in_point > self.out_point:
+            self.in_point, self.out_point = self.out_point, self.in_point
 
     def clear_marks(self) -> None:
         """Forget the in and out points."""

@@ -86,6 +86,31 @@ def test_a_mark_past_the_other_end_of_a_range_starts_a_new_range() -> None:
     assert pb.selection() == (30, 51)
 
 
+def test_a_range_marked_end_first_is_moved_by_the_marks_after_it() -> None:
+    """I at 140 then O at 100 select 100-140; a point inside that range then moves its start
+    (I) or its end (O), and one before its start (I) stretches it: the explorer's report,
+    where O at 130 collapsed the range to frame 130 and I at 90 gave 90-100 (the points were
+    kept as marked, in at 140 and out at 100)."""
+    pb = Playback(n_frames=300, rate_hz=100.0)
+    pb.mark_in(140)
+    pb.mark_out(100)
+    assert pb.selection() == (100, 141)
+    pb.mark_out(130)
+    assert pb.selection() == (100, 131)
+    pb.clear_marks()
+    pb.mark_in(140)
+    pb.mark_out(100)
+    pb.mark_in(110)
+    assert pb.selection() == (110, 141)
+    pb.clear_marks()
+    pb.mark_in(140)
+    pb.mark_out(100)
+    pb.mark_in(90)
+    assert pb.selection() == (90, 141)
+    pb.mark_in(200)  # past the range's end: a new range
+    assert pb.selection() == (200, 201)
+
+
 def test_bad_trial_sizes_are_refused() -> None:
     with pytest.raises(ValueError, match="at least one frame"):
         Playback(n_frames=0, rate_hz=100.0)
