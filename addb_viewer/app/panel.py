@@ -62,7 +62,7 @@ LEGEND = (
 )
 
 
-@dataclass
+@dataclass(repr=False)  # viser's handles do not all print
 class ReviewPanel:
     """Handles of every control (built by :func:`build_panel`)."""
 

@@ -21,6 +21,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -137,9 +138,9 @@ class ReviewApp:
         #: Why the review record could not be opened (shown again with every trial loaded).
         self.store_problem: tuple[str, BaseException] | None = None
         self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
-        # (reviewer, trial) of each edit the store can undo, oldest first, and of each it can redo
-        self._undo_owners: list[tuple[str, str]] = []
-        self._redo_owners: list[tuple[str, str]] = []
+        # each action the store can undo, oldest first, and each it can redo (:class:`_Action`)
+        self._undo_owners: list[_Action] = []
+        self._redo_owners: list[_Action] = []
         self._review_warned: tuple[str, int] | None = None  # (trial, pending frames) the last "Trial reviewed" warning named
         self._review_warned_at = 0.0  # time.monotonic() of that warning
         self.trials: list[str] = []
@@ -585,7 +586,11 @@ class ReviewApp:
             mask = masks.get(what)
             target = None if mask is None else next_run_start(mask, self.playback.frame)
         if target is None:
-            self.panel.saved.content = f"No {what.lower()} frames in this trial."
+            self.panel.saved.content = {
+                "Flagged": "No flagged frames in this trial.",
+                "Proposal": "No pending proposals in this trial (accepted and rejected ones are decided).",
+                "Over Hicks": "No frame with measured force over Hicks' per-frame limits in this trial.",
+            }.get(what, f"No {what.lower()} frames in this trial.")
             return
         with self._lock:
             self.playback.pause(time.monotonic())
@@ -675,12 +680,14 @@ class ReviewApp:
             self.panel.saved.content = f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}"
             return
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
-        if what not in ("undo", "redo"):
-            self._own_history(edits)
-        if not edits and what in ("undo", "redo"):
+        history = what.split(" (")[0] in ("undo", "redo")
+        if not history:
+            self._own_history(edits, what)
+        if not edits and history:
             self.panel.saved.content = (
-                f"Nothing to {what}: the history holds the edits made since this subject was opened "
-                "(opening another subject starts a new one)."
+                "Nothing to undo: the history holds the edits made since this subject was opened "
+                "(opening another subject starts a new one)." if what.startswith("undo") else
+                "Nothing to redo: no edit has been undone since the last edit."
             )
         elif not edits:
             self.panel.saved.content = f"Nothing to do: {what}."
@@ -850,13 +857,15 @@ class ReviewApp:
         else:
             self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
 
-    def _own_history(self, edits: list[Edit]) -> None:
-        """Note who made each of ``edits`` that the store can undo, in the store's order (it
-        keeps one undo history for the whole server: :meth:`history` reads whose turn it is)."""
-        for e in edits:
-            if e.trial is not None and e.changed and e.op not in ("none", "trial_info"):
-                self._undo_owners.append((e.provenance.reviewer, e.trial))
-                self._redo_owners.clear()
+    def _own_history(self, edits: list[Edit], what: str) -> None:
+        """Note who made ``edits`` (one action of the reviewer, ``what``: one key or button
+        press, which may save several edits, e.g. Z over three proposal runs) that the store
+        can undo, in the store's order (it keeps one undo history for the whole server:
+        :meth:`history` reads whose turn it is, and undoes the action's edits together)."""
+        kept = [e for e in edits if e.trial is not None and e.changed and e.op not in ("none", "trial_info")]
+        if kept:
+            self._undo_owners.append(_Action(kept[-1].provenance.reviewer, kept[-1].trial, len(kept), what))
+            self._redo_owners.clear()
         del self._undo_owners[: -UNDO_OWNERS_KEPT]
 
     def history(self, what: str) -> None:
@@ -874,25 +883,31 @@ class ReviewApp:
         owners = self._undo_owners if undo else self._redo_owners
         last = "edit" if undo else "undone edit"
         refused = f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last {last}"
-        if name is not None and owners and owners[-1][0] != name:
+        if name is not None and owners and owners[-1].reviewer != name:
             self.panel.saved.content = (
-                f"{refused} on this subject is {_escape(owners[-1][0])}'s (one history for everyone on this "
+                f"{refused} on this subject is {_escape(owners[-1].reviewer)}'s (one history for everyone on this "
                 "server); unflag or flag your frames instead."
             )
             return
         shown = self.trial.trial if self.trial is not None else None
-        if owners and owners[-1][1] != shown:
-            self.panel.saved.content = f"{refused} is on trial {_escape(owners[-1][1])}: open it to {what.lower()} it."
+        if owners and owners[-1].trial != shown:
+            self.panel.saved.content = f"{refused} is on trial {_escape(owners[-1].trial)}: open it to {what.lower()} it."
             return
         step = self.store.undo if undo else self.store.redo
+        action = owners[-1] if owners else None
 
-        def run(_ed: TrialEditor, _k: int, _f: str) -> Edit | None:
-            done = step()
-            if done is not None and owners:
+        def run(_ed: TrialEditor, _k: int, _f: str) -> list[Edit]:
+            done = []
+            for _ in range(action.edits if action is not None else 1):  # the action's edits together
+                e = step()
+                if e is None:
+                    break
+                done.append(e)
+            if done and owners:
                 (self._redo_owners if undo else self._undo_owners).append(owners.pop())
             return done
 
-        self.edit(what.lower(), run)
+        self.edit(what.lower() + (f" ({action.what})" if action is not None else ""), run)
 
     # ================================================================== GUI wiring
     @contextlib.contextmanager
@@ -1034,6 +1049,17 @@ class ReviewApp:
             s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
             if self.playback is not None:
                 self.render(self.playback.frame)
+
+
+@dataclass(frozen=True)
+class _Action:
+    """One reviewer action in the undo history: who made it, on which trial, how many of
+    the store's edits it saved (undone and redone together) and what it was."""
+
+    reviewer: str
+    trial: str
+    edits: int
+    what: str
 
 
 def _preferred(trials: list[str]) -> str:

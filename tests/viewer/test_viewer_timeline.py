@@ -158,3 +158,31 @@ def test_selection_hotkeys_edit_the_selection(dyn_paths, make_app) -> None:
     pending = app.view.pending
     run_starts = [i for i in range(1, pending.size) if pending[i] and not pending[i - 1]]
     assert run_starts and app.playback.frame == run_starts[0]  # the next pending run after frame 0
+
+
+def test_one_press_is_one_undo_step_and_undo_names_it(dyn_paths, make_app) -> None:
+    """Z over a selection with several pending runs saves one note per run; U brings back all
+    of them (it brought back the last run only, as three presses of Z would), Shift+U rejects
+    them again, and the saved line names what was undone."""
+    app = make_app(dyn_paths)
+    from addb_viewer.app.flags import true_runs
+
+    pending = app.view.pending
+    starts = [s for s, _ in true_runs(pending)]
+    assert len(starts) >= 2, starts
+    end = starts[1] + 1  # the selection reaches into the second run
+    app.select(0, end)
+    app.selection_edit("Reject")
+    rejected = app.view.rejected.copy()
+    assert rejected[starts[0]] and rejected[starts[1]] and int(rejected.sum()) > 1
+    app.history("Undo")
+    assert not app.view.rejected.any() and np.array_equal(app.view.pending, pending)
+    assert f"undo (reject proposals in 0–{end})" in app.panel.saved.content, app.panel.saved.content
+    app.history("Redo")
+    assert np.array_equal(app.view.rejected, rejected)
+    app.history("Redo")
+    assert "Nothing to redo" in app.panel.saved.content and np.array_equal(app.view.rejected, rejected)
+    app.history("Undo")
+    app.history("Undo")
+    assert not app.view.rejected.any()
+    assert "Nothing to undo" in app.panel.saved.content
