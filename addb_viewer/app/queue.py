@@ -293,6 +293,7 @@ def next_to_review(
     rows: list[QueueRow],
     after: tuple[str, str | None] | None = None,
     order: list[tuple[str, str | None]] | None = None,
+    visited: set[tuple[str, str | None]] | frozenset[tuple[str, str | None]] = frozenset(),
 ) -> QueueRow | None:
     """The next row that needs review after ``after`` (rel, trial) in queue order, wrapping
     around to the first; the first such row when ``after`` is no row (None, or a subject
@@ -303,12 +304,19 @@ def next_to_review(
     ``(rel, trial)``; default: the order of ``rows``). Editing the trial on screen moves it
     in the queue (accepting its proposals sends it down), so "after" it is read in that
     order: the rows it had below it come next, not those it passed on its way down. Rows not
-    in ``order`` (new since) come after it, in queue order."""
+    in ``order`` (new since) come after it, in queue order.
+
+    ``visited`` holds the rows opened since the reviewer started going round the queue:
+    they are passed over while another row needs review, so a row that took a place above
+    the one shown (a subject processed since, sorted high) is reached before any row is
+    opened a second time (the explorer's report: R went round to the top again, skipping a
+    trial processed meanwhile). The caller starts a new round (empties ``visited``) once
+    the row returned is one of them."""
     by_key = {(r.subject.rel, r.trial): r for r in rows}
     keys = [k for k in (order or []) if k in by_key]
     keys += [k for k in by_key if k not in set(keys)]
     start = keys.index(after) + 1 if after in keys else 0
-    for key in keys[start:] + keys[:start]:
-        if by_key[key].needs_review and key != after:
-            return by_key[key]
-    return None
+    waiting = [k for k in keys[start:] + keys[:start] if by_key[k].needs_review and k != after]
+    fresh = [k for k in waiting if k not in visited]
+    pick = fresh or waiting
+    return by_key[pick[0]] if pick else None

@@ -122,6 +122,7 @@ class Workbench:
         self.labels: dict[str, tuple[str, str | None]] = {}
         self.current: tuple[str, str | None] | None = None
         self._order: list[tuple[str, str | None]] = []  # the queue order when the trial on screen was opened
+        self._visited: set[tuple[str, str | None]] = set()  # rows opened in this round of the queue (next_to_review)
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
@@ -235,6 +236,7 @@ class Workbench:
                 self.app.set_status(f"**{rel}** failed: {self._failed[subject.rel]}")
         if self.app.trial is not None:
             self.current = (rel, self.app.trial.trial)
+        self._visited.add(self.current)
         self._order = [(r.subject.rel, r.trial) for r in self.refresh()]  # as the reviewer sees it now
 
     def _shown(self, paths: ReviewPaths) -> bool:
@@ -251,10 +253,12 @@ class Workbench:
 
     def open_next(self) -> QueueRow | None:
         """Open the next trial that needs review (after the one shown); None when none."""
-        row = next_to_review(self.refresh(), after=self.current, order=self._order)
+        row = next_to_review(self.refresh(), after=self.current, order=self._order, visited=self._visited)
         if row is None:
             self.run_status.content = ALL_REVIEWED
             return None
+        if (row.subject.rel, row.trial) in self._visited:  # every row needing review opened: a new round
+            self._visited.clear()
         self.open(row.subject.rel, row.trial)
         return row
 

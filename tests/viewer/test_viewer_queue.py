@@ -181,3 +181,31 @@ def test_a_damaged_review_record_is_named_in_the_queue_not_shown_unreviewed(data
     # the other subjects' states are unchanged
     by = {(r.subject.rel, r.trial): r for r in rows}
     assert by[("lab/done", "walk")].review == REVIEWED and by[("lab/fresh", "walk")].review == UNREVIEWED
+
+
+def test_next_to_review_reaches_a_row_sorted_above_the_one_shown_before_going_round_again() -> None:
+    """As the workbench calls it (the order taken again at each open, the rows opened kept):
+    a subject processed while the reviewer goes round takes a place above the trial shown;
+    R reaches it before opening any trial a second time (the explorer's report: R opened
+    DJ1, walking1, walk, the statics, then DJ1 again, never the run processed meanwhile)."""
+    from types import SimpleNamespace
+
+    def row(rel: str) -> SimpleNamespace:
+        return SimpleNamespace(subject=SimpleNamespace(rel=rel), trial="t", needs_review=True)
+
+    queues = [
+        ["dj1", "walking1", "walk", "static"],  # the run not processed yet
+        ["dj1", "run", "walking1", "walk", "static"],  # processed: sorted second
+    ]
+    visited: set = set()
+    opened, after, order = [], None, None
+    for press in range(6):
+        rows = [row(r) for r in queues[min(press, 1)]]
+        nxt = next_to_review(rows, after=after, order=order, visited=visited)
+        key = (nxt.subject.rel, nxt.trial)
+        if key in visited:
+            visited.clear()
+        visited.add(key)
+        opened.append(nxt.subject.rel)
+        after, order = key, [(r.subject.rel, r.trial) for r in rows]
+    assert opened == ["dj1", "walking1", "walk", "static", "run", "walking1"]  # then round again, after the run
