@@ -62,6 +62,25 @@ LEGEND = (
 )
 
 
+class EchoedMarkdown:
+    """A message shown in two places at once: the edits' line (the Flags folder's, under
+    Undo / Redo) is also shown under the timeline's buttons, where the keys G, X, Y, Z and U
+    act (on a 1280 x 800 window the Flags folder's line is below the fold)."""
+
+    def __init__(self, *handles: viser.GuiMarkdownHandle) -> None:
+        self.handles = handles
+
+    @property
+    def content(self) -> str:
+        """The message (markdown)."""
+        return self.handles[0].content
+
+    @content.setter
+    def content(self, text: str) -> None:
+        for h in self.handles:
+            h.content = text
+
+
 @dataclass(repr=False)  # viser's handles do not all print
 class ReviewPanel:
     """Handles of every control (built by :func:`build_panel`)."""
@@ -86,7 +105,7 @@ class ReviewPanel:
     proposal_all: viser.GuiButtonGroupHandle
     reviewed: viser.GuiCheckboxHandle
     history: viser.GuiButtonGroupHandle
-    saved: viser.GuiMarkdownHandle
+    saved: EchoedMarkdown
     reprocess: viser.GuiButtonHandle
     cancel: viser.GuiButtonHandle
     progress: viser.GuiProgressBarHandle
@@ -146,7 +165,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["proposal_all"] = gui.add_button_group("All proposals", ("Accept all", "Reject all"))
         h["reviewed"] = gui.add_checkbox("Trial reviewed", initial_value=False)
         h["history"] = gui.add_button_group("Edits", ("Undo", "Redo"))
-        h["saved"] = gui.add_markdown(NO_EDITS)
+        saved = gui.add_markdown(NO_EDITS)
     with gui.add_folder("Reprocess"):
         h["reprocess"] = gui.add_button("Reprocess", hint="run the solver on this trial with the current flags")
         h["progress"] = gui.add_progress_bar(0.0, animated=True, visible=False)
@@ -183,6 +202,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         h["selection"] = gui.add_multi_slider("Selection", min=0, max=1, step=1, initial_value=(0, 0), disabled=True)
         h["selection_info"] = gui.add_markdown("Drag the ends of Selection to choose frames.")
         h["selection_edit"] = gui.add_button_group("Selected frames", ("Flag", "Unflag", "Accept", "Reject"))
+        h["saved"] = EchoedMarkdown(saved, gui.add_markdown(NO_EDITS))
         h["plots_folder"] = gui.add_folder("Plots")
         with h["plots_folder"]:
             gui.add_markdown(shading_legend())

@@ -368,6 +368,7 @@ class ReviewApp:
             problems += p
         editor, record_problem = self._editor_for(trial)
         view = editor.view() if editor is not None else None
+        self._forget_refusal()
         with self._lock:
             self._drop_trial()
             self.trial, self.editor, self.view = trial, editor, view
@@ -764,6 +765,7 @@ class ReviewApp:
             if pb is None:
                 return
             {"Set in": pb.mark_in, "Set out": pb.mark_out, "Clear marks": pb.clear_marks}[what]()
+            self._forget_refusal()
             sel = pb.selection()
             with self._quiet_updates():  # cleared: the slider's thumbs go back together at 0
                 self.panel.selection.value = (sel[0], sel[1] - 1) if sel is not None else (0, 0)
@@ -809,10 +811,19 @@ class ReviewApp:
                 return
             pb.mark_in(min(start, end))
             pb.mark_out(max(start, end))
+            self._forget_refusal()
             with self._quiet_updates():
                 self.panel.selection.value = (pb.in_point, pb.out_point)
             self.draw_timeline()
         self._show_range_info()
+
+    def _forget_refusal(self) -> None:
+        """Take back the edits' line when it refuses or warns (not a saved edit): it answered
+        the reviewer's last press, and would read as an answer to the next ("Select frames
+        first" beside a selection, "open trial X" once X is open)."""
+        text = self.panel.saved.content
+        if text != NO_EDITS and not text.startswith("✓"):
+            self.panel.saved.content = NO_EDITS
 
     def selection_edit(self, what: str) -> None:
         """"Flag", "Unflag", "Accept" or "Reject" the timeline's selected frames."""

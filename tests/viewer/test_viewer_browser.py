@@ -97,7 +97,13 @@ def test_review_in_the_browser(view_server) -> None:
             page.get_by_role("button", name="Set out", exact=True).click()
             page.get_by_text("Range: frames 2–12").wait_for(timeout=20_000)
             page.get_by_role("button", name="Flag range", exact=True).click()
-            page.get_by_text(re.compile(r"✓ saved: flag frames 2–12")).wait_for(timeout=20_000)
+            saved = page.get_by_text(re.compile(r"✓ saved: flag frames 2–12"))
+            saved.first.wait_for(timeout=20_000)
+            # said twice: in the Flags folder and under the timeline's buttons, where the keys
+            # act; there in view without scrolling (the Flags folder's line is below the fold)
+            assert saved.count() == 2
+            boxes = [saved.nth(i).bounding_box() for i in range(2)]
+            assert any(b is not None and 0 <= b["y"] and b["y"] + b["height"] <= 720 for b in boxes), boxes
 
             # the page said "saved": the range is in the review record on disk
             with AnnotationStore.open(paths.annotations, reviewer="checker") as disk:

@@ -186,3 +186,21 @@ def test_one_press_is_one_undo_step_and_undo_names_it(dyn_paths, make_app) -> No
     app.history("Undo")
     assert not app.view.rejected.any()
     assert "Nothing to undo" in app.panel.saved.content
+
+
+def test_a_refusal_is_taken_back_once_the_reviewer_acts_on_it(dyn_paths, make_app) -> None:
+    """"Select frames first" went on standing beside a selection made since; a saved edit's
+    line stays (it says what is in the record)."""
+    from addb_viewer.app.panel import NO_EDITS
+
+    app = make_app(dyn_paths)
+    app.selection_edit("Flag")
+    assert "Select frames on the timeline first" in app.panel.saved.content
+    app.select(10, 12)
+    assert app.panel.saved.content == NO_EDITS
+    app.selection_edit("Flag")
+    saved = app.panel.saved.content
+    assert saved.startswith("✓ saved: flag frames 10–12")
+    app.mark("Clear marks")
+    app.load_trial("walk")
+    assert app.panel.saved.content == saved

@@ -210,13 +210,13 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
             # accept the solver's proposals, select frames near 20-40 by dragging the timeline's
             # range, and flag them with the hotkey G
             page.get_by_role("button", name="Accept all", exact=True).click()
-            page.get_by_text(re.compile(r"✓ saved: accept proposal")).wait_for(timeout=20_000)
+            page.get_by_text(re.compile(r"✓ saved: accept proposal")).first.wait_for(timeout=20_000)
             last = int(re.search(r"frame \d+ / (\d+)", page.get_by_text(re.compile(r"run · run · frame")).inner_text()).group(1))
             lo, hi = _drag_selection(page, 20, 40, last)
             page.get_by_text(f"Selected: frames {lo}–{hi} ({hi - lo + 1} frames)").wait_for(timeout=20_000)
             page.locator("body").click(position={"x": 800, "y": 900})  # focus the page, not an input
             page.keyboard.press("g")
-            page.get_by_text(re.compile(rf"✓ saved: flag frames {lo}–{hi}")).wait_for(timeout=20_000)
+            page.get_by_text(re.compile(rf"✓ saved: flag frames {lo}–{hi}")).first.wait_for(timeout=20_000)
             shot = SCREENSHOT if os.environ.get("ADDB_WRITE_SCREENSHOT") == "1" else tmp_path / "workbench.png"
             shot.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(shot))
