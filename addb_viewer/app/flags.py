@@ -212,9 +212,33 @@ class TrialEditor:
         replaced; one edit (one undo step)."""
         return self.store.set_unmeasured(self.trial, self._range(start, stop), True, foot=foot, keep_other_foot=True)
 
-    def clear_range(self, start: int, stop: int) -> Edit:
-        """Clear the unmeasured-force flags of frames ``[start, stop)``."""
-        return self.store.set_unmeasured(self.trial, self._range(start, stop), False)
+    def clear_range(self, start: int, stop: int, foot: str = "both") -> list[Edit]:
+        """Clear the unmeasured-force flags of frames ``[start, stop)``: every flag with
+        ``foot`` "both", else ``foot``'s ("left" or "right") as :func:`toggled_foot` takes
+        a foot off a frame: a frame flagged for both feet keeps the other foot's flag, a
+        flag of this foot or without a foot goes, the other foot's flags stay. Returns the
+        edits made (one action: one undo step in the app; empty when nothing changed).
+
+        Raises
+        ------
+        AnnotationError
+            A range outside the trial, or an unknown foot.
+        """
+        rng = self._range(start, stop)
+        if foot not in FEET:
+            raise AnnotationError(f"foot must be one of {FEET}, got {foot!r}")
+        if foot == "both":
+            return [self.store.set_unmeasured(self.trial, rng, False)]
+        feet = self.view().feet
+        other = "left" if foot == "right" else "right"
+        cleared = [f for f in rng if feet[f] in ("", foot)]
+        kept_other = [f for f in rng if feet[f] == "both"]
+        edits = []
+        if cleared:
+            edits.append(self.store.set_unmeasured(self.trial, cleared, False))
+        if kept_other:
+            edits.append(self.store.set_unmeasured(self.trial, kept_other, True, foot=other))
+        return edits
 
     # ------------------------------------------------------------------ proposals
     def proposal_at(self, frame: int) -> tuple[int, int, str] | None:

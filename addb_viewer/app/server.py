@@ -866,7 +866,7 @@ class ReviewApp:
         if flag:
             self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
         else:
-            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, _f: ed.clear_range(s, e))
+            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, foot: ed.clear_range(s, e, foot))
 
     def _own_history(self, edits: list[Edit], what: str) -> None:
         """Note who made ``edits`` (one action of the reviewer, ``what``: one key or button
