@@ -48,7 +48,8 @@ class FlagView:
     proposed
         ``(T,)`` the solver's automatic proposals.
     rejected
-        ``(T,)`` proposals the reviewer rejected.
+        ``(T,)`` proposals the reviewer rejected and has not flagged since (a flag made by
+        hand over a rejected proposal is what the solver takes: it is agreed then).
     pending
         ``(T,)`` proposals neither flagged nor rejected.
     feet
@@ -111,7 +112,7 @@ def build_view(review: TrialReview, proposed: BoolArray) -> FlagView:
     for note in review.notes:
         if note.start is not None and note.stop is not None and note.text.startswith(REJECTED_NOTE):
             rejected[min(note.start, n) : min(note.stop, n)] = True
-    rejected &= proposed
+    rejected &= proposed & ~flagged  # rejected, then flagged by hand: the flag is what the fit takes
     return FlagView(
         flagged=flagged,
         left=left,

@@ -193,3 +193,17 @@ def test_other_writers_edits_appear_and_errors_do_not_say_saved(demo_paths, make
     # an edit the store refuses is reported, not shown as saved
     app.edit("bad edit", lambda ed, _k, _f: ed.flag_range(200, 10_000, "left"))
     assert "not saved" in app.panel.saved.content
+
+
+def test_a_rejected_proposal_flagged_by_hand_is_agreed_and_rejected_again_once_unflagged(editor: TrialEditor) -> None:
+    """The fit leaves a flagged frame out whatever was said of its proposal before, so the
+    timeline shows it green (agreed), not grey (rejected) as it did; unflagged, the
+    rejection stands again."""
+    editor.reject(12)
+    assert editor.view().rejected[10:20].all()
+    editor.flag_range(10, 12, "left")
+    v = editor.view()
+    assert v.agreed[10:12].all() and not v.rejected[10:12].any() and v.rejected[12:20].all()
+    assert not v.pending[10:20].any()
+    editor.clear_range(10, 12)
+    assert editor.view().rejected[10:20].all()
