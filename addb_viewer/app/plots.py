@@ -182,7 +182,8 @@ class Chart:
         }
         vals = [ln.values for ln in lines if np.isfinite(ln.values).any()]
         scales["y"] = {"auto": False, "range": _range(vals, floor_zero=True)}
-        axes: list[dict] = [{}, {"scale": "y", "label": unit, "side": 3, "size": 50}]
+        # ticks at least 15 px apart (uPlot's default 30 px left a 90 px chart one tick, "0")
+        axes: list[dict] = [{}, {"scale": "y", "label": unit, "side": 3, "size": 50, "space": 15}]
         for ln in lines:
             series.append(
                 {

@@ -57,6 +57,9 @@ SELECTION = (255, 230, 120)
 ROW_PX = 11
 GAP_PX = 3
 LABEL_PX = 78
+#: Room kept right of the strip, px: the docked panel's scrollbar floats over its right edge
+#: (it hid the last frames' runs and the playhead at the last frame).
+RIGHT_PX = 12
 #: Vertical force on a foot above which its force counts as measured, N.
 FORCE_THRESHOLD_N = 20.0
 
@@ -186,7 +189,7 @@ def timeline_html(data: TrackData, *, reasons: tuple[str, ...] = (), frame: int 
     row = ROW_PX + GAP_PX
     height = len(TRACKS) * row + GAP_PX
     parts = [
-        (f"<div style='display:flex;font-size:10px;line-height:{ROW_PX}px;font-family:sans-serif'>"
+        (f"<div style='display:flex;font-size:10px;line-height:{ROW_PX}px;font-family:sans-serif;padding-right:{RIGHT_PX}px'>"
          f"<div style='width:{LABEL_PX}px;flex-shrink:0;padding-top:{GAP_PX}px'>")
     ]
     parts += [f"<div style='height:{ROW_PX}px;margin-bottom:{GAP_PX}px;color:#444'>{name}</div>" for name in TRACKS]
