@@ -510,6 +510,8 @@ class ReviewApp:
             if t.unobserved[k]:  # its residual is the force no plate measured, not judged by Hicks
                 over = " · left out of the fit (no measured force)"
             parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
+        elif not t.plates:
+            parts.append("no force plates in this trial: kinematics only (no residuals)")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")
         return " · ".join(parts[:2]) + "<br>" + parts[2] + "<br>" + flag
@@ -522,7 +524,10 @@ class ReviewApp:
         """Show an error in the page and on the terminal (with the traceback of an
         unexpected exception)."""
         text = str(exc) if str(exc) else type(exc).__name__
-        self.panel.error.content = f"<span style='color:#c00'>**{context}**</span><br>{_escape(text)}"
+        # a long path breaks anywhere: unbroken, the file's line number ran past the panel's edge
+        self.panel.error.content = (
+            f"<span style='color:#c00'>**{context}**</span><br><span style='overflow-wrap:anywhere'>{_escape(text)}</span>"
+        )
         self.panel.error.visible = True
         print(f"addb view: {context}: {text}", file=sys.stderr, flush=True)
         if isinstance(exc, BaseException) and not isinstance(exc, AnnotationError | FileNotFoundError) and not hasattr(exc, "to_dict"):

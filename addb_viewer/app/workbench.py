@@ -69,9 +69,10 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     done = sum(r.review == REVIEWED for r in rows if r.trial is not None)
     waiting = sum(r.processing == PROCESSING for r in rows)
     failed = sum(r.processing == FAILED for r in rows)
-    head = f"**{len({r.subject.rel for r in rows})} subjects, {n_trials} trials: {done} reviewed"
-    head += f", {waiting} processing" if waiting else ""
-    head += f", {failed} failed" if failed else ""
+    # processing and failed count subjects (they have no trial rows), reviewed counts trials
+    states = [f"{n} {what}" for n, what in ((waiting, "processing"), (failed, "failed")) if n]
+    head = f"**{len({r.subject.rel for r in rows})} subjects" + (f" ({', '.join(states)})" if states else "")
+    head += f", {n_trials} trials: {done} reviewed"
     columns = ("subject / trial", "review", "pending", "Hicks RMS") if compact else (
         "subject / trial", "state", "review", "pending", "Hicks RMS", "RMS cm")
     lines = [head + "**", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
@@ -233,7 +234,9 @@ class Workbench:
         else:
             self.app.open_subject(paths, trial)
             if self.app.trial is None and subject.rel in self._failed:
-                self.app.set_status(f"**{rel}** failed: {self._failed[subject.rel]}")
+                self.app.set_status(  # the path breaks anywhere: its line number stays in the panel
+                    f"**{rel}** failed: <span style='overflow-wrap:anywhere'>{_md(self._failed[subject.rel])}</span>"
+                )
         if self.app.trial is not None:
             self.current = (rel, self.app.trial.trial)
         self._visited.add(self.current)

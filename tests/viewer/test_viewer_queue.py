@@ -90,6 +90,11 @@ def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output
     assert order.index(("lab/broken", None)) < order.index(("lab/waiting", None)) < order.index(("lab/done", "walk"))
     assert next_to_review(rows).trial == "walk" and next_to_review(rows).subject.rel == "lab/fresh"
     assert next_to_review(rows, after=("lab/fresh", "walk")).subject.rel == "lab/busy"
+    # the summary line: subject states with the subjects, the review count with the trials
+    # (it read "5 subjects, 6 trials: 1 reviewed, 1 processing, 1 failed")
+    n_trials = sum(r.trial is not None for r in rows)
+    head = queue_markdown(rows).splitlines()[0]
+    assert head == f"**5 subjects (1 processing, 1 failed), {n_trials} trials: 1 reviewed**", head
     # without a process running, the waiting subject is simply not processed
     assert next(r for r in build_queue(subjects) if r.subject.rel == "lab/waiting").processing == NOT_PROCESSED
 

@@ -204,3 +204,13 @@ def test_a_refusal_is_taken_back_once_the_reviewer_acts_on_it(dyn_paths, make_ap
     app.mark("Clear marks")
     app.load_trial("walk")
     assert app.panel.saved.content == saved
+
+
+def test_a_trial_without_plates_is_said_to_be_kinematics_only(dyn_paths, make_app) -> None:
+    """The static trial has no force plates: its status line said "no dynamics yet
+    (residuals appear after a Reprocess…)", which no Reprocess would change."""
+    app = make_app(dyn_paths)
+    app.load_trial("static")
+    assert "no force plates in this trial: kinematics only" in app.panel.status.content, app.panel.status.content
+    app.load_trial("walk")
+    assert "residual" in app.panel.status.content and "no force plates" not in app.panel.status.content
