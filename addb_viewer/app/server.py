@@ -314,6 +314,8 @@ class ReviewApp:
         try:
             self.store = AnnotationStore.open(self.paths.annotations, reviewer=self.reviewer)
             self.store_problem = None
+            if self._record_elsewhere():
+                print(f"addb view: {self.paths.subject_dir.name}: {self._record_elsewhere_text()}", file=sys.stderr, flush=True)
             self._undo_owners, self._redo_owners = [], []  # a new store: a new history
         except AnnotationError as exc:
             self.store = None
@@ -761,7 +763,17 @@ class ReviewApp:
                 "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
                 "(in Reprocess and in the dataset run); accept or reject them first."
             )
+        if self._record_elsewhere():  # not <subject>/annotations.json, where a colleague would look
+            text += f". {_escape(self._record_elsewhere_text())}"
         self.panel.proposal_info.content = text
+
+    def _record_elsewhere(self) -> bool:
+        """Whether the review record is outside the subject folder (a read-only folder, or
+        the bundled demo: :func:`addb_viewer.locations.annotations_path`)."""
+        return not self.paths.annotations.resolve().is_relative_to(self.paths.subject_dir.resolve())
+
+    def _record_elsewhere_text(self) -> str:
+        return f"The review record is {self.paths.annotations} (addb does not write in this subject folder)"
 
     def mark(self, what: str) -> None:
         """"Set in", "Set out" or "Clear marks" at the current frame."""

@@ -113,3 +113,27 @@ def test_trial_reviewed_warns_once_about_pending_proposals_and_flags_say_what_th
     assert "fitted as measured" not in p.saved.content
     app.set_reviewed(True)
     assert app.view.reviewed and "not marked reviewed" not in p.saved.content
+
+
+def test_a_review_record_outside_the_subject_folder_is_named(walk_processed: Path, tmp_path: Path, make_app, capsys) -> None:
+    """A read-only subject folder (a copy of shared data) keeps its review record beside the
+    output folder: the Flags folder and the terminal name it (a reviewer looked for
+    ``<subject>/annotations.json``, as the README says); a writable one is not named."""
+    import os
+    import stat
+
+    subject = writable_copy(WALK, tmp_path / "walk")
+    out = tmp_path / "out"
+    shutil.copytree(walk_processed, out)
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    assert app.paths.annotations == subject / "annotations.json" and "review record is" not in app.panel.proposal_info.content
+    app.stop()
+    ro = writable_copy(WALK, tmp_path / "ro")
+    os.chmod(ro, stat.S_IRUSR | stat.S_IXUSR)
+    try:  # read-only by its mode bits (addb_viewer.locations.folder_is_writable), for root too
+        app = make_app(ReviewPaths.for_subject(ro, out))
+        record = str(tmp_path / "out.annotations.json")
+        assert f"The review record is {record}" in app.panel.proposal_info.content, app.panel.proposal_info.content
+        assert f"The review record is {record}" in capsys.readouterr().err
+    finally:
+        os.chmod(ro, stat.S_IRWXU)
