@@ -22,8 +22,10 @@ the server and raises rather than serve without the token.
 
 from __future__ import annotations
 
+import contextlib
 import http
 import http.cookies
+import io
 import ipaddress
 import secrets
 import sys
@@ -198,7 +200,11 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
 
         ws_server.serve = serve
         try:
-            server = viser.ViserServer(host=host, port=port, **kwargs)
+            # viser prints its own address box, without the token (a wildcard host shown as
+            # localhost): a reviewer given that address is refused; the caller prints the
+            # address with the token instead
+            with contextlib.redirect_stdout(io.StringIO()):
+                server = viser.ViserServer(host=host, port=port, **kwargs)
         finally:
             ws_server.serve = original
     if not installed:

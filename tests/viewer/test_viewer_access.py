@@ -115,6 +115,10 @@ def test_lab_server_requires_the_token(lab_server) -> None:
     assert _websocket(port, "/", {"Cookie": f"addb_token_{port}={token}"}) == 101
     assert _websocket(port, f"/?token={token}") == 101
 
+    # the only address printed is the one with the token (viser's own box, without it and
+    # naming localhost, would be refused)
+    printed = [line for line in log if "http://" in line]
+    assert printed and all(f"token={token}" in line for line in printed), printed
     # each refusal is logged, without any token in the line
     refused = [line for line in log if "refused" in line]
     assert sum("refused HTTP GET /" in line for line in refused) >= 3, "".join(log)
