@@ -150,6 +150,45 @@ def rejections_ignored(view: FlagView) -> int:
     return 0 if flags_replace_proposals(view) else int(view.rejected.sum())
 
 
+#: The reasons the dynamics stage gives the frames it leaves out (results.json's
+#: ``unobserved_reasons``, :mod:`solver.dynamics.stage`) for the reviewer's flags and for a
+#: saved correction of ``addb diagnose``.
+FLAGGED_REASON = "flagged by the reviewer"
+CORRECTION_REASON = "unmeasured force found by addb diagnose"
+
+
+def flags_differ_from_fit(mask: BoolArray | None, unobserved: BoolArray, proposed: BoolArray, reasons: list[str]) -> int:
+    """Frames the next solver run would leave out, or fit, otherwise than the fit shown:
+    how stale the shown results are after flag edits (a flag, an Undo after a Reprocess).
+
+    Parameters
+    ----------
+    mask
+        ``(T,)`` the reviewer's flags as the solver takes them
+        (:func:`addb_viewer.review_masks.unmeasured_force`), None when the solver keeps its
+        own choice for the trial (no flag, not marked reviewed).
+    unobserved, proposed
+        ``(T,)`` the fit's left-out frames and the solver's proposals (the processed trial).
+    reasons
+        The fit's reasons for its left-out frames (results.json ``unobserved_reasons``).
+
+    Returns
+    -------
+    int
+        0 when the next run takes the same frames; without flags, at least 1 when the fit
+        used flags since removed. Frames a saved correction added are not counted.
+    """
+    used_flags = FLAGGED_REASON in reasons
+    if mask is None:
+        return max(int((unobserved != proposed).sum()), 1) if used_flags else 0
+    mask = np.asarray(mask, bool)
+    if mask.shape != unobserved.shape:
+        return 0  # other frames: the run says so itself
+    if any(r.startswith(CORRECTION_REASON) for r in reasons):
+        return int((mask & ~unobserved).sum())  # the correction's frames are left out as well
+    return int((mask != unobserved).sum())
+
+
 def toggled_foot(current: str | None, foot: str) -> str | None:
     """The foot a frame is flagged for after toggling ``foot`` (None: not flagged).
 

@@ -35,6 +35,7 @@ from addb_viewer.app.flags import (
     FlagView,
     TrialEditor,
     describe_frame,
+    flags_differ_from_fit,
     pending_replaced,
     rejections_ignored,
 )
@@ -740,32 +741,54 @@ class ReviewApp:
             return
         n_prop = int(v.proposed.sum())
         no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
-        text = (
+        sentences = [
             f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right"
-            + (f", {no_foot} without a foot" if no_foot else "") + "). "
-            f"Automatic proposals: {n_prop} frames"
-        )
-        if n_prop:
-            text += f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
+            + (f", {no_foot} without a foot" if no_foot else "") + ")",
+            f"Automatic proposals: {n_prop} frames" + (
+                f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
+                if n_prop else ""),
+        ]  # fmt: skip
         if v.beyond:
-            text += f". {v.beyond} flagged frames lie past the end of this trial."
+            sentences.append(f"{v.beyond} flagged frames lie past the end of this trial")
         ignored = rejections_ignored(v)
         if ignored:
-            text += (
-                f". <span style='color:#c00'>**{ignored} rejected proposed frames are still left out of the fit**</span>: "
+            sentences.append(
+                f"<span style='color:#c00'>**{ignored} rejected proposed frames are still left out of the fit**</span>: "
                 "the solver keeps its own choice until the trial has a flag or is marked reviewed; tick "
                 "Trial reviewed to fit them as measured"
             )
         pending = pending_replaced(v)
         if pending:
-            text += (
-                f". <span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
+            sentences.append(
+                f"<span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
                 "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
-                "(in Reprocess and in the dataset run); accept or reject them first."
+                "(in Reprocess and in the dataset run); accept or reject them first"
+            )
+        stale = self._flags_since_fit()
+        if stale:
+            sentences.append(
+                f"<span style='color:#c00'>**The results shown were fitted with other flags**</span> ({stale} frames "
+                "differ): Reprocess to fit these"
             )
         if self._record_elsewhere():  # not <subject>/annotations.json, where a colleague would look
-            text += f". {_escape(self._record_elsewhere_text())}"
+            sentences.append(_escape(self._record_elsewhere_text()))
+        text = ". ".join(sentences) + "."
         self.panel.proposal_info.content = text
+
+    def _flags_since_fit(self) -> int:
+        """Frames the flags as they are now would fit otherwise than the results shown
+        (:func:`~addb_viewer.app.flags.flags_differ_from_fit`); 0 without dynamics, or when
+        the flags cannot be read as the solver takes them (a Reprocess says why)."""
+        from addb_viewer.review_masks import unmeasured_force
+
+        t = self.trial
+        if t is None or self.store is None or not t.has_dynamics:
+            return 0
+        try:
+            mask = unmeasured_force(self.store, self.paths.subject_dir, [t.trial]).get(t.trial)
+        except (AnnotationError, AddbError):
+            return 0
+        return flags_differ_from_fit(mask, t.unobserved, t.proposed, list(t.metrics.get("unobserved_reasons") or []))
 
     def _record_elsewhere(self) -> bool:
         """Whether the review record is outside the subject folder (a read-only folder, or

@@ -214,3 +214,25 @@ def test_a_trial_without_plates_is_said_to_be_kinematics_only(dyn_paths, make_ap
     assert "no force plates in this trial: kinematics only" in app.panel.status.content, app.panel.status.content
     app.load_trial("walk")
     assert "residual" in app.panel.status.content and "no force plates" not in app.panel.status.content
+
+
+def test_flags_edited_since_the_fit_are_said_to_differ_from_it(dyn_paths, make_app) -> None:
+    """After a flag (or an Undo after a Reprocess) the results on screen were fitted with
+    other flags: the Flags folder says so and how many frames differ, until the flags match
+    the fit again (the explorer saw nothing say it after an Undo)."""
+    app = make_app(dyn_paths)
+    assert "fitted with other flags" not in app.panel.proposal_info.content  # the solver's own choice
+    frame = int(np.flatnonzero(~app.view.proposed & ~app.trial.unobserved)[0])
+    app.select(frame, frame + 4)
+    app.selection_edit("Flag")
+    info = app.panel.proposal_info.content
+    # the flags now replace every proposal: 5 new frames, and the proposals no longer left out
+    n = 5 + int(app.trial.unobserved.sum())
+    assert f"fitted with other flags**</span> ({n} frames differ)" in info, info
+    app.history("Undo")
+    assert "fitted with other flags" not in app.panel.proposal_info.content
+    # accepting every proposal leaves out what the fit left out: nothing differs
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())
+    assert np.array_equal(app.view.flagged, app.trial.proposed)
+    assert np.array_equal(app.trial.unobserved, app.trial.proposed)  # the demo's fit left out its proposals
+    assert "fitted with other flags" not in app.panel.proposal_info.content

@@ -98,10 +98,12 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     app.edit("accept all", lambda ed, _k, _f: ed.accept())
     app.select(100, 129)
     app.selection_edit("Flag")
+    assert "fitted with other flags" in app.panel.proposal_info.content  # not processed with them yet
     bench = Workbench(app, dataset, workers=1)
     bench.current = ("labA/walk", "walk")
     assert bench.processing_done.wait(600), bench.run_status.content
     after = load_processed(walk.out_dir, "walk")
+    assert "fitted with other flags" not in app.panel.proposal_info.content, app.panel.proposal_info.content
     assert after.unobserved[100:130].all() and not before.unobserved[100:130].all()  # processed again
     assert app.trial.trial == "walk" and np.array_equal(app.trial.unobserved, after.unobserved)
     assert "reloaded" in app.panel.job_status.content, app.panel.job_status.content
