@@ -64,21 +64,24 @@ LEGEND = (
 
 class EchoedMarkdown:
     """A message shown in two places at once: the edits' line (the Flags folder's, under
-    Undo / Redo) is also shown under the timeline's buttons, where the keys G, X, Y, Z and U
-    act (on a 1280 x 800 window the Flags folder's line is below the fold)."""
+    Undo / Redo) is also shown, in small type, under the timeline's buttons, where the keys
+    G, X, Y, Z and U act (on a 1280 x 800 window the Flags folder's line is below the fold);
+    hidden there while it says :data:`NO_EDITS`, so the charts below keep their place."""
 
-    def __init__(self, *handles: viser.GuiMarkdownHandle) -> None:
-        self.handles = handles
+    def __init__(self, main: viser.GuiMarkdownHandle, echo: viser.GuiMarkdownHandle) -> None:
+        self.main, self.echo = main, echo
+        self.content = main.content
 
     @property
     def content(self) -> str:
         """The message (markdown)."""
-        return self.handles[0].content
+        return self.main.content
 
     @content.setter
     def content(self, text: str) -> None:
-        for h in self.handles:
-            h.content = text
+        self.main.content = text
+        self.echo.content = f"<small>{text}</small>"
+        self.echo.visible = text != NO_EDITS
 
 
 @dataclass(repr=False)  # viser's handles do not all print

@@ -207,6 +207,12 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
             # the timeline's proposals carry their reason on hover (a title on each run)
             tip = page.locator("div.run[data-track='proposal']").first.get_attribute("title")
             assert re.match(r"proposal \(pending\), frames \d+–\d+: \S", tip), tip
+            # ticking Trial reviewed with proposals pending only warns: the box stays unticked
+            reviewed = page.get_by_label("Trial reviewed", exact=True)
+            reviewed.click()
+            page.get_by_text(re.compile(r"not marked reviewed: \d+ proposed frames of run are still pending")).first.wait_for(timeout=20_000)
+            page.wait_for_timeout(500)
+            assert not reviewed.is_checked()
             # accept the solver's proposals, select frames near 20-40 by dragging the timeline's
             # range, and flag them with the hotkey G
             page.get_by_role("button", name="Accept all", exact=True).click()
