@@ -21,7 +21,6 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ from addb_viewer.app.flags import (
     pending_replaced,
     rejections_ignored,
 )
+from addb_viewer.app.history import ActionHistory
 from addb_viewer.app.meshes import body_mesh
 from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
@@ -60,9 +60,6 @@ TICK_S = 1 / 60
 """Playback thread period (viser sends at most ~60 updates per second anyway)."""
 REFRESH_S = 1.0
 """How often the store is polled for other writers' edits."""
-UNDO_OWNERS_KEPT = 10_000
-"""Edits whose reviewer the app remembers for undo: the store's own undo depth (its default
-``max_undo``)."""
 
 
 class TrialLoadError(AddbError):
@@ -139,9 +136,7 @@ class ReviewApp:
         #: Why the review record could not be opened (shown again with every trial loaded).
         self.store_problem: tuple[str, BaseException] | None = None
         self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
-        # each action the store can undo, oldest first, and each it can redo (:class:`_Action`)
-        self._undo_owners: list[_Action] = []
-        self._redo_owners: list[_Action] = []
+        self.actions = ActionHistory()  # who made each edit the store can undo or redo
         self._review_warned: tuple[str, int] | None = None  # (trial, pending frames) the last "Trial reviewed" warning named
         self._review_warned_at = 0.0  # time.monotonic() of that warning
         self.trials: list[str] = []
@@ -317,7 +312,7 @@ class ReviewApp:
             self.store_problem = None
             if self._record_elsewhere():
                 print(f"addb view: {self.paths.subject_dir.name}: {self._record_elsewhere_text()}", file=sys.stderr, flush=True)
-            self._undo_owners, self._redo_owners = [], []  # a new store: a new history
+            self.actions.clear()  # a new store: a new history
         except AnnotationError as exc:
             self.store = None
             self.store_problem = ("The review record cannot be opened; flagging is disabled", exc)
@@ -691,7 +686,7 @@ class ReviewApp:
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
         history = what.split(" (")[0] in ("undo", "redo")
         if not history:
-            self._own_history(edits, what)
+            self.actions.record(edits, what)
         if not edits and history:
             self.panel.saved.content = (
                 "Nothing to undo: the history holds the edits made since this subject was opened "
@@ -908,22 +903,11 @@ class ReviewApp:
         else:
             self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, foot: ed.clear_range(s, e, foot))
 
-    def _own_history(self, edits: list[Edit], what: str) -> None:
-        """Note who made ``edits`` (one action of the reviewer, ``what``: one key or button
-        press, which may save several edits, e.g. Z over three proposal runs) that the store
-        can undo, in the store's order (it keeps one undo history for the whole server:
-        :meth:`history` reads whose turn it is, and undoes the action's edits together)."""
-        kept = [e for e in edits if e.trial is not None and e.changed and e.op not in ("none", "trial_info")]
-        if kept:
-            self._undo_owners.append(_Action(kept[-1].provenance.reviewer, kept[-1].trial, len(kept), what))
-            self._redo_owners.clear()
-        del self._undo_owners[: -UNDO_OWNERS_KEPT]
-
     def history(self, what: str) -> None:
-        """"Undo" or "Redo" the page's reviewer's last edit.
+        """"Undo" or "Redo" the page's reviewer's last action (:mod:`~addb_viewer.app.history`).
 
         The store undoes one edit at a time for the whole server (one history per store,
-        over every trial of the subject), so the last edit may be another reviewer's (on a
+        over every trial of the subject), so the last action may be another reviewer's (on a
         team server) or on another trial than the one shown: then nothing is undone and the
         page says whose it is, or which trial to open (undo never removes another reviewer's
         work, nor frames the reviewer cannot see)."""
@@ -931,34 +915,24 @@ class ReviewApp:
             return
         name = self.reviewer_name(getattr(self._actor, "client", None))
         undo = what == "Undo"
-        owners = self._undo_owners if undo else self._redo_owners
+        action = self.actions.last(undo)
         last = "edit" if undo else "undone edit"
         refused = f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last {last}"
-        if name is not None and owners and owners[-1].reviewer != name:
+        if name is not None and action is not None and action.reviewer != name:
             self.panel.saved.content = (
-                f"{refused} on this subject is {_escape(owners[-1].reviewer)}'s (one history for everyone on this "
+                f"{refused} on this subject is {_escape(action.reviewer)}'s (one history for everyone on this "
                 "server); unflag or flag your frames instead."
             )
             return
         shown = self.trial.trial if self.trial is not None else None
-        if owners and owners[-1].trial != shown:
-            self.panel.saved.content = f"{refused} is on trial {_escape(owners[-1].trial)}: open it to {what.lower()} it."
+        if action is not None and action.trial != shown:
+            self.panel.saved.content = f"{refused} is on trial {_escape(action.trial)}: open it to {what.lower()} it."
             return
-        step = self.store.undo if undo else self.store.redo
-        action = owners[-1] if owners else None
-
-        def run(_ed: TrialEditor, _k: int, _f: str) -> list[Edit]:
-            done = []
-            for _ in range(action.edits if action is not None else 1):  # the action's edits together
-                e = step()
-                if e is None:
-                    break
-                done.append(e)
-            if done and owners:
-                (self._redo_owners if undo else self._undo_owners).append(owners.pop())
-            return done
-
-        self.edit(what.lower() + (f" ({action.what})" if action is not None else ""), run)
+        store = self.store
+        self.edit(
+            what.lower() + (f" ({action.what})" if action is not None else ""),
+            lambda _ed, _k, _f: self.actions.step(store.undo if undo else store.redo, undo),
+        )
 
     # ================================================================== GUI wiring
     @contextlib.contextmanager
@@ -1100,17 +1074,6 @@ class ReviewApp:
             s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
             if self.playback is not None:
                 self.render(self.playback.frame)
-
-
-@dataclass(frozen=True)
-class _Action:
-    """One reviewer action in the undo history: who made it, on which trial, how many of
-    the store's edits it saved (undone and redone together) and what it was."""
-
-    reviewer: str
-    trial: str
-    edits: int
-    what: str
 
 
 def _preferred(trials: list[str]) -> str:
