@@ -189,6 +189,48 @@ def flags_differ_from_fit(mask: BoolArray | None, unobserved: BoolArray, propose
     return int((mask != unobserved).sum())
 
 
+def describe_flags(v: FlagView, *, differ: int = 0, record: str = "") -> str:
+    """The Flags folder's summary of a trial's flags (markdown): frames flagged per foot, the
+    proposals pending, agreed and rejected, and in red what the next solver run does
+    otherwise than the reviewer may think (rejections it ignores, pending proposals it fits
+    as measured: :func:`rejections_ignored`, :func:`pending_replaced`); ``differ`` frames
+    whose flags differ from the fit shown (:func:`flags_differ_from_fit`), ``record`` a
+    sentence naming the review record when it is not in the subject folder."""
+    n_prop = int(v.proposed.sum())
+    no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
+    sentences = [
+        f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right"
+        + (f", {no_foot} without a foot" if no_foot else "") + ")",
+        f"Automatic proposals: {n_prop} frames" + (
+            f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
+            if n_prop else ""),
+    ]  # fmt: skip
+    if v.beyond:
+        sentences.append(f"{v.beyond} flagged frames lie past the end of this trial")
+    ignored = rejections_ignored(v)
+    if ignored:
+        sentences.append(
+            f"<span style='color:#c00'>**{ignored} rejected proposed frames are still left out of the fit**</span>: "
+            "the solver keeps its own choice until the trial has a flag or is marked reviewed; tick "
+            "Trial reviewed to fit them as measured"
+        )
+    pending = pending_replaced(v)
+    if pending:
+        sentences.append(
+            f"<span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
+            "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
+            "(in Reprocess and in the dataset run); accept or reject them first"
+        )
+    if differ:
+        sentences.append(
+            f"<span style='color:#c00'>**The results shown were fitted with other flags**</span> ({differ} frames "
+            "differ): Reprocess to fit these"
+        )
+    if record:
+        sentences.append(record)
+    return ". ".join(sentences) + "."
+
+
 def toggled_foot(current: str | None, foot: str) -> str | None:
     """The foot a frame is flagged for after toggling ``foot`` (None: not flagged).
 

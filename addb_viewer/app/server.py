@@ -33,10 +33,10 @@ from addb_viewer.app.diagnosis import diagnosis_markdown
 from addb_viewer.app.flags import (
     FlagView,
     TrialEditor,
+    describe_flags,
     describe_frame,
     flags_differ_from_fit,
     pending_replaced,
-    rejections_ignored,
 )
 from addb_viewer.app.history import ActionHistory
 from addb_viewer.app.meshes import body_mesh
@@ -734,41 +734,8 @@ class ReviewApp:
         if v is None:
             self.panel.proposal_info.content = "Flags unavailable."
             return
-        n_prop = int(v.proposed.sum())
-        no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
-        sentences = [
-            f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right"
-            + (f", {no_foot} without a foot" if no_foot else "") + ")",
-            f"Automatic proposals: {n_prop} frames" + (
-                f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
-                if n_prop else ""),
-        ]  # fmt: skip
-        if v.beyond:
-            sentences.append(f"{v.beyond} flagged frames lie past the end of this trial")
-        ignored = rejections_ignored(v)
-        if ignored:
-            sentences.append(
-                f"<span style='color:#c00'>**{ignored} rejected proposed frames are still left out of the fit**</span>: "
-                "the solver keeps its own choice until the trial has a flag or is marked reviewed; tick "
-                "Trial reviewed to fit them as measured"
-            )
-        pending = pending_replaced(v)
-        if pending:
-            sentences.append(
-                f"<span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
-                "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
-                "(in Reprocess and in the dataset run); accept or reject them first"
-            )
-        stale = self._flags_since_fit()
-        if stale:
-            sentences.append(
-                f"<span style='color:#c00'>**The results shown were fitted with other flags**</span> ({stale} frames "
-                "differ): Reprocess to fit these"
-            )
-        if self._record_elsewhere():  # not <subject>/annotations.json, where a colleague would look
-            sentences.append(_escape(self._record_elsewhere_text()))
-        text = ". ".join(sentences) + "."
-        self.panel.proposal_info.content = text
+        record = _escape(self._record_elsewhere_text()) if self._record_elsewhere() else ""
+        self.panel.proposal_info.content = describe_flags(v, differ=self._flags_since_fit(), record=record)
 
     def _flags_since_fit(self) -> int:
         """Frames the flags as they are now would fit otherwise than the results shown
