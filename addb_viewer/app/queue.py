@@ -171,14 +171,21 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
 
 
 def _review_state(snapshot: Any | None) -> tuple[str, str | None]:
+    """(review state, who): who marked the trial reviewed (and who edited it since, if
+    anyone: "alice, edited since by bob"), else who edited it last."""
     if snapshot is None:
         return UNREVIEWED, None
-    if snapshot.reviewed:
-        prov = snapshot.reviewed_provenance
-        return REVIEWED, prov.reviewer if prov else None
     edits = [r.provenance for r in (*snapshot.unmeasured_force, *snapshot.excluded)]
     edits += [n.provenance for n in snapshot.notes] + [a.provenance for a in snapshot.activities]
     edits = [e for e in edits if e is not None and e.source not in ("imported",)]
+    if snapshot.reviewed:
+        prov = snapshot.reviewed_provenance
+        if prov is None:
+            return REVIEWED, None
+        later = [e for e in edits if e.timestamp > prov.timestamp]
+        if later:  # the mark may no longer hold: say so beside it
+            return REVIEWED, f"{prov.reviewer}, edited since by {max(later, key=lambda e: e.timestamp).reviewer}"
+        return REVIEWED, prov.reviewer
     if edits or snapshot.reviewed_provenance is not None:
         last = max(edits, key=lambda e: e.timestamp) if edits else snapshot.reviewed_provenance
         return IN_REVIEW, last.reviewer

@@ -95,6 +95,12 @@ def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output
     n_trials = sum(r.trial is not None for r in rows)
     head = queue_markdown(rows).splitlines()[0]
     assert head == f"**5 subjects (1 processing, 1 failed), {n_trials} trials: 1 reviewed**", head
+    # an edit after the trial was marked reviewed is named beside the mark (the mark stays)
+    with AnnotationStore.open(annotations_path(dataset / "lab" / "done", out / "lab" / "done"), reviewer="carol") as s:
+        s.set_unmeasured("walk", [5])
+    done = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/done", "walk"))
+    assert (done.review, done.reviewer) == (REVIEWED, "alice, edited since by carol")
+    assert "reviewed (alice, edited since by carol)" in queue_markdown([done])
     # without a process running, the waiting subject is simply not processed
     assert next(r for r in build_queue(subjects) if r.subject.rel == "lab/waiting").processing == NOT_PROCESSED
 
