@@ -14,6 +14,7 @@ terminal) instead of being lost or stopping the server.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import socket
 import sys
@@ -122,7 +123,7 @@ class ReviewApp:
         self.server = start_viser(host, port, token=self.token, label="addb review", verbose=False)
         self.server.scene.set_up_direction("+y")
         self.server.scene.configure_default_lights(cast_shadow=False)
-        self.panel: ReviewPanel = build_panel(self.server, title=f"addb · {paths.subject_dir.name}")
+        self.panel: ReviewPanel = build_panel(self.server, title=f"addb · {_converted_from(paths.subject_dir) or paths.subject_dir.name}")
         self.settings = SceneSettings()
         self._lock = threading.RLock()
         self._edit_lock = threading.RLock()
@@ -141,6 +142,7 @@ class ReviewApp:
         self._review_warned_at = 0.0  # time.monotonic() of that warning
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
+        self._shown_label = ""
         self.scene: TrialScene | None = None
         self.plots: TrialPlots | None = None
         self.playback: Playback | None = None
@@ -189,10 +191,10 @@ class ReviewApp:
                 self.set_trial_options(_preferred(self.trials))
                 self.load_trial(_preferred(self.trials))
             elif self.process_missing:
-                self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet: processing…")
+                self.set_status(f"**{self._subject_label(self.paths)}** has not been processed yet: processing…")
                 self.jobs.process_subject()
             else:
-                self.set_status(f"**{self.paths.subject_dir.name}** has not been processed yet (see the dataset queue).")
+                self.set_status(f"**{self._subject_label(self.paths)}** has not been processed yet (see the dataset queue).")
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not open the subject", exc)
         finally:
@@ -217,7 +219,7 @@ class ReviewApp:
                     self.store.close()
                 self.store = None
             self.paths = paths
-        self.server.gui.set_panel_label(f"addb · {paths.subject_dir.name}")
+        self.server.gui.set_panel_label(f"addb · {self._subject_label(paths)}")
         self.panel.comparison.content = ""
         self.panel.job_status.content = (  # the cancelled run's own line, with its subject
             f"{before} · {self.panel.job_status.content} (you opened {self._subject_label(paths)})" if running else ""
@@ -229,7 +231,7 @@ class ReviewApp:
             self._open_store()
             self.trials = processed_trials(paths.out_dir) if paths.out_dir.is_dir() else []
             if not self.trials:
-                self.set_status(f"**{paths.subject_dir.name}** has not been processed yet (see the dataset queue).")
+                self.set_status(f"**{self._subject_label(paths)}** has not been processed yet (see the dataset queue).")
                 self._clear_trial_controls()
                 return
             name = trial if trial in self.trials else _preferred(self.trials)
@@ -285,12 +287,13 @@ class ReviewApp:
 
     def _subject_label(self, paths: ReviewPaths) -> str:
         """A subject's name as the reviewer knows it: its place in the dataset queue
-        (``labB/run``), else its folder's name."""
+        (``labB/run``), else the .b3d file it was converted from (``results.b3d``; its
+        folder in the cache is named with a digest), else its folder's name."""
         if self.workbench is not None:
             for s in self.workbench.subjects:
                 if Path(s.subject_dir).resolve() == Path(paths.subject_dir).resolve():
                     return s.rel
-        return paths.subject_dir.name
+        return _converted_from(paths.subject_dir) or paths.subject_dir.name
 
     def after_processing(self) -> None:
         """Called once the first processing run has written the output folder."""
@@ -367,9 +370,11 @@ class ReviewApp:
         editor, record_problem = self._editor_for(trial)
         view = editor.view() if editor is not None else None
         self._forget_refusal()
+        label = self._subject_label(self.paths)
         with self._lock:
             self._drop_trial()
             self.trial, self.editor, self.view = trial, editor, view
+            self._shown_label = label  # the status line's subject name (read at every frame)
             self.hicks = hicks_exceeded(trial)
             self.rms = trial.marker_rms_per_frame
             self.playback = Playback(trial.n_frames, trial.rate_hz or 100.0, frame=frame)
@@ -498,7 +503,7 @@ class ReviewApp:
         flag = describe_frame(self.view, k, t.proposal_reasons) if self.view is not None else "flags unavailable"
         rms = self.rms[k] if self.rms is not None else np.nan
         parts = [
-            f"**{t.subject}** · **{t.trial}** · frame {k} / {t.n_frames - 1} · t = {t.time[k]:.2f} s",
+            f"**{self._shown_label}** · **{t.trial}** · frame {k} / {t.n_frames - 1} · t = {t.time[k]:.2f} s",
             f"marker RMS {100 * rms:.1f} cm" if np.isfinite(rms) else "no markers seen",
         ]
         if t.has_dynamics:
@@ -1041,6 +1046,18 @@ class ReviewApp:
             s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
             if self.playback is not None:
                 self.render(self.playback.frame)
+
+
+def _converted_from(subject_dir: Path) -> str | None:
+    """The name of the .b3d file a subject folder was converted from (``addb convert``
+    writes its source beside the trials), None for other subject folders."""
+    from solver.io.b3d_convert import SOURCE_JSON
+
+    try:
+        source = json.loads((Path(subject_dir) / SOURCE_JSON).read_text(encoding="utf-8"))["b3d"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return Path(str(source)).name or None
 
 
 def _preferred(trials: list[str]) -> str:

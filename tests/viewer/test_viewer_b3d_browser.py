@@ -36,7 +36,9 @@ def test_b3d_file_opens_in_the_review_app_with_its_trials(tmp_path: Path) -> Non
             try:
                 page = browser.new_page(viewport={"width": 1600, "height": 1000})
                 page.goto(view.url)
-                page.get_by_text(re.compile(r"walking\d_segment_0 · frame \d+ / \d+")).wait_for(timeout=120_000)
+                # named by its file, not its cache folder (published-<digest>)
+                page.get_by_text(re.compile(r"published\.b3d · walking\d_segment_0 · frame \d+ / \d+")).wait_for(timeout=120_000)
+                assert page.get_by_text("addb · published.b3d", exact=True).count() == 1
                 page.get_by_label("Trial", exact=True).click()
                 names = {page.get_by_role("option").nth(i).inner_text() for i in range(page.get_by_role("option").count())}
                 assert {"walking1_segment_0", "walking2_segment_0"} <= names, names
