@@ -183,7 +183,9 @@ class Chart:
         vals = [ln.values for ln in lines if np.isfinite(ln.values).any()]
         scales["y"] = {"auto": False, "range": _range(vals, floor_zero=True)}
         # ticks at least 15 px apart (uPlot's default 30 px left a 90 px chart one tick, "0")
-        axes: list[dict] = [{}, {"scale": "y", "label": unit, "side": 3, "size": 50, "space": 15}]
+        # the time axis 30 px high (uPlot's 50 px left a 90 px chart a 40 px plot, too short
+        # for the y axis' label "N, N·m")
+        axes: list[dict] = [{"size": 30}, {"scale": "y", "label": unit, "side": 3, "size": 50, "space": 15}]
         for ln in lines:
             series.append(
                 {
@@ -210,6 +212,7 @@ class Chart:
             legend={"show": False},  # the series are named in the title (space beside the 3D view)
             height=height,
             aspect=2.0,
+            padding=(8, 24, 0, 0),  # room above the plot for the top tick's label (viser's default 0 cut it)
         )
 
     def arrays(self) -> tuple[FloatArray, ...]:
