@@ -593,7 +593,12 @@ class ReviewApp:
                 "Over Hicks": self.hicks,
             }
             mask = masks.get(what)
-            target = None if mask is None else next_run_start(mask, self.playback.frame)
+            here = self.playback.frame
+            target = None if mask is None else next_run_start(mask, here)
+        names = {"Flagged": "flagged frames", "Proposal": "pending proposals", "Over Hicks": "frames over Hicks' limits"}
+        if target is not None and target == here:  # the search went round to the run it started in
+            self.panel.saved.content = f"Frame {here} starts the only run of {names.get(what, what.lower())} in this trial."
+            return
         if target is None:
             self.panel.saved.content = {
                 "Flagged": "No flagged frames in this trial.",
@@ -601,6 +606,7 @@ class ReviewApp:
                 "Over Hicks": "No frame with measured force over Hicks' per-frame limits in this trial.",
             }.get(what, f"No {what.lower()} frames in this trial.")
             return
+        self._forget_refusal()  # an earlier "No … in this trial" answered another press
         with self._lock:
             self.playback.pause(time.monotonic())
         self.seek(target)

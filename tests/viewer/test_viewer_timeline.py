@@ -236,3 +236,18 @@ def test_flags_edited_since_the_fit_are_said_to_differ_from_it(dyn_paths, make_a
     assert np.array_equal(app.view.flagged, app.trial.proposed)
     assert np.array_equal(app.trial.unobserved, app.trial.proposed)  # the demo's fit left out its proposals
     assert "fitted with other flags" not in app.panel.proposal_info.content
+
+
+def test_a_jump_from_the_start_of_the_only_run_says_so(dyn_paths, make_app) -> None:
+    """N with one flagged run, from its first frame: the search goes round to that run; it
+    did nothing and said nothing (the last message stood)."""
+    app = make_app(dyn_paths)
+    app.select(30, 40)
+    app.selection_edit("Flag")
+    app.seek(30)
+    app.jump("Flagged")
+    assert app.playback.frame == 30
+    assert app.panel.saved.content == "Frame 30 starts the only run of flagged frames in this trial."
+    app.seek(50)
+    app.jump("Flagged")  # from elsewhere: to the run, and the line above is taken back
+    assert app.playback.frame == 30 and not app.panel.saved.content.startswith("Frame 30")
