@@ -296,10 +296,10 @@ class TrialEditor:
 
     def clear_range(self, start: int, stop: int, foot: str = "both") -> list[Edit]:
         """Clear the unmeasured-force flags of frames ``[start, stop)``: every flag with
-        ``foot`` "both", else ``foot``'s ("left" or "right") as :func:`toggled_foot` takes
-        a foot off a frame: a frame flagged for both feet keeps the other foot's flag, a
-        flag of this foot or without a foot goes, the other foot's flags stay. Returns the
-        edits made (one action: one undo step in the app; empty when nothing changed).
+        ``foot`` "both", else ``foot``'s ("left" or "right"): a frame flagged for both feet
+        keeps the other foot's flag, a flag of this foot goes, the other foot's flags and
+        flags without a foot (accepted proposals) stay (Foot "both" clears those). Returns
+        the edits made (one action: one undo step in the app; empty when nothing changed).
 
         Raises
         ------
@@ -313,7 +313,7 @@ class TrialEditor:
             return [self.store.set_unmeasured(self.trial, rng, False)]
         feet = self.view().feet
         other = "left" if foot == "right" else "right"
-        cleared = [f for f in rng if feet[f] in ("", foot)]
+        cleared = [f for f in rng if feet[f] == foot]
         kept_other = [f for f in rng if feet[f] == "both"]
         edits = []
         if cleared:

@@ -876,10 +876,11 @@ class ReviewApp:
 
     def _flag_frames(self, flag: bool, s: int, e: int) -> None:
         """Flag frames ``[s, e)`` for the selected foot, or clear their flags."""
+        feet = _feet(self.panel.foot.value)
         if flag:
-            self.edit(f"flag frames {s}–{e - 1}", lambda ed, _k, foot: ed.flag_range(s, e, foot))
+            self.edit(f"flag frames {s}–{e - 1} ({feet})", lambda ed, _k, foot: ed.flag_range(s, e, foot))
         else:
-            self.edit(f"unflag frames {s}–{e - 1}", lambda ed, _k, foot: ed.clear_range(s, e, foot))
+            self.edit(f"unflag frames {s}–{e - 1} ({feet})", lambda ed, _k, foot: ed.clear_range(s, e, foot))
 
     def history(self, what: str) -> None:
         """"Undo" or "Redo" the page's reviewer's last action (:mod:`~addb_viewer.app.history`).
@@ -1031,7 +1032,8 @@ class ReviewApp:
 
     def toggle_flag(self) -> None:
         """Toggle the selected foot's flag on the current frame."""
-        self.edit("toggle flag", lambda ed, k, foot: ed.toggle(k, foot))
+        k = self.playback.frame if self.playback is not None else 0
+        self.edit(f"toggle flag at frame {k} ({_feet(self.panel.foot.value)})", lambda ed, k, foot: ed.toggle(k, foot))
 
     def _proposal(self, what: str, *, here: bool) -> None:
         accept = what.startswith("Accept")
@@ -1052,6 +1054,11 @@ class ReviewApp:
             s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
             if self.playback is not None:
                 self.render(self.playback.frame)
+
+
+def _feet(foot: str) -> str:
+    """The Flags folder's Foot choice as the edits' line names it."""
+    return "both feet" if foot == "both" else f"{foot} foot"
 
 
 def _converted_from(subject_dir: Path) -> str | None:

@@ -58,16 +58,16 @@ def test_toggle_and_ranges_per_foot(editor: TrialEditor) -> None:
 
 
 def test_unflagging_a_range_for_one_foot_keeps_the_other_foots_flags(editor: TrialEditor) -> None:
-    """X with Foot "right" takes the right foot off the range as F does frame by frame: "both"
-    becomes "left", right and footless flags go, left flags stay (X cleared every foot's
-    flags while G flagged the chosen foot's); Foot "both" clears them all."""
+    """X with Foot "right" takes the right foot off the range: "both" becomes "left", right
+    flags go, left flags and flags without a foot (accepted proposals) stay (X cleared every
+    foot's flags while G flagged the chosen foot's); Foot "both" clears them all."""
     editor.flag_range(20, 41, "left")
     editor.flag_range(30, 51, "right")
     editor.accept(12)  # the proposal run 10-19 accepted: flags without a foot
     edits = editor.clear_range(15, 46, "right")
     assert len(edits) == 2
     v = editor.view()
-    assert [v.feet[k] for k in (12, 15, 25, 35, 45, 47)] == ["", None, "left", "left", None, "right"]
+    assert [v.feet[k] for k in (12, 15, 25, 35, 45, 47)] == ["", "", "left", "left", None, "right"]
     assert editor.store.ranges("walk", foot="left") == [(20, 41)] and editor.store.ranges("walk", foot="right") == [(46, 51)]
     assert editor.clear_range(60, 70, "left") == []  # nothing flagged there: no edit
     editor.clear_range(0, T, "both")

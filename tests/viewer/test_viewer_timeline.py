@@ -105,6 +105,7 @@ def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) 
     app.panel.foot.value = "left"
     app.selection_edit("Flag")
     assert np.flatnonzero(app.store.mask("walk", app.trial.n_frames)).tolist() == list(range(20, 41))
+    assert app.panel.saved.content.startswith("✓ saved: flag frames 20–40 (left foot) on walk")  # the foot named
     assert np.flatnonzero(app.tracks.masks["flag left"]).tolist() == list(range(20, 41))
     assert not app.tracks.masks["flag right"].any()
     app.playback.seek(200, now=0.0)
