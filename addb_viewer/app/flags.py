@@ -189,13 +189,26 @@ def flags_differ_from_fit(mask: BoolArray | None, unobserved: BoolArray, propose
     return int((mask != unobserved).sum())
 
 
-def describe_flags(v: FlagView, *, differ: int = 0, record: str = "") -> str:
+def unproposed_replaced(view: FlagView, unobserved: BoolArray, proposed: BoolArray, reasons: list[str]) -> int:
+    """Frames the solver left out of the fit shown without proposing them (two feet on one
+    plate, plate force with no foot on the plate: :mod:`solver.dynamics.stage`) that the
+    next run fits as measured because the reviewer's flags replace the solver's choice
+    (:func:`flags_replace_proposals`) and do not cover them; 0 when the fit shown already
+    took the reviewer's flags (``reasons``: results.json's ``unobserved_reasons``)."""
+    if not flags_replace_proposals(view) or FLAGGED_REASON in reasons or unobserved.shape != view.flagged.shape:
+        return 0
+    return int((unobserved & ~proposed & ~view.flagged).sum())
+
+
+def describe_flags(v: FlagView, *, differ: int = 0, unproposed: int = 0, record: str = "") -> str:
     """The Flags folder's summary of a trial's flags (markdown): frames flagged per foot, the
     proposals pending, agreed and rejected, and in red what the next solver run does
     otherwise than the reviewer may think (rejections it ignores, pending proposals it fits
     as measured: :func:`rejections_ignored`, :func:`pending_replaced`); ``differ`` frames
-    whose flags differ from the fit shown (:func:`flags_differ_from_fit`), ``record`` a
-    sentence naming the review record when it is not in the subject folder."""
+    whose flags differ from the fit shown (:func:`flags_differ_from_fit`), ``unproposed``
+    frames left out without a proposal that the next run fits as measured
+    (:func:`unproposed_replaced`), ``record`` a sentence naming the review record when it
+    is not in the subject folder."""
     n_prop = int(v.proposed.sum())
     no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
     sentences = [
@@ -220,6 +233,12 @@ def describe_flags(v: FlagView, *, differ: int = 0, record: str = "") -> str:
             f"<span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
             "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
             "(in Reprocess and in the dataset run); accept or reject them first"
+        )
+    if unproposed:
+        sentences.append(
+            f"<span style='color:#c00'>**{unproposed} more frames the solver left out without proposing them will be "
+            "fitted as measured**</span> (two feet on one plate, or plate force with no foot on it: the left out "
+            "track); flag them to keep them out"
         )
     if differ:
         sentences.append(

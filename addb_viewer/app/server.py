@@ -38,6 +38,7 @@ from addb_viewer.app.flags import (
     describe_frame,
     flags_differ_from_fit,
     pending_replaced,
+    unproposed_replaced,
 )
 from addb_viewer.app.history import ActionHistory
 from addb_viewer.app.meshes import body_mesh
@@ -746,7 +747,10 @@ class ReviewApp:
             self.panel.proposal_info.content = "Flags unavailable."
             return
         record = _escape(self._record_elsewhere_text()) if self._record_elsewhere() else ""
-        self.panel.proposal_info.content = describe_flags(v, differ=self._flags_since_fit(), record=record)
+        t = self.trial
+        unproposed = unproposed_replaced(v, t.unobserved, t.proposed, list(t.metrics.get("unobserved_reasons") or [])) if (
+            t is not None and t.has_dynamics) else 0  # fmt: skip
+        self.panel.proposal_info.content = describe_flags(v, differ=self._flags_since_fit(), unproposed=unproposed, record=record)
 
     def _flags_since_fit(self) -> int:
         """Frames the flags as they are now would fit otherwise than the results shown

@@ -207,3 +207,22 @@ def test_a_rejected_proposal_flagged_by_hand_is_agreed_and_rejected_again_once_u
     assert not v.pending[10:20].any()
     editor.clear_range(10, 12)
     assert editor.view().rejected[10:20].all()
+
+
+def test_frames_left_out_without_a_proposal_are_counted_once_flags_replace_the_solvers_choice(editor: TrialEditor) -> None:
+    """The solver leaves out frames it does not propose (two feet on one plate); once the
+    reviewer's flags replace its choice they are fitted as measured unless flagged, and the
+    Flags folder counts them (a reviewer saw 8 such frames fitted without any word)."""
+    from addb_viewer.app.flags import FLAGGED_REASON, describe_flags, unproposed_replaced
+
+    unobserved = editor.proposed.copy()
+    unobserved[[50, 51]] = True  # left out, not proposed
+    reasons = ["two feet on one plate"]
+    assert unproposed_replaced(editor.view(), unobserved, editor.proposed, reasons) == 0  # the solver's choice stands
+    editor.toggle(5, "left")
+    v = editor.view()
+    assert unproposed_replaced(v, unobserved, editor.proposed, reasons) == 2
+    assert "2 more frames the solver left out without proposing them will be fitted as measured" in describe_flags(v, unproposed=2)
+    editor.flag_range(50, 51, "both")
+    assert unproposed_replaced(editor.view(), unobserved, editor.proposed, reasons) == 1
+    assert unproposed_replaced(editor.view(), unobserved, editor.proposed, [FLAGGED_REASON]) == 0  # the fit took flags
