@@ -171,9 +171,11 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         saved = gui.add_markdown(NO_EDITS)
     with gui.add_folder("Reprocess"):
         h["reprocess"] = gui.add_button("Reprocess", hint="run the solver on this trial with the current flags")
-        h["progress"] = gui.add_progress_bar(0.0, animated=True, visible=False)
-        h["cancel"] = gui.add_button("Cancel", disabled=True, color="red")
+        # its answer right under the button (a warning below a Cancel row went below the fold
+        # of a 1366 x 768 window); Cancel only while a run goes on
         h["job_status"] = gui.add_markdown("")
+        h["progress"] = gui.add_progress_bar(0.0, animated=True, visible=False)
+        h["cancel"] = gui.add_button("Cancel", disabled=True, color="red", visible=False)
         h["comparison"] = gui.add_markdown("")
     h["diagnosis_folder"] = gui.add_folder("Diagnosis", expand_by_default=False)
     with h["diagnosis_folder"]:

@@ -289,6 +289,7 @@ class Reprocessor:
             p.progress.value = 0.0
             p.progress.visible = True
             p.cancel.disabled = False
+            p.cancel.visible = True
             p.reprocess.disabled = True
             p.job_status.content = f"{label}: starting…"
             p.comparison.content = ""
@@ -339,6 +340,7 @@ class Reprocessor:
         finally:
             p.progress.visible = False
             p.cancel.disabled = True
+            p.cancel.visible = False
             p.reprocess.disabled = False
             self.last_result = result
             if self.job is not None:

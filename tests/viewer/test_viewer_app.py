@@ -134,13 +134,14 @@ def test_failing_solver_run_keeps_the_previous_result(demo_paths, make_app, tmp_
     assert app.trial is before and app.playback.frame == 77
     assert (demo_paths.out_dir / "walk" / "trial.npz").is_file()
     assert not app.panel.progress.visible and app.panel.cancel.disabled and not app.panel.reprocess.disabled
+    assert not app.panel.cancel.visible  # shown only while a run goes on
 
 
 def test_playback_runs_during_a_solver_run_which_can_be_cancelled(demo_paths, make_app) -> None:
     app = make_app(demo_paths)
     before = app.trial
     app.jobs.reprocess()
-    assert app.jobs.running and not app.panel.cancel.disabled and app.panel.progress.visible
+    assert app.jobs.running and not app.panel.cancel.disabled and app.panel.progress.visible and app.panel.cancel.visible
     start = app.playback.frame
     app.toggle_play()
     wait_for(lambda: app.playback.frame >= start + 20, timeout=30, what="playback to advance")
