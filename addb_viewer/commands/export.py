@@ -147,7 +147,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "subject output folder REL/NAME becomes OUT/REL/NAME.b3d."
         ),
     )
-    p.add_argument("subject", help="subject folder, processed output folder, or (b3d) dataset output tree")
+    p.add_argument(
+        "subject",
+        help="subject folder (mcap, rrd, b3d); for b3d also a processed output folder or a dataset output tree",
+    )
     p.add_argument("--trial", help="trial name (mcap, rrd)")
     p.add_argument(
         "--format",
