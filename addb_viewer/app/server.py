@@ -711,7 +711,9 @@ class ReviewApp:
             e = edits[-1]
             when = datetime.now().strftime("%H:%M:%S")
             on = f" on {e.trial}" if e.trial else ""  # the message stays when the reviewer picks another trial
-            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, edit #{e.seq}, {when}"
+            # no record sequence number: it counts every entry of the record (trial information,
+            # other reviewers' edits), so a reviewer's first edit read "#2" and the next "#6"
+            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}"
         self.refresh_flags()
         pending = pending_replaced(self.view) if edits and self.view is not None else 0
         if pending:  # the edit made (or left) the trial's flags replace the solver's proposals
