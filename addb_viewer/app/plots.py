@@ -311,7 +311,8 @@ class TrialPlots:
         t = trial.time
         self.gui, self.trial, self.container = gui, trial, container
         no_plates = "no force plates" if not trial.plates else ""
-        self.no_dyn = "" if trial.has_dynamics else "no dynamics yet"
+        # a trial without plates never has dynamics: its charts say why, not "yet"
+        self.no_dyn = "" if trial.has_dynamics else ("kinematics only" if not trial.plates else "no dynamics yet")
         h = CHART_HEIGHT
         self.charts = [
             Chart(gui, "Vertical GRF: left · right · m(a+g) dashed", t, grf_lines(trial), "N", note=no_plates, height=h),

@@ -213,6 +213,8 @@ def test_a_trial_without_plates_is_said_to_be_kinematics_only(dyn_paths, make_ap
     app = make_app(dyn_paths)
     app.load_trial("static")
     assert "no force plates in this trial: kinematics only" in app.panel.status.content, app.panel.status.content
+    titles = [c.handle.title for c in app.plots.charts]
+    assert not any("no dynamics yet" in x for x in titles) and any("kinematics only" in x for x in titles), titles
     app.load_trial("walk")
     assert "residual" in app.panel.status.content and "no force plates" not in app.panel.status.content
 
