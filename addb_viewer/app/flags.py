@@ -211,9 +211,10 @@ def describe_flags(v: FlagView, *, differ: int = 0, unproposed: int = 0, record:
     is not in the subject folder."""
     n_prop = int(v.proposed.sum())
     no_foot = int((v.flagged & ~v.left & ~v.right).sum())  # accepted proposals, flags without a foot
+    both = int((v.left & v.right).sum())  # counted once, not under left and right (the parts add up)
     sentences = [
-        f"{int(v.flagged.sum())} frames flagged ({int(v.left.sum())} left, {int(v.right.sum())} right"
-        + (f", {no_foot} without a foot" if no_foot else "") + ")",
+        f"{int(v.flagged.sum())} frames flagged ({int((v.left & ~v.right).sum())} left, {int((v.right & ~v.left).sum())} right"
+        + (f", {both} both feet" if both else "") + (f", {no_foot} without a foot" if no_foot else "") + ")",
         f"Automatic proposals: {n_prop} frames" + (
             f" — {int(v.pending.sum())} pending, {int(v.agreed.sum())} accepted or flagged, {int(v.rejected.sum())} rejected"
             if n_prop else ""),

@@ -160,11 +160,16 @@ def track_runs(data: TrackData, reasons: tuple[str, ...] = ()) -> list[tuple[str
             for value, state, c in ((1, "pending", color), (2, "accepted", ACCEPTED), (3, "rejected", REJECTED)):
                 for s, e in true_runs(data.proposal_state == value):
                     reason = reasons[s] if s < len(reasons) and reasons[s] else "no reason given"
-                    out.append((name, s, e, c, f"proposal ({state}), frames {s}–{e - 1}: {reason}"))
+                    out.append((name, s, e, c, f"proposal ({state}), {frames_text(s, e)}: {reason}"))
             continue
         for s, e in true_runs(data.masks[name]):
-            out.append((name, s, e, color, f"{name}, frames {s}–{e - 1}"))
+            out.append((name, s, e, color, f"{name}, {frames_text(s, e)}"))
     return out
+
+
+def frames_text(start: int, stop: int) -> str:
+    """Frames ``[start, stop)`` as a tooltip names them: "frames 20–40", or "frame 6"."""
+    return f"frame {start}" if stop - start == 1 else f"frames {start}–{stop - 1}"
 
 
 def timeline_html(data: TrackData, *, reasons: tuple[str, ...] = (), frame: int | None = None,
@@ -196,7 +201,7 @@ def timeline_html(data: TrackData, *, reasons: tuple[str, ...] = (), frame: int 
     parts.append(f"</div><div class='addb-timeline' style='position:relative;flex-grow:1;height:{height}px'>")
     if selection is not None:
         s, e = selection
-        parts.append(f"<div class='sel' title='selected: frames {s}–{e - 1}' style='position:absolute;left:{_pct(s / n)};"
+        parts.append(f"<div class='sel' title='selected: {frames_text(s, e)}' style='position:absolute;left:{_pct(s / n)};"
                      f"width:{_pct((e - s) / n)};top:0;bottom:0;background:rgb{SELECTION}'></div>")  # fmt: skip
     for r, name in enumerate(TRACKS):
         parts.append(f"<div style='position:absolute;left:0;right:0;top:{GAP_PX + r * row}px;height:{ROW_PX}px;"

@@ -85,6 +85,10 @@ def test_flagging_a_range_for_one_foot_keeps_the_other_foots_flags(editor: Trial
     v = editor.view()
     assert [v.feet[k] for k in (25, 30, 40, 45)] == ["left", "both", "both", "right"]
     assert editor.store.ranges("walk", foot="left") == [(20, 41)] and editor.store.ranges("walk", foot="right") == [(30, 51)]
+    from addb_viewer.app.flags import describe_flags
+
+    # the parts add up to the whole (frames for both feet were counted under left and right)
+    assert describe_flags(v).startswith("31 frames flagged (10 left, 10 right, 11 both feet)")
     editor.flag_range(35, 38, "left")  # a frame flagged for both stays both
     assert [editor.view().feet[k] for k in (34, 35, 37, 38)] == ["both"] * 4
     editor.store.undo()

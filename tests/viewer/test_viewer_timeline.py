@@ -79,6 +79,7 @@ def test_strip_places_runs_playhead_and_selection_by_frame_with_tooltips() -> No
     state[300:310] = 2
     masks = {name: np.zeros(n, bool) for name in TRACKS}
     masks["flag left"][1000:1500] = True
+    masks["flag right"][6] = True  # one frame: "frame 6", not "frames 6–6"
     masks["proposal"] = state > 0
     reasons = tuple("calcn_l in contact with no plate force" if 100 <= k < 200 else "" for k in range(n))
     text = timeline_html(TrackData(masks, state), reasons=reasons, frame=1999, selection=(40, 61))
@@ -86,6 +87,7 @@ def test_strip_places_runs_playhead_and_selection_by_frame_with_tooltips() -> No
     flag = [b for b in blocks if b["track"] == "flag left"]
     assert len(flag) == 1 and flag[0]["left"] == pytest.approx(50.0) and flag[0]["width"] == pytest.approx(25.0)
     assert flag[0]["title"] == "flag left, frames 1000–1499"
+    assert [b["title"] for b in blocks if b["track"] == "flag right"] == ["flag right, frame 6"]
     props = {b["title"] for b in blocks if b["track"] == "proposal"}
     assert props == {"proposal (pending), frames 100–199: calcn_l in contact with no plate force",
                      "proposal (accepted), frames 300–309: no reason given"}  # fmt: skip
@@ -94,7 +96,7 @@ def test_strip_places_runs_playhead_and_selection_by_frame_with_tooltips() -> No
     head = next(b for b in blocks if b["kind"] == "playhead")
     assert head["left"] == pytest.approx(100 * 1999.5 / 2000) and head["title"] == "frame 1999"
     assert all(name in text for name in TRACKS)  # every track is labelled
-    assert not [b for b in blocks if b["track"] not in (None, "flag left", "proposal")]
+    assert not [b for b in blocks if b["track"] not in (None, "flag left", "flag right", "proposal")]
 
 
 def test_selection_edits_write_exactly_the_selected_frames(dyn_paths, make_app) -> None:
