@@ -277,10 +277,10 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
     running = running or {}
     out: list[QueueRow] = []
     for subject in subjects:
-        if subject.rel in running:
+        state, detail, rows = _rows_of_output(subject)
+        if subject.rel in running and (state != PROCESSED or not rows):
             out.append(QueueRow(subject, None, PROCESSING, running[subject.rel]))
             continue
-        state, detail, rows = _rows_of_output(subject)
         if not rows:
             out.append(QueueRow(subject, None, state, detail))
             continue
@@ -288,8 +288,11 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
         for r in rows:
             snap = snaps.get(r["trial"]) if snaps is not None else None
             review, reviewer = _review_state(snap) if snaps is not None else (RECORD_UNREADABLE, None)
+            # a subject processed again keeps its trials, reviews and figures (its earlier
+            # output stays until the new one is in place), marked as processing
+            processing = PROCESSING if subject.rel in running else PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY
             out.append(QueueRow(
-                subject, r["trial"], PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY, "", review, reviewer,
+                subject, r["trial"], processing, running.get(subject.rel, ""), review, reviewer,
                 _pending(r, snap) if snaps is not None else None, int(r.get("frames") or 0), int(r.get("measured_frames") or 0),
                 r.get("marker_rms_m"), r.get("hicks_linear_ok"), r.get("hicks_angular_ok"),
             ))  # fmt: skip

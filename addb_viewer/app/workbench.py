@@ -67,8 +67,8 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     RMS columns: a state other than "processed" follows the row's name instead."""
     n_trials = sum(r.trial is not None for r in rows)
     done = sum(r.review == REVIEWED for r in rows if r.trial is not None)
-    waiting = sum(r.processing == PROCESSING for r in rows)
-    failed = sum(r.processing == FAILED for r in rows)
+    waiting = len({r.subject.rel for r in rows if r.processing == PROCESSING})  # subjects (one processed again keeps its trial rows)
+    failed = len({r.subject.rel for r in rows if r.processing == FAILED})
     # processing and failed count subjects (they have no trial rows), reviewed counts trials
     states = [f"{n} {what}" for n, what in ((waiting, "processing"), (failed, "failed")) if n]
     head = f"**{len({r.subject.rel for r in rows})} subjects" + (f" ({', '.join(states)})" if states else "")

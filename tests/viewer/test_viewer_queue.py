@@ -101,6 +101,15 @@ def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output
     done = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/done", "walk"))
     assert (done.review, done.reviewer) == (REVIEWED, "alice, edited since by carol")
     assert "reviewed (alice, edited since by carol)" in queue_markdown([done])
+    # a subject processed again keeps its trials, review states and figures, marked as
+    # processing (they collapsed into one row: Open lost the trial on screen, the reviewed
+    # count dropped); the summary counts it once
+    again = build_queue(subjects, running={"lab/done": "40 %: inverse kinematics"})
+    done_rows = {r.trial: r for r in again if r.subject.rel == "lab/done"}
+    assert set(done_rows) == {"walk", "static"} and all(r.processing == PROCESSING for r in done_rows.values())
+    assert done_rows["walk"].review == REVIEWED and done_rows["walk"].marker_rms_m == by[("lab/done", "walk")].marker_rms_m
+    assert "processing: 40 %: inverse kinematics" in queue_markdown(again)
+    assert queue_markdown(again).splitlines()[0].startswith("**5 subjects (1 processing, 1 failed)")
     # without a process running, the waiting subject is simply not processed
     assert next(r for r in build_queue(subjects) if r.subject.rel == "lab/waiting").processing == NOT_PROCESSED
 
