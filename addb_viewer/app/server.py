@@ -60,6 +60,10 @@ PLOT_INTERVAL_S = 0.25
 """Least time between two chart cursor updates while playing (they re-send the data)."""
 TICK_S = 1 / 60
 """Playback thread period (viser sends at most ~60 updates per second anyway)."""
+STATUS_MIN_LINES = 6
+"""Lines the status line keeps room for (its longest frames' text at the panel's width)."""
+STATUS_LINE_EM = 1.55
+"""Height of one line of the panel's text, em (viser's markdown: 22.9 px at 14.8 px)."""
 REFRESH_S = 1.0
 """How often the store is polled for other writers' edits."""
 
@@ -518,7 +522,11 @@ class ReviewApp:
             parts.append("no force plates in this trial: kinematics only (no residuals)")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")
-        return " · ".join(parts[:2]) + "<br>" + parts[2] + "<br>" + flag
+        # kept STATUS_MIN_LINES lines high: it wraps to four to six lines from frame to frame,
+        # and the folders below jumped up and down during playback (blank lines around the
+        # text, so that it is read as markdown inside the block)
+        text = " · ".join(parts[:2]) + "<br>" + parts[2] + "<br>" + flag
+        return f"<div style='min-height:{STATUS_MIN_LINES * STATUS_LINE_EM:.2f}em'>\n\n{text}\n\n</div>"
 
     def set_status(self, text: str) -> None:
         """Replace the status line at the top of the panel."""
