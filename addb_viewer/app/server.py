@@ -723,6 +723,16 @@ class ReviewApp:
             # other reviewers' edits), so a reviewer's first edit read "#2" and the next "#6"
             self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}"
         self.refresh_flags()
+        damaged = self._damaged_record() if edits else None
+        if damaged is not None:  # saved in the journal, but no other reader sees it
+            self.panel.saved.content = f"✓ saved in the record's journal only: {what} (see the error above)"
+            record = self.paths.annotations
+            self.show_error(
+                "The review record file is damaged: addb process, addb diagnose and the dataset queue cannot read it",
+                f"{record}: {damaged}. Every edit is kept in its journal ({record.with_suffix('.journal')}). Stop addb "
+                f"view, then rebuild the file from the journal: python -c \"from annotations import AnnotationStore; "
+                f"AnnotationStore.recover('{record}')\"",
+            )
         pending = pending_replaced(self.view) if edits and self.view is not None else 0
         if pending:  # the edit made (or left) the trial's flags replace the solver's proposals
             self.panel.saved.content += (
@@ -776,6 +786,18 @@ class ReviewApp:
         except (AnnotationError, AddbError):
             return 0
         return flags_differ_from_fit(mask, t.unobserved, t.proposed, list(t.metrics.get("unobserved_reasons") or []))
+
+    def _damaged_record(self) -> str | None:
+        """Why the review record file does not read as JSON (another hand or tool damaged
+        it while the app runs: the store keeps saving in its journal), None when it reads
+        or does not exist yet."""
+        try:
+            json.loads(self.paths.annotations.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError) as exc:
+            return f"{type(exc).__name__}: {exc}"
+        return None
 
     def _record_elsewhere(self) -> bool:
         """Whether the review record is outside the subject folder (a read-only folder, or

@@ -269,3 +269,26 @@ def test_cli_sigterm_while_processing_stops_the_solver_too(tmp_path: Path) -> No
             proc.wait()
         for pid in _processes_mentioning(str(tmp_path / ".fresh_out.jobs")):  # this test's solver child
             os.kill(pid, signal.SIGKILL)
+
+
+def test_a_record_damaged_while_the_app_runs_is_said_at_the_next_edit(demo_paths, make_app) -> None:
+    """The record file cut short by another hand while the app runs: the edit is saved in
+    the journal, and the page says the file is damaged and how to rebuild it (it said only
+    "✓ saved" while the dataset queue called the record unreadable); the rebuilt file holds
+    the edit."""
+    from annotations import AnnotationStore
+
+    app = make_app(demo_paths)
+    app.toggle_flag()
+    record = app.paths.annotations
+    text = record.read_text()
+    record.write_text(text[: len(text) // 2])
+    app.seek(10)
+    app.toggle_flag()
+    assert app.panel.saved.content.startswith("✓ saved in the record's journal only: toggle flag at frame 10")
+    error = app.panel.error.content
+    assert app.panel.error.visible and "The review record file is damaged" in error and "AnnotationStore.recover(" in error, error
+    app.stop()
+    AnnotationStore.recover(record)
+    with AnnotationStore.open(record, reviewer="checker") as disk:
+        assert disk.mask("walk", app.trial.n_frames)[[0, 10]].all()
