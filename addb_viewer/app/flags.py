@@ -243,8 +243,8 @@ def describe_flags(v: FlagView, *, differ: int = 0, unproposed: int = 0, record:
         )
     if differ:
         sentences.append(
-            f"<span style='color:#c00'>**The results shown were fitted with other flags**</span> ({differ} frames "
-            "differ): Reprocess to fit these"
+            f"<span style='color:#c00'>**The results shown were fitted with other flags**</span> ({differ} "
+            f"frame{'s differ' if differ != 1 else ' differs'}): Reprocess to fit these"
         )
     if record:
         sentences.append(record)

@@ -50,7 +50,7 @@ from addb_viewer.app.reprocess import CONFIRM_AFTER_S, Reprocessor
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
-from addb_viewer.app.timeline import TrackData, timeline_html, track_data
+from addb_viewer.app.timeline import TrackData, frames_text, timeline_html, track_data
 from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
 from solver.errors import AddbError
@@ -377,6 +377,10 @@ class ReviewApp:
         self._forget_refusal()
         label = self._subject_label(self.paths)
         with self._lock:
+            # the same trial loaded again (its output rewritten by a Reprocess or the background
+            # run): the reviewer's in and out points stay (they went, and the next G flagged one frame)
+            pb = self.playback
+            marks = (pb.in_point, pb.out_point) if pb is not None and self.trial is not None and self.trial.trial == name else None
             self._drop_trial()
             self.trial, self.editor, self.view = trial, editor, view
             self._shown_label = label  # the status line's subject name (read at every frame)
@@ -391,6 +395,15 @@ class ReviewApp:
             self.tracks = track_data(trial, view, self.hicks)
             self._sync_controls(name)
             self._setup_timeline(trial)
+            if marks is not None:
+                for point, mark in zip(marks, (self.playback.mark_in, self.playback.mark_out), strict=True):
+                    if point is not None:
+                        mark(point)  # clamped to the trial
+                sel = self.playback.selection()
+                if sel is not None:
+                    with self._quiet_updates():
+                        self.panel.selection.value = (sel[0], sel[1] - 1)
+                self._show_range_info()
             self.panel.diagnosis.content = diagnosis_markdown(self.paths.out_dir, self.paths.subject_dir, name)
             self.camera_view("Sagittal")  # framed from the side, for new pages and every open one
             self.render(self.playback.frame, force_plots=True)
@@ -885,9 +898,9 @@ class ReviewApp:
         if what in ("Flag", "Unflag"):
             self._flag_frames(what == "Flag", s, e)
         elif what == "Accept":
-            self.edit(f"accept proposals in {s}–{e - 1}", lambda ed, _k, _f: ed.accept_range(s, e))
+            self.edit(f"accept proposals in {frames_text(s, e)}", lambda ed, _k, _f: ed.accept_range(s, e))
         else:
-            self.edit(f"reject proposals in {s}–{e - 1}", lambda ed, _k, _f: ed.reject_range(s, e))
+            self.edit(f"reject proposals in {frames_text(s, e)}", lambda ed, _k, _f: ed.reject_range(s, e))
 
     def _show_range_info(self) -> None:
         pb = self.playback
@@ -914,9 +927,9 @@ class ReviewApp:
         """Flag frames ``[s, e)`` for the selected foot, or clear their flags."""
         feet = _feet(self.panel.foot.value)
         if flag:
-            self.edit(f"flag frames {s}–{e - 1} ({feet})", lambda ed, _k, foot: ed.flag_range(s, e, foot))
+            self.edit(f"flag {frames_text(s, e)} ({feet})", lambda ed, _k, foot: ed.flag_range(s, e, foot))
         else:
-            self.edit(f"unflag frames {s}–{e - 1} ({feet})", lambda ed, _k, foot: ed.clear_range(s, e, foot))
+            self.edit(f"unflag {frames_text(s, e)} ({feet})", lambda ed, _k, foot: ed.clear_range(s, e, foot))
 
     def history(self, what: str) -> None:
         """"Undo" or "Redo" the page's reviewer's last action (:mod:`~addb_viewer.app.history`).
@@ -936,7 +949,7 @@ class ReviewApp:
         if name is not None and action is not None and action.reviewer != name:
             self.panel.saved.content = (
                 f"{refused} on this subject is {_escape(action.reviewer)}'s (one history for everyone on this "
-                "server); unflag or flag your frames instead."
+                "server); make your own edit instead (flag, unflag, accept or reject)."
             )
             return
         shown = self.trial.trial if self.trial is not None else None

@@ -324,6 +324,7 @@ class Workbench:
                 if self.app.trial is None:
                     self.open(data["rel"])  # the subject on screen was waiting for its output
                 elif data.get("status") in ("ok", "kinematics_only"):  # its output was rewritten
+                    self.app.panel.comparison.content = ""  # an earlier Reprocess's table: no longer the output
                     self.app.reload_shown(
                         f"{data['rel']} was processed again in the background (its inputs or its review changed): "
                         "the trial shown was reloaded with the new results."

@@ -180,7 +180,7 @@ def test_one_press_is_one_undo_step_and_undo_names_it(dyn_paths, make_app) -> No
     assert rejected[starts[0]] and rejected[starts[1]] and int(rejected.sum()) > 1
     app.history("Undo")
     assert not app.view.rejected.any() and np.array_equal(app.view.pending, pending)
-    assert f"undo (reject proposals in 0–{end})" in app.panel.saved.content, app.panel.saved.content
+    assert f"undo (reject proposals in frames 0–{end})" in app.panel.saved.content, app.panel.saved.content
     app.history("Redo")
     assert np.array_equal(app.view.rejected, rejected)
     app.history("Redo")
@@ -256,3 +256,20 @@ def test_a_jump_from_the_start_of_the_only_run_says_so(dyn_paths, make_app) -> N
     app.seek(50)
     app.jump("Flagged")  # from elsewhere: to the run, and the line above is taken back
     assert app.playback.frame == 30 and not app.panel.saved.content.startswith("Frame 30")
+
+
+def test_the_selection_stays_when_the_trial_is_loaded_again(dyn_paths, make_app) -> None:
+    """A Reprocess or the background run reloads the trial shown: the in and out points the
+    reviewer set stay (they went, and the next G flagged one frame); another trial starts
+    without them."""
+    app = make_app(dyn_paths)
+    app.select(40, 50)
+    app.load_trial("walk", frame=45)
+    assert app.playback.selection() == (40, 51) and tuple(app.panel.selection.value) == (40, 50)
+    assert "frames 40–50" in app.panel.selection_info.content
+    app.mark("Clear marks")
+    app.mark("Set in")  # the in point alone (between I and O)
+    app.load_trial("walk", frame=45)
+    assert app.playback.selection() == (45, 46)
+    app.load_trial("static")
+    assert app.playback.selection() is None

@@ -99,6 +99,8 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     app.select(100, 129)
     app.selection_edit("Flag")
     assert "fitted with other flags" in app.panel.proposal_info.content  # not processed with them yet
+    app.select(10, 20)  # the reviewer's in and out points survive the reload
+    app.panel.comparison.content = "Reprocess result: walk (an earlier run's table)"
     bench = Workbench(app, dataset, workers=1)
     bench.current = ("labA/walk", "walk")
     assert bench.processing_done.wait(600), bench.run_status.content
@@ -107,6 +109,8 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     assert after.unobserved[100:130].all() and not before.unobserved[100:130].all()  # processed again
     assert app.trial.trial == "walk" and np.array_equal(app.trial.unobserved, after.unobserved)
     assert "reloaded" in app.panel.job_status.content, app.panel.job_status.content
+    assert app.panel.comparison.content == ""  # the earlier table no longer describes the output
+    assert app.playback.selection() == (10, 21)
     # the timeline's "left out" track shows the flagged frames the fit left out (not proposals)
     assert app.tracks.masks["left out"][100:130].all() and not app.tracks.masks["proposal"][100:130].any()
     assert np.array_equal(app.tracks.masks["left out"], after.unobserved)
