@@ -734,7 +734,7 @@ class ReviewApp:
             on = f" on {e.trial}" if e.trial else ""  # the message stays when the reviewer picks another trial
             # no record sequence number: it counts every entry of the record (trial information,
             # other reviewers' edits), so a reviewer's first edit read "#2" and the next "#6"
-            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}"
+            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}" + _conflicts_text(edits, history)
         self.refresh_flags()
         damaged = self._damaged_record() if edits else None
         if damaged is not None:  # saved in the journal, but no other reader sees it
@@ -1103,6 +1103,18 @@ class ReviewApp:
             s.m_per_bw = max(float(p.m_per_bw.value), 0.01)
             if self.playback is not None:
                 self.render(self.playback.frame)
+
+
+def _conflicts_text(edits: list[Edit], history: bool) -> str:
+    """What an undo or redo left as it was because another writer (another page's process,
+    another reviewer) changed it since (the store's conflicts): "" when nothing."""
+    kept = [c for e in edits for c in e.conflicts] if history else []
+    if not kept:
+        return ""
+    ranges = sorted({r for c in kept for r in c.frames})
+    where = ", ".join(frames_text(a, b) for a, b in ranges) or "some values"
+    who = ", ".join(dict.fromkeys(c.kept.reviewer for c in kept if c.kept is not None)) or "another writer"
+    return f"<br><span style='color:#c00'>**not all restored**</span>: {where} kept as {_escape(who)} edited them since"
 
 
 def _feet(foot: str) -> str:

@@ -273,3 +273,23 @@ def test_the_selection_stays_when_the_trial_is_loaded_again(dyn_paths, make_app)
     assert app.playback.selection() == (45, 46)
     app.load_trial("static")
     assert app.playback.selection() is None
+
+
+def test_an_undo_that_another_writer_overlapped_says_what_it_left(dyn_paths, make_app) -> None:
+    """Ana flags 180-190 (right foot) here, Cleo 185-195 (left foot) from another process on
+    the same record; Ana's Undo cannot restore 185-190 without removing Cleo's flags: the
+    store keeps them, and the saved line says which frames and whose (it said only
+    "✓ saved: undo")."""
+    from annotations import AnnotationStore
+
+    app = make_app(dyn_paths)
+    app.panel.foot.value = "right"
+    app.select(180, 190)
+    app.selection_edit("Flag")
+    with AnnotationStore.open(app.paths.annotations, reviewer="cleo") as other:
+        other.set_unmeasured("walk", range(185, 196), True, foot="left", keep_other_foot=True)
+    assert app.store.refresh()
+    app.history("Undo")
+    saved = app.panel.saved.content
+    assert "not all restored" in saved and "kept as cleo edited them since" in saved, saved
+    assert "frames 185–190" in saved, saved
