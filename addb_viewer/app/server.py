@@ -720,25 +720,27 @@ class ReviewApp:
         history = what.split(" (")[0] in ("undo", "redo")
         if not history:
             self.actions.record(edits, what)
+        # the flags, timeline and Flags folder first, the line last: a reviewer (and a test)
+        # reading "saved" finds the rest of the page already showing the edit
+        self.refresh_flags()
         if not edits and history:
-            self.panel.saved.content = (
+            text = (
                 "Nothing to undo: the history holds the edits made since this subject was opened "
                 "(opening another subject starts a new one)." if what.startswith("undo") else
                 "Nothing to redo: no edit has been undone since the last edit."
             )
         elif not edits:
-            self.panel.saved.content = f"Nothing to do: {what}."
+            text = f"Nothing to do: {what}."
         else:
             e = edits[-1]
             when = datetime.now().strftime("%H:%M:%S")
             on = f" on {e.trial}" if e.trial else ""  # the message stays when the reviewer picks another trial
             # no record sequence number: it counts every entry of the record (trial information,
             # other reviewers' edits), so a reviewer's first edit read "#2" and the next "#6"
-            self.panel.saved.content = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}" + _conflicts_text(edits, history)
-        self.refresh_flags()
+            text = f"✓ saved: {what}{on} — {e.provenance.reviewer}, {when}" + _conflicts_text(edits, history)
         damaged = self._damaged_record() if edits else None
         if damaged is not None:  # saved in the journal, but no other reader sees it
-            self.panel.saved.content = f"✓ saved in the record's journal only: {what} (see the error above)"
+            text = f"✓ saved in the record's journal only: {what} (see the error above)"
             record = self.paths.annotations
             self.show_error(
                 "The review record file is damaged: addb process, addb diagnose and the dataset queue cannot read it",
@@ -748,10 +750,11 @@ class ReviewApp:
             )
         pending = pending_replaced(self.view) if edits and self.view is not None else 0
         if pending:  # the edit made (or left) the trial's flags replace the solver's proposals
-            self.panel.saved.content += (
+            text += (
                 f"<br><span style='color:#c00'>{pending} pending proposed frames are now fitted as measured</span> "
                 "(your flags replace the solver's choice): accept or reject them (Y / Z)."
             )
+        self.panel.saved.content = text
 
     def refresh_flags(self) -> None:
         """Re-read the trial's flags from the store and redraw what shows them."""
