@@ -232,7 +232,7 @@ def describe_flags(v: FlagView, *, differ: int = 0, unproposed: int = 0, record:
     if pending:
         sentences.append(
             f"<span style='color:#c00'>**{pending} pending proposed frames will be fitted as measured**</span>: "
-            "once a trial has flags or is marked reviewed, your flags replace the solver's own choice "
+            "once a trial has flags or is marked reviewed, its flags replace the solver's own choice "
             "(in Reprocess and in the dataset run); accept or reject them first"
         )
     if unproposed:

@@ -619,14 +619,14 @@ class ReviewApp:
             target = None if mask is None else next_run_start(mask, here)
         names = {"Flagged": "flagged frames", "Proposal": "pending proposals", "Over Hicks": "frames over Hicks' limits"}
         if target is not None and target == here:  # the search went round to the run it started in
-            self.panel.saved.content = f"Frame {here} starts the only run of {names.get(what, what.lower())} in this trial."
+            self._answer(f"Frame {here} starts the only run of {names.get(what, what.lower())} in this trial.")
             return
         if target is None:
-            self.panel.saved.content = {
+            self._answer({
                 "Flagged": "No flagged frames in this trial.",
                 "Proposal": "No pending proposals in this trial (accepted and rejected ones are decided).",
                 "Over Hicks": "No frame with measured force over Hicks' per-frame limits in this trial.",
-            }.get(what, f"No {what.lower()} frames in this trial.")
+            }.get(what, f"No {what.lower()} frames in this trial."))
             return
         self._forget_refusal()  # an earlier "No … in this trial" answered another press
         with self._lock:
@@ -690,7 +690,7 @@ class ReviewApp:
         edits therefore run one at a time, each message final before the next edit starts."""
         name = self.reviewer_name(getattr(self._actor, "client", None))
         if name is None:
-            self.panel.saved.content = (
+            self._answer(
                 "<span style='color:#c00'>**not saved**</span>: type your name in “Your name” at the "
                 "top of the panel first (each edit keeps its reviewer's name)."
             )
@@ -708,13 +708,13 @@ class ReviewApp:
             frame = pb.frame if pb is not None else 0
         if editor is None:
             why = f": {self.store_problem[1]}" if self.store is None and self.store_problem is not None else " (no trial or no review record)"
-            self.panel.saved.content = f"Flagging is unavailable{_escape(why)}."
+            self._answer(f"Flagging is unavailable{_escape(why)}.")
             return
         self.panel.saved.content = f"saving: {what}…"
         try:
             result = action(editor, frame, self.panel.foot.value)
         except AnnotationError as exc:
-            self.panel.saved.content = f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}"
+            self._answer(f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}")
             return
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
         history = what.split(" (")[0] in ("undo", "redo")
@@ -752,9 +752,12 @@ class ReviewApp:
         if pending:  # the edit made (or left) the trial's flags replace the solver's proposals
             text += (
                 f"<br><span style='color:#c00'>{pending} pending proposed frames are now fitted as measured</span> "
-                "(your flags replace the solver's choice): accept or reject them (Y / Z)."
+                "(the trial's flags replace the solver's choice): accept or reject them (Y / Z)."
             )
-        self.panel.saved.content = text
+        if text.startswith("✓"):
+            self.panel.saved.content = text  # names its reviewer
+        else:
+            self._answer(text)
 
     def refresh_flags(self) -> None:
         """Re-read the trial's flags from the store and redraw what shows them."""
@@ -882,6 +885,15 @@ class ReviewApp:
             self.draw_timeline()
         self._show_range_info()
 
+    def _answer(self, text: str) -> None:
+        """Show ``text`` in the edits' line as the answer to the press of the page whose
+        handler runs: on a team server (every page shows the same line) it starts with that
+        page's reviewer, so that a refusal is not read as addressed to another reviewer."""
+        if self.token is not None:
+            name = self.reviewer_name(getattr(self._actor, "client", None))
+            text = f"**{_escape(name) if name else 'a page without a name'}**: {text}"
+        self.panel.saved.content = text
+
     def _forget_refusal(self) -> None:
         """Take back the edits' line when it refuses or warns (not a saved edit): it answered
         the reviewer's last press, and would read as an answer to the next ("Select frames
@@ -895,7 +907,7 @@ class ReviewApp:
         pb = self.playback
         sel = pb.selection() if pb is not None else None
         if sel is None:
-            self.panel.saved.content = "Select frames on the timeline first (drag the ends of Selection)."
+            self._answer("Select frames on the timeline first (drag the ends of Selection).")
             return
         s, e = sel
         if what in ("Flag", "Unflag"):
@@ -922,7 +934,7 @@ class ReviewApp:
         pb = self.playback
         sel = pb.selection() if pb is not None else None
         if sel is None:
-            self.panel.saved.content = "Set an in point and an out point first (I / O)."
+            self._answer("Set an in point and an out point first (I / O).")
             return
         self._flag_frames(what == "Flag range", *sel)
 
@@ -950,14 +962,14 @@ class ReviewApp:
         last = "edit" if undo else "undone edit"
         refused = f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last {last}"
         if name is not None and action is not None and action.reviewer != name:
-            self.panel.saved.content = (
+            self._answer(
                 f"{refused} on this subject is {_escape(action.reviewer)}'s (one history for everyone on this "
                 "server); make your own edit instead (flag, unflag, accept or reject)."
             )
             return
         shown = self.trial.trial if self.trial is not None else None
         if action is not None and action.trial != shown:
-            self.panel.saved.content = f"{refused} is on trial {_escape(action.trial)}: open it to {what.lower()} it."
+            self._answer(f"{refused} is on trial {_escape(action.trial)}: open it to {what.lower()} it.")
             return
         store = self.store
         self.edit(
@@ -1071,9 +1083,9 @@ class ReviewApp:
                     self._review_warned, self._review_warned_at = (t.trial, pending), now
                 with self._quiet_updates():
                     self.panel.reviewed.value = False
-                self.panel.saved.content = (
+                self._answer(
                     f"<span style='color:#c00'>**not marked reviewed: {pending} proposed frames of {_escape(t.trial)} "
-                    "are still pending.**</span> A trial marked reviewed has your flags replace the solver's own "
+                    "are still pending.**</span> A trial marked reviewed has its flags replace the solver's own "
                     "choice, so they would be fitted as measured frames (with the plates' force, often none) by "
                     "Reprocess and the dataset run. Accept or reject them first (Y / Z, All proposals), or tick "
                     "Trial reviewed again to mark it reviewed as it is."

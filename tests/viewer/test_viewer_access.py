@@ -161,7 +161,7 @@ def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
         wait_for(lambda: app.playback.frame == 40, what="seek to 40")
         a.set_value(p.toggle_flag, True)
         wait_for(lambda: "not saved" in p.saved.content, what="the request for a name")
-        assert "Your name" in p.saved.content
+        assert "Your name" in p.saved.content and p.saved.content.startswith("**a page without a name**: ")
 
         a.set_value(app.name_fields[ida], "ana")
         b.set_value(app.name_fields[idb], "ben")
@@ -176,6 +176,8 @@ def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
         a.set_value(p.history, "Undo")
         wait_for(lambda: "not undone" in p.saved.content, what="A's refused undo")
         assert "ben's" in p.saved.content and app.store.flag("walk", 60) is not None
+        # every page shows the line: it names who pressed (B read A's refusal as his own)
+        assert p.saved.content.startswith("**ana**: "), p.saved.content
         b.set_value(p.history, "Undo")
         wait_for(lambda: app.store.flag("walk", 60) is None, what="B's undo")
         a.set_value(p.history, "Redo")  # B's undone edit is B's to redo
