@@ -144,6 +144,7 @@ class Reprocessor:
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
         self._warned: tuple[str, int] | None = None  # (trial, pending frames) the last warning named
+        self._review: str | None | bool = False  # the flags' digest when the running Reprocess started
         self._warned_at = 0.0  # time.monotonic() of that warning
         self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
@@ -195,6 +196,7 @@ class Reprocessor:
         # every trial with dynamics is rewritten, since the masses are fitted over all of them
         trials = written_trials(app.paths.subject_dir, app.paths.out_dir, name)
         spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, trials, self._masks(), dynamics_only=True)
+        self._review = self._review_digest()  # the flags this run takes, for a dataset run's manifest
         self._kept = kept_reports(app.paths.out_dir, trials)  # the solver rewrites those folders without them
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
 
@@ -279,6 +281,17 @@ class Reprocessor:
             self.app.show_error("The reviewer's flags were not used", exc)
             return {}
 
+    def _review_digest(self) -> str | None | bool:
+        """The digest of the review record's flags a dataset run keys on
+        (:func:`addb_viewer.review_masks.review_digest`), False when the record cannot be
+        read (no manifest is then touched)."""
+        from addb_viewer.review_masks import review_digest
+
+        try:
+            return review_digest(str(self.app.paths.subject_dir), str(self.app.paths.out_dir))
+        except (AnnotationError, OSError):
+            return False
+
     def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str = "process") -> None:
         with self._lock:
             if self.running:
@@ -323,6 +336,10 @@ class Reprocessor:
                     app.after_processing()
                 else:
                     restore_reports(app.paths.out_dir, self._kept)
+                    if kind == "process" and self._review is not False:  # a dataset run would not redo it
+                        from addb_viewer.app.dataset_manifest import mark_reprocessed
+
+                        mark_reprocessed(app.paths.subject_dir, app.paths.out_dir, self._review)
                     self._install(trial, before, work)
             elif result.status == "cancelled":
                 p.job_status.content = f"{label}: cancelled; the previous result is kept."

@@ -21,6 +21,7 @@ frame (``labA/broken``), processed once by ``addb process`` and copied for each 
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -212,3 +213,34 @@ def test_all_reviewed_is_taken_back_when_a_trial_needs_review_again(dataset: Pat
     app.edit("not reviewed", lambda ed, _k, _f: ed.set_reviewed(False))  # static again
     bench.refresh()
     assert bench.run_status.content == ""
+
+
+def test_a_reprocess_keeps_the_dataset_manifest_current(dataset: Path, make_app) -> None:
+    """After a Reprocess with the reviewer's flags the subject's manifest records those flags
+    and the new figures, so the next dataset run (and Process changed subjects) skips it:
+    it processed again a subject just fitted with the same flags. Once an input changed, a
+    Reprocess leaves the manifest alone (the dataset run must process the subject)."""
+    from addb_viewer.app.dataset_manifest import mark_reprocessed
+    from addb_viewer.review_masks import review_digest
+    from solver.dataset.manifest import current_manifest, manifest_key, read_manifest
+
+    app, _ = _bench(dataset, make_app)
+    subject, out = app.paths.subject_dir, app.paths.out_dir
+    settings = read_manifest(out)["key"]["settings"]
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())
+    app.select(100, 129)
+    app.selection_edit("Flag")
+    digest = review_digest(str(subject), str(out))
+    assert current_manifest(out, manifest_key(subject, settings, digest)) is None  # flags changed: a run would redo it
+    app.jobs.reprocess()
+    assert app.jobs.finished.wait(300) and app.jobs.last_result.status == "done", app.panel.job_status.content
+    stored = current_manifest(out, manifest_key(subject, settings, digest))
+    assert stored is not None, read_manifest(out)["key"]["annotations"]
+    row = next(r for r in stored["trials"] if r["trial"] == "walk")
+    results = json.loads((out / "walk" / "results.json").read_text())
+    assert row["measured_frames"] == results["n_observed_frames"] and row["measured_frames"] < 238 - 30
+    # an input changed since the dataset run: left for the dataset run to process
+    (subject / "_subject.json").write_text((subject / "_subject.json").read_text() + "\n")
+    before = (out / "manifest.json").read_bytes()
+    assert not mark_reprocessed(subject, out, digest)
+    assert (out / "manifest.json").read_bytes() == before
