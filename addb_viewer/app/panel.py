@@ -46,7 +46,9 @@ SIDE_WIDTH_PX, MAIN_WIDTH_PX = 440, 320
 #: The Foot choice a page starts with (and a newly opened subject).
 DEFAULT_FOOT = "both"
 #: The Edits line before the shown subject's first edit.
-NO_EDITS = "No edits yet."
+NO_EDITS = "Every edit is saved at once in the review record."
+"""The edits' line before an edit (and once a refusal is taken back: "No edits yet" read as
+"nothing to undo" after earlier edits)."""
 
 LEGEND = (
     "<small>"

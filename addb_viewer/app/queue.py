@@ -182,8 +182,9 @@ def _review_state(snapshot: Any | None) -> tuple[str, str | None]:
         prov = snapshot.reviewed_provenance
         if prov is None:
             return REVIEWED, None
-        later = sorted((e for e in edits if e.timestamp > prov.timestamp), key=lambda e: e.timestamp)
-        if later:  # the mark may no longer hold: say so beside it, with everyone who edited since
+        later = sorted((e for e in edits if e.timestamp > prov.timestamp and e.reviewer != prov.reviewer),
+                       key=lambda e: e.timestamp)  # fmt: skip
+        if later:  # the mark may no longer hold: say so beside it, with everyone else who edited since
             return REVIEWED, f"{prov.reviewer}, edited since by {', '.join(dict.fromkeys(e.reviewer for e in later))}"
         return REVIEWED, prov.reviewer
     if edits or snapshot.reviewed_provenance is not None:

@@ -181,9 +181,10 @@ class Reprocessor:
             if not warned:
                 self._warned, self._warned_at = (name, pending), now
             self._say(
-                f"**{pending} proposed frames of {name} are still pending.** Your flags replace the solver's own "
-                "choice, so Reprocess fits them as measured frames (with the plates' force, often none). Accept or "
-                "reject them first (All proposals), or press Reprocess again to fit them as measured."
+                f"<span style='color:#c00'>**{pending} proposed frames of {name} are still pending.**</span> The "
+                "trial's flags replace the solver's own choice, so Reprocess fits them as measured frames (with the "
+                "plates' force, often none: marker and residual errors rise). Accept or reject them first (All "
+                "proposals), or press Reprocess again to fit them as measured."
             )
             return
         self._warned = None
@@ -247,7 +248,7 @@ class Reprocessor:
         pending = pending_replaced(view) if view is not None else 0
         if pending:
             self._say(
-                f"**{pending} proposed frames of {name} are still pending**: accept or reject them first "
+                f"<span style='color:#c00'>**{pending} proposed frames of {name} are still pending**</span>: accept or reject them first "
                 "(All proposals); the correction was not saved."
             )
             return None
@@ -394,7 +395,7 @@ class Reprocessor:
         if stale:
             app.panel.comparison.content += (
                 f"\n\n<span style='color:#c00'>**The fitted body mass is now {after['mass_kg']:.2f} kg**</span> "
-                "(the mass fit uses every trial with your flags); "
+                "(the mass fit uses every trial with its flags); "
                 + ", ".join(f"{name} ({mass:.2f} kg)" for name, mass in stale)
                 + " still hold results made with the old mass (their trials are no longer in the subject folder) "
                 "and the scaled model is the new one."

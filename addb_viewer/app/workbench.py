@@ -344,8 +344,12 @@ class Workbench:
                 progress=lambda m, f: setattr(self.run_status, "content", f"Background processing: {m}"),
             )  # fmt: skip
             failed = len(run.failed)
+            skipped = sum(s["status"] == "skipped" for s in run.subjects)
+            ran = len(run.subjects) - skipped
+            # the counts: a run with nothing to do said only "finished in 0 s", as the run before it
             self.run_status.content = (
-                f"Background processing finished in {run.seconds:.0f} s" + (f"; {failed} subject(s) failed." if failed else ".")
+                f"Background processing finished in {run.seconds:.0f} s: {ran} subject(s) processed, {skipped} up to date"
+                + (f"; {failed} failed." if failed else ".")
             )
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.run_status.content = f"Background processing stopped: {exc}"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from addb_viewer.app.panel import NO_EDITS
 from addb_viewer.app.paths import ReviewPaths
 from tests.conftest import SHARED_DATA, writable_copy
 
@@ -34,7 +35,7 @@ def test_open_cancels_the_running_reprocess_and_says_so(walk_processed: Path, ma
     assert "cancelled" in status and status.startswith("first ·") and "you opened second" in status, status
     assert not app.jobs.running and app.jobs.last_result.status == "cancelled"
     assert (tmp_path / "first_out" / "walk" / "results.json").read_bytes() == before  # the previous result kept
-    assert app.panel.saved.content == "No edits yet." and app.panel.foot.value == "both"
+    assert app.panel.saved.content == NO_EDITS and app.panel.foot.value == "both"
     assert app.trial is not None and app.paths.subject_dir == subjects["second"].subject_dir
     app.open_subject(subjects["first"], "walk")  # nothing running: no message
     assert app.panel.job_status.content == ""

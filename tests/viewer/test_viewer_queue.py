@@ -101,10 +101,12 @@ def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output
     done = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/done", "walk"))
     assert (done.review, done.reviewer) == (REVIEWED, "alice, edited since by carol")
     assert "reviewed (alice, edited since by carol)" in queue_markdown([done])
+    with AnnotationStore.open(annotations_path(dataset / "lab" / "done", out / "lab" / "done"), reviewer="dave") as s:
+        s.set_unmeasured("walk", [6])  # everyone else who edited since, in order (carol was dropped)
     with AnnotationStore.open(annotations_path(dataset / "lab" / "done", out / "lab" / "done"), reviewer="alice") as s:
-        s.set_unmeasured("walk", [6])  # everyone who edited since, in order (carol was dropped)
+        s.set_unmeasured("walk", [7])  # the one who marked it is not listed
     done = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/done", "walk"))
-    assert done.reviewer == "alice, edited since by carol, alice"
+    assert done.reviewer == "alice, edited since by carol, dave"
     # a subject processed again keeps its trials, review states and figures, marked as
     # processing (they collapsed into one row: Open lost the trial on screen, the reviewed
     # count dropped); the summary counts it once
