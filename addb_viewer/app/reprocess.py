@@ -134,6 +134,32 @@ CONFIRM_AFTER_S = 1.0
 """Least time between the pending-proposal warning and the press that goes ahead, s."""
 
 
+class SecondThought:
+    """A press that warns first and goes ahead when pressed again about the same thing
+    (``key``, e.g. the trial and its pending frames) at least :data:`CONFIRM_AFTER_S` later:
+    a double click is not a second thought. Reprocess and "Trial reviewed" with pending
+    proposals use it."""
+
+    def __init__(self) -> None:
+        self.key: Any = None  # what the last warning named (None: no warning standing)
+        self.at = 0.0  # time.monotonic() of that warning
+
+    def confirmed(self, key: Any) -> bool:
+        """Whether this press about ``key`` goes ahead; a first press (or one about
+        something else) is remembered as warned and does not."""
+        now = time.monotonic()
+        if self.key == key and now - self.at >= CONFIRM_AFTER_S:
+            self.key = None
+            return True
+        if self.key != key:
+            self.key, self.at = key, now
+        return False
+
+    def forget(self) -> None:
+        """No warning standing (nothing to warn about any more)."""
+        self.key = None
+
+
 class Reprocessor:
     """The solver-run controls of the review app (a :class:`ReprocessHost`)."""
 
@@ -143,9 +169,8 @@ class Reprocessor:
         self._lock = threading.Lock()
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
-        self._warned: tuple[str, int] | None = None  # (trial, pending frames) the last warning named
+        self.pending_warning = SecondThought()  # Reprocess with pending proposals: (trial, pending frames)
         self._review: str | None | bool = False  # the flags' digest when the running Reprocess started
-        self._warned_at = 0.0  # time.monotonic() of that warning
         self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
@@ -176,10 +201,7 @@ class Reprocessor:
             return
         view = app.view if app.trial is not None and app.trial.trial == name else None
         pending = pending_replaced(view) if view is not None else 0
-        now, warned = time.monotonic(), self._warned == (name, pending)
-        if pending and not (warned and now - self._warned_at >= CONFIRM_AFTER_S):
-            if not warned:
-                self._warned, self._warned_at = (name, pending), now
+        if pending and not self.pending_warning.confirmed((name, pending)):
             self._say(
                 f"<span style='color:#c00'>**{pending} proposed frames of {name} are still pending.**</span> The "
                 "trial's flags replace the solver's own choice, so Reprocess fits them as measured frames (with the "
@@ -187,7 +209,7 @@ class Reprocessor:
                 "proposals), or press Reprocess again to fit them as measured."
             )
             return
-        self._warned = None
+        self.pending_warning.forget()
         if self.running:  # before the reports of the running one's trials are read again
             self._say("A solver run is already in progress; cancel it first.")
             return

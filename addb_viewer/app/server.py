@@ -46,7 +46,7 @@ from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
-from addb_viewer.app.reprocess import CONFIRM_AFTER_S, Reprocessor
+from addb_viewer.app.reprocess import Reprocessor, SecondThought
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
@@ -143,8 +143,7 @@ class ReviewApp:
         self.store_problem: tuple[str, BaseException] | None = None
         self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
         self.actions = ActionHistory()  # who made each edit the store can undo or redo
-        self._review_warned: tuple[str, int] | None = None  # (trial, pending frames) the last "Trial reviewed" warning named
-        self._review_warned_at = 0.0  # time.monotonic() of that warning
+        self.review_warning = SecondThought()  # "Trial reviewed" with pending proposals: (trial, pending frames)
         self.trials: list[str] = []
         self.trial: ProcessedTrial | None = None
         self._shown_label = ""
@@ -679,11 +678,14 @@ class ReviewApp:
             return name
         return self.reviewer if self.token is None else None
 
-    def edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
+    def edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None], *,
+             history: bool = False) -> None:  # fmt: skip
         """Run one store edit on the current trial and frame; say "saved" once it is durable.
 
         The edit is recorded under the name of the page that asked for it
         (:meth:`reviewer_name`); a page of a team server without a name is asked for one.
+        ``history``: the action is an Undo or Redo (:meth:`history`), not a new action of the
+        undo history.
 
         viser runs the page's handlers in a thread pool, so two quick clicks (undo, then the
         reviewed box) would run side by side and the earlier one's message could come last;
@@ -698,11 +700,11 @@ class ReviewApp:
         with self._edit_lock:
             acting = self.store.acting_as(name) if self.store is not None else contextlib.nullcontext()
             with acting:
-                self._edit(what, action)
+                self._edit(what, action, history)
         if self.workbench is not None:  # review state and pending proposals in the queue
             self.workbench.refresh()
 
-    def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None]) -> None:
+    def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None], history: bool = False) -> None:
         with self._lock:
             editor, pb = self.editor, self.playback
             frame = pb.frame if pb is not None else 0
@@ -717,7 +719,6 @@ class ReviewApp:
             self._answer(f"<span style='color:#c00'>**not saved**</span>: {_escape(str(exc))}")
             return
         edits = [e for e in (result if isinstance(result, list) else [result]) if e is not None]
-        history = what.split(" (")[0] in ("undo", "redo")
         if not history:
             self.actions.record(edits, what)
         # the flags, timeline and Flags folder first, the line last: a reviewer (and a test)
@@ -787,14 +788,16 @@ class ReviewApp:
             return
         record = _escape(self._record_elsewhere_text()) if self._record_elsewhere() else ""
         t = self.trial
-        unproposed = unproposed_replaced(v, t.unobserved, t.proposed, list(t.metrics.get("unobserved_reasons") or [])) if (
-            t is not None and t.has_dynamics) else 0  # fmt: skip
-        self.panel.proposal_info.content = describe_flags(v, differ=self._flags_since_fit(), unproposed=unproposed, record=record)
+        reasons = list(t.metrics.get("unobserved_reasons") or []) if t is not None else []  # the fit shown's
+        unproposed = unproposed_replaced(v, t.unobserved, t.proposed, reasons) if t is not None and t.has_dynamics else 0
+        differ = self._flags_since_fit(reasons)
+        self.panel.proposal_info.content = describe_flags(v, differ=differ, unproposed=unproposed, record=record)
 
-    def _flags_since_fit(self) -> int:
+    def _flags_since_fit(self, reasons: list[str]) -> int:
         """Frames the flags as they are now would fit otherwise than the results shown
-        (:func:`~addb_viewer.app.flags.flags_differ_from_fit`); 0 without dynamics, or when
-        the flags cannot be read as the solver takes them (a Reprocess says why)."""
+        (:func:`~addb_viewer.app.flags.flags_differ_from_fit`, ``reasons`` the fit's
+        ``unobserved_reasons``); 0 without dynamics, or when the flags cannot be read as the
+        solver takes them (a Reprocess says why)."""
         from addb_viewer.review_masks import unmeasured_force
 
         t = self.trial
@@ -804,7 +807,7 @@ class ReviewApp:
             mask = unmeasured_force(self.store, self.paths.subject_dir, [t.trial]).get(t.trial)
         except (AnnotationError, AddbError):
             return 0
-        return flags_differ_from_fit(mask, t.unobserved, t.proposed, list(t.metrics.get("unobserved_reasons") or []))
+        return flags_differ_from_fit(mask, t.unobserved, t.proposed, reasons)
 
     def _damaged_record(self) -> str | None:
         """Why the review record file does not read as JSON (another hand or tool damaged
@@ -975,6 +978,7 @@ class ReviewApp:
         self.edit(
             what.lower() + (f" ({action.what})" if action is not None else ""),
             lambda _ed, _k, _f: self.actions.step(store.undo if undo else store.redo, undo),
+            history=True,
         )
 
     # ================================================================== GUI wiring
@@ -1073,25 +1077,22 @@ class ReviewApp:
         With such pending proposals the first tick therefore says so and leaves the box
         unticked; ticked again with the same pending frames, at least
         :data:`~addb_viewer.app.reprocess.CONFIRM_AFTER_S` later (a double click is not a
-        second thought), it marks the trial reviewed."""
+        second thought: :class:`~addb_viewer.app.reprocess.SecondThought`), it marks the
+        trial reviewed."""
         v, t = self.view, self.trial
         pending = int(v.pending.sum()) if reviewed and v is not None and t is not None and not v.reviewed else 0
-        if pending:
-            now, warned = time.monotonic(), self._review_warned == (t.trial, pending)
-            if not (warned and now - self._review_warned_at >= CONFIRM_AFTER_S):
-                if not warned:
-                    self._review_warned, self._review_warned_at = (t.trial, pending), now
-                with self._quiet_updates():
-                    self.panel.reviewed.value = False
-                self._answer(
-                    f"<span style='color:#c00'>**not marked reviewed: {pending} proposed frames of {_escape(t.trial)} "
-                    "are still pending.**</span> A trial marked reviewed has its flags replace the solver's own "
-                    "choice, so they would be fitted as measured frames (with the plates' force, often none) by "
-                    "Reprocess and the dataset run. Accept or reject them first (Y / Z, All proposals), or tick "
-                    "Trial reviewed again to mark it reviewed as it is."
-                )
-                return
-        self._review_warned = None
+        if pending and not self.review_warning.confirmed((t.trial, pending)):
+            with self._quiet_updates():
+                self.panel.reviewed.value = False
+            self._answer(
+                f"<span style='color:#c00'>**not marked reviewed: {pending} proposed frames of {_escape(t.trial)} "
+                "are still pending.**</span> A trial marked reviewed has its flags replace the solver's own "
+                "choice, so they would be fitted as measured frames (with the plates' force, often none) by "
+                "Reprocess and the dataset run. Accept or reject them first (Y / Z, All proposals), or tick "
+                "Trial reviewed again to mark it reviewed as it is."
+            )
+            return
+        self.review_warning.forget()
         self.edit("trial reviewed" if reviewed else "trial not reviewed", lambda ed, _k, _f: ed.set_reviewed(reviewed))
 
     def toggle_flag(self) -> None:

@@ -67,9 +67,10 @@ def queue_markdown(rows: list[QueueRow], *, limit: int = TABLE_ROWS, current: tu
     RMS columns: a state other than "processed" follows the row's name instead."""
     n_trials = sum(r.trial is not None for r in rows)
     done = sum(r.review == REVIEWED for r in rows if r.trial is not None)
-    waiting = len({r.subject.rel for r in rows if r.processing == PROCESSING})  # subjects (one processed again keeps its trial rows)
+    # processing and failed count subjects (a subject processed again keeps its trial rows),
+    # reviewed counts trials
+    waiting = len({r.subject.rel for r in rows if r.processing == PROCESSING})
     failed = len({r.subject.rel for r in rows if r.processing == FAILED})
-    # processing and failed count subjects (they have no trial rows), reviewed counts trials
     states = [f"{n} {what}" for n, what in ((waiting, "processing"), (failed, "failed")) if n]
     head = f"**{len({r.subject.rel for r in rows})} subjects" + (f" ({', '.join(states)})" if states else "")
     head += f", {n_trials} trials: {done} reviewed"

@@ -68,7 +68,7 @@ def test_reprocess_warns_once_about_pending_proposals_it_would_fit_as_measured(
     assert len(started) == 1 and f"{n_proposed} proposed frames of walk are still pending" in app.panel.job_status.content
     app.jobs.reprocess()  # at once (a double click): still only the warning
     assert len(started) == 1
-    app.jobs._warned_at -= reprocess.CONFIRM_AFTER_S  # the warning read: a second press later
+    app.jobs.pending_warning.at -= reprocess.CONFIRM_AFTER_S  # the warning read: a second press later
     app.jobs.reprocess()  # pressed again: the reviewer means it
     assert len(started) == 2 and started[-1].unmeasured_force["walk"].sum() == 1
     # decided (every proposal accepted): no warning any more, Reprocess runs at once
@@ -97,7 +97,7 @@ def test_trial_reviewed_warns_once_about_pending_proposals_and_flags_say_what_th
     assert f"not marked reviewed: {n_proposed} proposed frames of walk are still pending" in p.saved.content
     app.set_reviewed(True)  # at once: a double click
     assert not app.view.reviewed
-    app._review_warned_at -= reprocess.CONFIRM_AFTER_S  # the warning read: ticked again later
+    app.review_warning.at -= reprocess.CONFIRM_AFTER_S  # the warning read: ticked again later
     app.set_reviewed(True)
     assert app.view.reviewed and p.reviewed.value and "✓ saved: trial reviewed" in p.saved.content
     assert f"{n_proposed} pending proposed frames are now fitted as measured" in p.saved.content
