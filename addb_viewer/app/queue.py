@@ -75,7 +75,7 @@ class QueueRow:
     review
         :data:`UNREVIEWED`, :data:`IN_REVIEW`, :data:`REVIEWED` or :data:`RECORD_UNREADABLE`.
     reviewer
-        Who marked it reviewed (or, in review, who edited last); None when nobody.
+        Who marked it reviewed (or, in review, everyone who edited it, the last editor first); None when nobody.
     pending
         Frames the solver proposes as unmeasured that are neither flagged nor rejected;
         None when unknown (an output without a manifest).
@@ -172,7 +172,8 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
 
 def _review_state(snapshot: Any | None) -> tuple[str, str | None]:
     """(review state, who): who marked the trial reviewed (and who edited it since, if
-    anyone: "alice, edited since by bob"), else who edited it last."""
+    anyone: "alice, edited since by bob"), else everyone who edited it, the last editor
+    first ("bob, alice")."""
     if snapshot is None:
         return UNREVIEWED, None
     edits = [r.provenance for r in (*snapshot.unmeasured_force, *snapshot.excluded)]
@@ -188,8 +189,11 @@ def _review_state(snapshot: Any | None) -> tuple[str, str | None]:
             return REVIEWED, f"{prov.reviewer}, edited since by {', '.join(dict.fromkeys(e.reviewer for e in later))}"
         return REVIEWED, prov.reviewer
     if edits or snapshot.reviewed_provenance is not None:
-        last = max(edits, key=lambda e: e.timestamp) if edits else snapshot.reviewed_provenance
-        return IN_REVIEW, last.reviewer
+        if not edits:
+            return IN_REVIEW, snapshot.reviewed_provenance.reviewer
+        # everyone who edited it, the last editor first ("bob, alice"): a team sees who to ask
+        latest = sorted(edits, key=lambda e: e.timestamp, reverse=True)
+        return IN_REVIEW, ", ".join(dict.fromkeys(e.reviewer for e in latest))
     return UNREVIEWED, None
 
 

@@ -107,6 +107,12 @@ def test_queue_states_reviewers_and_pending_proposals(dataset: Path, walk_output
         s.set_unmeasured("walk", [7])  # the one who marked it is not listed
     done = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/done", "walk"))
     assert done.reviewer == "alice, edited since by carol, dave"
+    # a trial in review names everyone who edited it, the last editor first (it named bob only
+    # once erin had edited after him, and a team could not tell that bob was on it too)
+    with AnnotationStore.open(annotations_path(dataset / "lab" / "busy", out / "lab" / "busy"), reviewer="erin") as s:
+        s.set_unmeasured("walk", [3])
+    busy = next(r for r in build_queue(subjects) if (r.subject.rel, r.trial) == ("lab/busy", "walk"))
+    assert (busy.review, busy.reviewer) == (IN_REVIEW, "erin, bob")
     # a subject processed again keeps its trials, review states and figures, marked as
     # processing (they collapsed into one row: Open lost the trial on screen, the reviewed
     # count dropped); the summary counts it once
