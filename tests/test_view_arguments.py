@@ -1,5 +1,5 @@
 """``addb view``'s argument checks that refuse on the terminal, before the server starts:
-an output folder its processing would refuse.
+an output folder its processing would refuse, and a file that is not a .b3d file.
 
 The review app is replaced by a stub that fails the test if it is made: a check that let the
 argument through would otherwise start a server that runs until stopped.
@@ -52,6 +52,17 @@ def test_an_output_folder_inside_the_subject_folder_is_let_through(tmp_path: Pat
     subject = writable_copy(WALK, tmp_path / "s01")
     with pytest.raises(AssertionError, match="started the review app"):
         main(["view", str(subject), "--out", str(subject / "addb_out"), "--port", "0"])
+
+
+@pytest.mark.parametrize("name", ["trials/walk/markers.trc", "unscaled_generic.osim", "_subject.json"])
+def test_a_file_other_than_a_b3d_file_is_named_as_a_file(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """It read as "no such subject folder", as if the file did not exist."""
+    path = WALK / name
+    assert main(["view", str(path), "--port", "0"]) == 1
+    err = capsys.readouterr().err
+    assert f"addb view: SubjectFolderError ({path}): is a file; addb view expects a subject folder (with _subject.json), " in err
+    assert "a .b3d file or a folder of .b3d files" in err
+    assert "no such" not in err and "Traceback" not in err
 
 
 def test_a_missing_path_is_still_no_such_subject_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -131,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
 
     Raises
     ------
+    SubjectFolderError
+        The path is a file other than a .b3d file.
     OutputFolderError
         ``--out`` of a subject is a folder its processing would refuse
         (:func:`solver.outputs.check_output_folder`: the subject folder or a folder above
@@ -141,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.paths import ReviewPaths
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
+    from solver.errors import SubjectFolderError
     from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
@@ -158,6 +161,12 @@ def run(args: argparse.Namespace) -> int:
         from addb_viewer.demo import DEMO_SUBJECT
 
         subject = DEMO_SUBJECT
+    if subject.is_file():
+        raise SubjectFolderError(
+            "is a file; addb view expects a subject folder (with _subject.json), a dataset folder (subject "
+            "folders, or a dataset output tree), a .b3d file or a folder of .b3d files",
+            path=subject,
+        )
     if not subject.is_dir():
         print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
         return 1
