@@ -75,8 +75,16 @@ def run(args: argparse.Namespace) -> int:
 
     Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
+    from solver.errors import SubjectFolderError
     from solver.io.b3d_convert import b3d_to_subject
+    from solver.io.subject import SUBJECT_JSON
 
+    if not args.force and (Path(args.out) / SUBJECT_JSON).exists():
+        raise SubjectFolderError(
+            f"exists and already holds a subject ({SUBJECT_JSON}); add --force to write the converted subject "
+            "over it (trial folders the .b3d file does not have are kept), or give a new folder as --out",
+            path=args.out,
+        )
     converted = b3d_to_subject(args.file, args.out, pass_index=args.pass_index, overwrite=args.force)
     record = write_review_record(converted)
     for t in converted.trials:
@@ -101,5 +109,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", help="the .b3d file")
     p.add_argument("--out", required=True, help="subject folder to write")
     p.add_argument("--pass", dest="pass_index", type=int, default=0, help="processing pass whose model to use (default 0)")
-    p.add_argument("--force", action="store_true", help="replace an existing converted subject in --out")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write over the subject already in --out (its model, _subject.json and the file's trials; other trial folders are kept)",
+    )
     p.set_defaults(handler=run)

@@ -120,9 +120,13 @@ def run(args: argparse.Namespace) -> int:
         return export_b3d(args)
     if not args.trial:
         raise SystemExit(f"addb export: --trial is required for --format {fmt}")
+    from addb_viewer.commands.record import refuse_output_folder
     from addb_viewer.progress import ProgressBar
     from addb_viewer.recording.jobs import record_subject_trial
 
+    # the output folder itself is taken by --format b3d only
+    given_format = ["--format", fmt] if args.format else []
+    refuse_output_folder(args.subject, args.out, ["export", "SUBJECT_DIR", "--trial", args.trial, *given_format, "-o", args.output])
     path = record_subject_trial(
         args.subject, args.trial, args.output, fmt=fmt, out_dir=args.out, progress=ProgressBar(),
         geometry=args.geometry,

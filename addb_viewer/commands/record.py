@@ -3,6 +3,60 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
+from collections.abc import Sequence
+from pathlib import Path
+
+
+def refuse_output_folder(subject: str | os.PathLike[str], out: str | os.PathLike[str] | None, suggest: Sequence[str]) -> None:
+    """Refuse an output folder of addb given where a recording command expects the subject folder.
+
+    ``addb record`` and ``addb export`` (mcap, rrd) read the subject folder (review record,
+    bone meshes) and process it first when its output folder holds no processed trial. An
+    output folder (what ``addb process --out`` wrote: one of
+    :data:`solver.outputs.OUTPUT_MARKERS`, no ``_subject.json``) in its place was reported
+    as a subject folder without ``_subject.json``. An output folder that is also given as
+    ``--out`` (or whose default output folder holds processed trials) is read as before.
+
+    Parameters
+    ----------
+    subject
+        The command's subject argument.
+    out
+        Its ``--out``; None: the subject's default output folder
+        (:func:`addb_viewer.locations.default_output_dir`).
+    suggest
+        The command line to suggest, as arguments, with ``SUBJECT_DIR`` where the subject
+        folder goes and without ``--out`` (added here, naming ``subject``).
+
+    Raises
+    ------
+    SubjectFolderError
+        ``subject`` is an output folder of addb and the command would have to process it;
+        the message names the subject folder when it is the output's parent
+        (``<subject>/addb_out``).
+    """
+    from addb_viewer.locations import OUTPUT_NAME, default_output_dir
+    from solver.errors import SubjectFolderError
+    from solver.io.subject import SUBJECT_JSON
+    from solver.outputs import OUTPUT_MARKERS
+    from solver.results import processed_trials
+
+    folder = Path(subject)
+    if not folder.is_dir() or (folder / SUBJECT_JSON).is_file():
+        return
+    marker = next((m for m in OUTPUT_MARKERS if (folder / m).exists()), None)
+    if marker is None or processed_trials(out if out is not None else default_output_dir(folder)):
+        return
+    parent = folder.resolve().parent
+    subject_dir = str(parent) if folder.resolve().name == OUTPUT_NAME and (parent / SUBJECT_JSON).is_file() else "SUBJECT_DIR"
+    command = shlex.join(["addb", *(subject_dir if a == "SUBJECT_DIR" else a for a in suggest), "--out", str(folder)])
+    raise SubjectFolderError(
+        f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder "
+        f"(the one with {SUBJECT_JSON}), with this output folder given as --out: {command}",
+        path=folder,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -18,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.progress import ProgressBar
     from addb_viewer.recording.jobs import record_subject_trial
 
+    refuse_output_folder(args.subject, args.out, ["record", "SUBJECT_DIR", "--trial", args.trial, "-o", args.output])
     path = record_subject_trial(
         args.subject,
         args.trial,

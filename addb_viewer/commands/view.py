@@ -129,11 +129,22 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0 after a clean stop, 1 when the subject folder does not exist.
 
-    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
+    Raises
+    ------
+    SubjectFolderError
+        The path is a file other than a .b3d file.
+    OutputFolderError
+        ``--out`` of a subject is a folder its processing would refuse
+        (:func:`solver.outputs.check_output_folder`: the subject folder or a folder above
+        it, a file, a folder of other files), before the server starts.
+
+    Other bad input raises too, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from addb_viewer.app.paths import ReviewPaths
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
+    from solver.errors import SubjectFolderError
+    from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
     if subject is not None and is_b3d_folder(subject):
@@ -150,10 +161,19 @@ def run(args: argparse.Namespace) -> int:
         from addb_viewer.demo import DEMO_SUBJECT
 
         subject = DEMO_SUBJECT
+    if subject.is_file():
+        raise SubjectFolderError(
+            "is a file; addb view expects a subject folder (with _subject.json), a dataset folder (subject "
+            "folders, or a dataset output tree), a .b3d file or a folder of .b3d files",
+            path=subject,
+        )
     if not subject.is_dir():
         print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
         return 1
     paths = ReviewPaths.for_subject(subject, args.out)
+    # processing and Reprocess write the output folder through this check: refused here, on
+    # the terminal, rather than in the page once the server runs
+    check_output_folder(paths.out_dir, (paths.subject_dir,))
     from addb_viewer.geometry import mesh_search_path
 
     mesh_search_path(None, None, args.geometry, bundled=False)  # a wrong --geometry fails here

@@ -132,7 +132,7 @@ def b3d_to_subject(
     h = b3d.header
     out = Path(out_dir)
     if (out / SUBJECT_JSON).exists() and not overwrite:
-        raise SubjectFolderError("already holds a subject; pass overwrite (--force) to replace it", path=out)
+        raise SubjectFolderError(f"already holds a subject ({SUBJECT_JSON}); overwrite=True (addb convert --force) writes over it", path=out)
     if not h.passes or not (0 <= pass_index < len(h.passes)):
         raise SubjectFolderError(f"the file has {len(h.passes)} processing passes, no pass {pass_index} to take the model from", path=b3d.path)
     if not any(t.n_frames for t in h.trials):

@@ -392,8 +392,12 @@ def _b3d_lines(d: dict[str, Any]) -> list[str]:
     ]
     for t in d["trials"]:
         missing = ", ".join(f"{k} {v}" for k, v in sorted(t["missing_grf_by_reason"].items())) or "none"
+        # the trial it was split from only when the name does not already say it (AddBiomechanics
+        # names part k of trial T "T_segment_k"; addb export names a trial as its original)
+        original, part = t["original_name"], t["split_index"]
+        source = "" if t["name"] in (original, f"{original}_segment_{part}") else f" (from {original} part {part})"
         lines.append(
-            f"    {t['name']} ({t['original_name']} part {t['split_index']}): {t['frames']} frames at "
+            f"    {t['name']}{source}: {t['frames']} frames at "
             f"{_fmt(t['rate_hz'])} Hz ({_fmt(t['duration_s'])} s), {t['force_plates']} plates, "
             f"passes {', '.join(t['passes'])}; missing GRF frames: {t['missing_grf_frames']} ({missing})"
         )

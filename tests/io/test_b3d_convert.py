@@ -23,7 +23,7 @@ B3D = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "b3d" / "
 pytestmark = pytest.mark.skipif(not B3D.exists(), reason="shared results.b3d not present")
 
 
-def test_converted_subject_holds_the_file_data(tmp_path: Path) -> None:
+def test_converted_subject_holds_the_file_data(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "subject"
     assert main(["convert", str(B3D), "--out", str(out)]) == 0
     f = open_b3d(B3D)
@@ -48,8 +48,12 @@ def test_converted_subject_holds_the_file_data(tmp_path: Path) -> None:
             np.testing.assert_array_equal(plate.force, fr.plate_force[:, p])
             np.testing.assert_array_equal(plate.cop, fr.plate_cop[:, p])
             np.testing.assert_array_equal(plate.free_moment, fr.plate_moment[:, p])
-    # a second convert into the same folder needs --force
+    # a second convert into the same folder needs --force, and says so in plain words
+    capsys.readouterr()
     assert main(["convert", str(B3D), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert f"addb convert: SubjectFolderError ({out}): exists and already holds a subject (_subject.json); add --force to write" in err
+    assert "pass overwrite" not in err
     assert main(["convert", str(B3D), "--out", str(out), "--force"]) == 0
 
 

@@ -38,3 +38,28 @@ def test_cli_info(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     assert main(["info", str(bad)]) == 1
     err = capsys.readouterr().err
     assert "B3dFormatError" in err and "byte 0" in err and str(bad) in err
+
+
+def test_each_trial_is_named_once(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """A trial's line named it and then, in parentheses, the trial it was split from, which the
+    name already says ("walking2_segment_0 (walking2 part 0)"; "walk (walk part 0)" for a file
+    of addb export): read as each trial listed twice. The source stays when the name does not say it."""
+    import dataclasses
+
+    from solver.io.b3d import open_b3d
+    from solver.io.b3d_writer import write_b3d
+
+    assert main(["info", str(B3D)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name in ("walking1", "walking2"):
+        [line] = [s for s in lines if name in s]
+        assert line.count(name) == 1 and line.startswith(f"    {name}_segment_0: ")
+    f = open_b3d(B3D)
+    first, second = f.header.trials
+    trials = (dataclasses.replace(first, name="overground"), dataclasses.replace(second, name="walking1", split_index=0))
+    renamed = tmp_path / "renamed.b3d"
+    write_b3d(renamed, dataclasses.replace(f.header, trials=trials), [f.read_trial(k) for k in range(2)])
+    assert main(["info", str(renamed)]) == 0
+    out = capsys.readouterr().out
+    assert "    overground (from walking2 part 0): 132 frames" in out
+    assert "    walking1: 131 frames" in out and out.count("walking1") == 1

@@ -154,3 +154,29 @@ def test_default_output_and_review_record(
     # second call: already processed, not processed again
     assert main(["record", str(subject), "--trial", "walk", "-o", str(tmp_path / "walk.rrd")]) == 0
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize(("command", "fmt"), [("record", []), ("export", ["--format", "mcap"]), ("export", [])],
+                         ids=["record", "export_mcap", "export_rrd"])
+def test_an_output_folder_in_place_of_the_subject_folder_says_so(
+    command: str, fmt: list[str], tmp_path: Path, demo_out: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``addb process SUBJ --out OUT`` then ``addb record OUT ...``: OUT is named as addb's
+    output folder and the command to type is given (it read as a subject folder without
+    _subject.json); nothing is processed or written. Given as --out too, OUT is read as before."""
+    output = tmp_path / ("walk.mcap" if fmt else "walk.rrd")
+    args = ["--trial", "walk", *fmt, "-o", str(output)]
+    assert main([command, str(demo_out), *args]) == 1
+    err = capsys.readouterr().err
+    assert f"SubjectFolderError ({demo_out}): is an output folder of addb (it holds subject.json), not a subject folder" in err
+    assert f"addb {command} SUBJECT_DIR {' '.join(args)} --out {demo_out}" in err
+    assert "_subject.json is missing" not in err and "Traceback" not in err
+    assert not output.exists() and not (demo_out / "addb_out").exists()
+    # the subject folder holding the output (<subject>/addb_out) is named in the command
+    subject = tmp_path / "s01"
+    shutil.copytree(DEMO_SUBJECT, subject)
+    shutil.copytree(demo_out, subject / "addb_out")
+    assert main([command, str(subject / "addb_out"), *args]) == 1
+    assert f"addb {command} {subject} {' '.join(args)} --out {subject / 'addb_out'}" in capsys.readouterr().err
+    assert main([command, str(demo_out), *args, "--out", str(demo_out)]) == 0
+    assert output.is_file()
