@@ -41,7 +41,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.discover import DatasetSubject, find_subjects
+from solver.dataset.discover import (
+    DatasetScan,
+    DatasetSubject,
+    no_subject_error,
+    scan_dataset,
+    subjects_below,
+)
 from solver.dataset.manifest import current_manifest, manifest_key
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
@@ -178,6 +184,28 @@ def _failure(entry: DatasetSubject, kind: str, message: str, **extra: Any) -> di
     }
 
 
+def _refuse_output_among_subjects(scan: DatasetScan, source: Path, out: Path) -> None:
+    """Raise DatasetError when the output tree ``out``, inside the dataset folder ``source``,
+    holds subject folders of the dataset (the search leaves it out, so the run would skip
+    them silently; an earlier output tree holds none: addb writes no ``_subject.json``) or
+    lies inside one (its outputs would become that subject's input files)."""
+    for entry in scan.subjects:
+        if entry.path.resolve() in out.parents:
+            raise DatasetError(
+                f"the output tree lies inside the subject folder {entry.rel} of the dataset {source}, whose files "
+                "are that subject's inputs; expected an output folder outside every subject folder, e.g. "
+                f"{source / 'addb_out'}", path=out)
+    for folder in scan.excluded:
+        held = subjects_below(source, folder)
+        if held:
+            names = ", ".join(s.rel for s in held[:5]) + (", ..." if len(held) > 5 else "")
+            raise DatasetError(
+                f"the output tree lies inside the dataset folder {source} and holds {len(held)} of its subject folder(s) "
+                f"({names}), which the run would leave out (the output tree is not searched for subjects) and write "
+                "its outputs among; expected an output folder that holds no subject folder, e.g. "
+                f"{source / 'addb_out'} or a folder outside the dataset", path=out)
+
+
 def process_dataset(
     dataset_dir: str | Path,
     out_dir: str | Path,
@@ -232,7 +260,9 @@ def process_dataset(
     ------
     DatasetError
         No subject below ``dataset_dir``, the scheduler cannot be reached, or ``out_dir``
-        is ``dataset_dir`` or a folder above it (checked first). A subject whose output
+        is ``dataset_dir`` or a folder above it, or lies inside it and holds subject folders
+        (the search leaves the output tree out, so they would be silently left out) or lies
+        inside a subject folder (checked before anything is written). A subject whose output
         folder holds what addb did not write (:func:`solver.outputs.check_output_folder`)
         fails alone, with that error, and the others run.
     """
@@ -247,7 +277,11 @@ def process_dataset(
             f"the output tree {out} {'is' if out == source else 'holds'} the dataset folder {source}; each subject's "
             "output folder replaces its namesake in the output tree, so it must be another folder (e.g. "
             f"{source / 'addb_out'})", path=out)
-    subjects = find_subjects(dataset_dir, exclude=(out,))
+    scan = scan_dataset(dataset_dir, exclude=(out,))
+    _refuse_output_among_subjects(scan, source, out)
+    if not scan.subjects:
+        raise no_subject_error(scan, dataset_dir)
+    subjects = scan.subjects
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_work(out)
     settings = {"addb_process": "default", **opts.settings}
