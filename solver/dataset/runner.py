@@ -58,7 +58,7 @@ from solver.dataset.task import (
     run_subject,
 )
 from solver.errors import DatasetError, OutputFolderError
-from solver.outputs import check_output_folder, write_json
+from solver.outputs import OUTPUT_MARKERS, check_output_folder, write_json
 from solver.provenance import addb_version
 
 SUMMARY_NAME = "dataset_summary.json"
@@ -184,6 +184,19 @@ def _failure(entry: DatasetSubject, kind: str, message: str, **extra: Any) -> di
     }
 
 
+def _refuse_subject_output(out: Path) -> None:
+    """Raise DatasetError when ``out`` is the output folder of one subject (it holds one of
+    :data:`solver.outputs.OUTPUT_MARKERS`, as ``addb process SUBJECT_DIR --out OUT`` or a
+    dataset run's subject writes it): a dataset run would write its tree among those files."""
+    marker = next((m for m in OUTPUT_MARKERS if (out / m).exists()), None) if out.is_dir() else None
+    if marker is not None:
+        raise DatasetError(
+            f"is the output folder of one subject (it holds {marker}, as `addb process SUBJECT_DIR --out` writes it), "
+            f"and a dataset run would write its output tree (a folder per subject, {SUMMARY_NAME}) among that "
+            f"subject's files; expected a new folder, an empty one, or an earlier dataset output tree (it holds "
+            f"{SUMMARY_NAME})", path=out)
+
+
 def _refuse_output_among_subjects(scan: DatasetScan, source: Path, out: Path) -> None:
     """Raise DatasetError when the output tree ``out``, inside the dataset folder ``source``,
     holds subject folders of the dataset (the search leaves it out, so the run would skip
@@ -262,7 +275,8 @@ def process_dataset(
         No subject below ``dataset_dir``, the scheduler cannot be reached, or ``out_dir``
         is ``dataset_dir`` or a folder above it, or lies inside it and holds subject folders
         (the search leaves the output tree out, so they would be silently left out) or lies
-        inside a subject folder (checked before anything is written). A subject whose output
+        inside a subject folder, or is the output folder of one subject (checked before
+        anything is written). A subject whose output
         folder holds what addb did not write (:func:`solver.outputs.check_output_folder`)
         fails alone, with that error, and the others run.
     """
@@ -277,6 +291,7 @@ def process_dataset(
             f"the output tree {out} {'is' if out == source else 'holds'} the dataset folder {source}; each subject's "
             "output folder replaces its namesake in the output tree, so it must be another folder (e.g. "
             f"{source / 'addb_out'})", path=out)
+    _refuse_subject_output(out)
     scan = scan_dataset(dataset_dir, exclude=(out,))
     _refuse_output_among_subjects(scan, source, out)
     if not scan.subjects:

@@ -5,6 +5,8 @@ found, on a dataset of symbolic links to the shared subjects (``labA/walk``, ``l
 * OUT inside the dataset folder holding subject folders of it (``--out DATASET/labA``) is
   refused, naming them: the search leaves OUT out, and the run skipped them silently. OUT
   inside a subject folder is refused too (its outputs would become the subject's inputs).
+* OUT that is the output folder of one subject (``addb process SUBJECT_DIR --out OUT``) is
+  refused: the dataset tree and its summary were written among that subject's files.
 """
 
 from __future__ import annotations
@@ -59,3 +61,22 @@ def test_an_output_tree_in_or_at_a_subject_folder_is_refused(dataset: Path, caps
         err = capsys.readouterr().err
         assert f"DatasetError ({out.resolve()}): the output tree" in err and said in err, err
         assert _files(dataset) == before
+
+
+def _states(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every file below ``folder``: relative path -> (size, modification time in ns)."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.slow
+def test_the_output_folder_of_one_subject_is_refused_as_an_output_tree(dataset: Path, tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    one = tmp_path / "walk_out"
+    assert cli(["process", str(SUBJECTS / "rajagopal2016_walk"), "--out", str(one)]) == 0
+    before = _states(one)
+    capsys.readouterr()
+    assert cli(["process", str(dataset), "--out", str(one), "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert f"DatasetError ({one.resolve()}): is the output folder of one subject (it holds subject.json" in err, err
+    assert "expected a new folder, an empty one, or an earlier dataset output tree" in err and "Traceback" not in err
+    assert _states(one) == before  # no labA/, no dataset_summary.json
