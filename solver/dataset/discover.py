@@ -13,6 +13,10 @@ into hidden folders, into addb's own output folders (``addb_out``) or into the o
 folder of the run itself when it lies inside the dataset folder (:func:`scan_dataset`
 says which excluded folders it met, so that the run can refuse one holding subject
 folders: addb never writes ``_subject.json`` into an output).
+
+AddBiomechanics ``.b3d`` files are not subject folders: the search lists those it meets
+outside subject folders (:attr:`DatasetScan.b3d_files`) so that the run can say they are
+not processed and how to make them subject folders (``addb convert``).
 """
 
 from __future__ import annotations
@@ -65,10 +69,14 @@ class DatasetScan:
     excluded
         The excluded folders the search met and did not enter (as reached from the
         dataset folder, not resolved).
+    b3d_files
+        Relative paths (``/`` separators) of the ``.b3d`` files outside subject folders,
+        which a dataset run does not process.
     """
 
     subjects: tuple[DatasetSubject, ...]
     excluded: tuple[Path, ...]
+    b3d_files: tuple[str, ...]
 
 
 def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
@@ -76,12 +84,14 @@ def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
     relative paths are taken from ``base``."""
     found: list[DatasetSubject] = []
     excluded: list[Path] = []
+    b3d: list[str] = []
     for folder, dirs, files in os.walk(top, followlinks=True):
         here = Path(folder)
         if SUBJECT_JSON in files and here != base:
             found.append(DatasetSubject(here.relative_to(base).as_posix(), here))
             dirs[:] = []  # a subject's trials are not subjects
             continue
+        b3d += [(here / f).relative_to(base).as_posix() for f in sorted(files) if f.lower().endswith(".b3d") and not f.startswith(".")]
         kept = []
         for d in sorted(dirs):
             if d.startswith(".") or d in SKIPPED_FOLDERS:
@@ -91,7 +101,7 @@ def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
                 continue
             kept.append(d)
         dirs[:] = kept
-    return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded))
+    return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded), tuple(sorted(b3d)))
 
 
 def scan_dataset(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> DatasetScan:
@@ -107,7 +117,8 @@ def scan_dataset(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> D
     Returns
     -------
     DatasetScan
-        The subject folders and the excluded folders met.
+        The subject folders, the excluded folders met and the ``.b3d`` files outside
+        subject folders.
 
     Raises
     ------
@@ -137,8 +148,27 @@ def subjects_below(root: str | Path, folder: str | Path) -> tuple[DatasetSubject
 
 
 def no_subject_error(scan: DatasetScan, root: str | Path) -> DatasetError:
-    """The error of a dataset folder ``root`` whose ``scan`` found no subject folder."""
-    return DatasetError(f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder", path=Path(root).resolve())
+    """The error of a dataset folder without subject folders; it names the ``.b3d`` files
+    met, which are not subject folders, and how to make them ones."""
+    message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
+    if scan.b3d_files:
+        message += f"; it holds {_b3d_note(scan.b3d_files)}"
+    return DatasetError(message, path=Path(root).resolve())
+
+
+def _b3d_note(b3d_files: tuple[str, ...]) -> str:
+    shown = ", ".join(b3d_files[:5]) + (", ..." if len(b3d_files) > 5 else "")
+    return (
+        f"{len(b3d_files)} .b3d file(s) ({shown}), which a dataset run does not process: convert each into a subject "
+        "folder of the dataset with `addb convert FILE.b3d --out SUBJECT_DIR` (a folder holding one .b3d file can "
+        "become that subject folder: --out that folder), or review a folder of .b3d files with `addb view FOLDER`"
+    )
+
+
+def b3d_note(scan: DatasetScan) -> str | None:
+    """A message for the user naming the ``.b3d`` files of ``scan`` that a dataset run does not
+    process and what it expects instead, or None when there are none."""
+    return f"the dataset folder holds {_b3d_note(scan.b3d_files)}" if scan.b3d_files else None
 
 
 def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> tuple[DatasetSubject, ...]:
@@ -159,7 +189,8 @@ def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> 
     Raises
     ------
     DatasetError
-        ``root`` is not a folder, or holds no subject folder.
+        ``root`` is not a folder, or holds no subject folder (the message names the
+        ``.b3d`` files found instead, if any).
     """
     scan = scan_dataset(root, exclude=exclude)
     if not scan.subjects:

@@ -44,6 +44,7 @@ from typing import Any
 from solver.dataset.discover import (
     DatasetScan,
     DatasetSubject,
+    b3d_note,
     no_subject_error,
     scan_dataset,
     subjects_below,
@@ -250,7 +251,8 @@ def process_dataset(
     progress
         Called with (message, fraction of subjects finished).
     log
-        Called with one-line messages for the user (the dashboard address, retries).
+        Called with one-line messages for the user (the dashboard address, retries, the
+        ``.b3d`` files below ``dataset_dir`` that are not processed: they are no subject folders).
     events
         Called with ``("queued", {"rels": [...]})`` once the subjects to process are known
         ``("progress", {"rel", "message", "fraction"})`` while a subject runs (from its
@@ -297,6 +299,8 @@ def process_dataset(
     if not scan.subjects:
         raise no_subject_error(scan, dataset_dir)
     subjects = scan.subjects
+    if (note := b3d_note(scan)) is not None:  # not processed: say so, and what is expected
+        tell(note)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_work(out)
     settings = {"addb_process": "default", **opts.settings}

@@ -7,6 +7,9 @@ found, on a dataset of symbolic links to the shared subjects (``labA/walk``, ``l
   inside a subject folder is refused too (its outputs would become the subject's inputs).
 * OUT that is the output folder of one subject (``addb process SUBJECT_DIR --out OUT``) is
   refused: the dataset tree and its summary were written among that subject's files.
+* A .b3d file in a folder of its own is no subject folder: the run says it is not processed
+  and how to make it one (``addb convert``), also when it finds no subject at all (it said
+  only "no subject folder").
 """
 
 from __future__ import annotations
@@ -17,9 +20,11 @@ import pytest
 
 from addb_viewer.cli import main as cli
 from solver.dataset.discover import scan_dataset, subjects_below
-from tests.conftest import writable_copy
+from solver.dataset.runner import process_dataset
+from tests.conftest import SHARED_DATA, writable_copy
 from tests.dataset.dataset_tree import SUBJECTS
 
+B3D = SHARED_DATA / "b3d" / "results.b3d"
 LINKED = {"labA/walk": "rajagopal2016_walk", "labA/run": "rajagopal2016_run", "labB/walk": "rajagopal2016_walk"}
 
 
@@ -80,3 +85,38 @@ def test_the_output_folder_of_one_subject_is_refused_as_an_output_tree(dataset: 
     assert f"DatasetError ({one.resolve()}): is the output folder of one subject (it holds subject.json" in err, err
     assert "expected a new folder, an empty one, or an earlier dataset output tree" in err and "Traceback" not in err
     assert _states(one) == before  # no labA/, no dataset_summary.json
+
+
+def test_b3d_files_outside_subject_folders_are_named_with_what_is_expected(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    root = tmp_path / "published"
+    (root / "labC" / "p1").mkdir(parents=True)
+    (root / "labC" / "p1" / "results.b3d").symlink_to(B3D)
+    assert cli(["process", str(root), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err
+    assert f"DatasetError ({root.resolve()}): no subject folder (a folder holding _subject.json) below this folder; " in err
+    assert "1 .b3d file(s) (labC/p1/results.b3d), which a dataset run does not process" in err, err
+    assert "addb convert FILE.b3d --out SUBJECT_DIR" in err and not (tmp_path / "out").exists()
+    # the advice holds: converted in its folder, the file's folder is a subject folder, and
+    # a .b3d file inside a subject folder is an input of it, not named
+    writable_copy(root / "labC", tmp_path / "copy" / "labC", symlinks=False)
+    folder = tmp_path / "copy" / "labC" / "p1"
+    assert cli(["convert", str(folder / "results.b3d"), "--out", str(folder)]) == 0
+    scan = scan_dataset(tmp_path / "copy")
+    assert [s.rel for s in scan.subjects] == ["labC/p1"] and scan.b3d_files == ()
+
+
+def test_a_b3d_file_in_a_dataset_of_subject_folders_is_named_as_not_processed(dataset: Path, tmp_path: Path) -> None:
+    (dataset / "labC" / "p1").mkdir(parents=True)
+    (dataset / "labC" / "p1" / "results.b3d").symlink_to(B3D)
+    out = tmp_path / "out"
+    for rel in LINKED:  # each subject's output folder holds a file of someone else's: they fail alone, no cluster starts
+        (out / rel).mkdir(parents=True)
+        (out / rel / "notes.txt").write_text("keep")
+    said: list[str] = []
+    run = process_dataset(dataset, out, log=said.append)
+    assert [s["rel"] for s in run.failed] == sorted(LINKED)
+    [note] = [m for m in said if ".b3d" in m]
+    assert note.startswith("the dataset folder holds 1 .b3d file(s) (labC/p1/results.b3d), which a dataset run does not process")
+    assert "addb convert FILE.b3d --out SUBJECT_DIR" in note
