@@ -36,7 +36,7 @@ import json
 import os
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -128,6 +128,41 @@ class DatasetRun:
     def failed(self) -> tuple[dict[str, Any], ...]:
         """The failed subjects' entries."""
         return tuple(s for s in self.subjects if s["status"] == "failed")
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """How many subjects this run processed, skipped as up to date, found failed and
+        gave up (:func:`subject_counts`)."""
+        return subject_counts(self.subjects)
+
+
+def subject_counts(entries: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+    """Subjects by what a run did with them, from their entries (outcomes).
+
+    Returns
+    -------
+    dict
+        ``processed`` (run now: ``ok`` or ``kinematics_only``), ``up_to_date`` (skipped,
+        their output current), ``failed`` (run now and failed, not started because of their
+        output folder or files, or failed before on the same inputs and not run again) and
+        ``cancelled`` (given up when the run was stopped).
+    """
+    out = {"processed": 0, "up_to_date": 0, "failed": 0, "cancelled": 0}
+    for e in entries:
+        kind = {"skipped": "up_to_date", "failed": "failed", "cancelled": "cancelled"}.get(e["status"], "processed")
+        out[kind] += 1
+    return out
+
+
+def _progress_line(counts: dict[str, int], frames: int | None, to_process: int = 0) -> str:
+    """The progress message of a run, each kind of subject counted apart (a subject skipped
+    as up to date was counted as processed); ``frames``: of the subjects processed so far,
+    None before any ran. The counts come first: the command line's bar shows 50 characters."""
+    if frames is None:
+        return f"{counts['up_to_date']} up to date, {counts['failed']} failed, {to_process} to process"
+    line = f"{counts['processed']} processed, {counts['failed']} failed, {counts['up_to_date']} up to date"
+    line += f", {counts['cancelled']} cancelled" if counts["cancelled"] else ""
+    return f"{line} ({frames} frames processed)"
 
 
 #: The variable Dask's nanny sets in its workers that slows the pipeline (module docstring).
@@ -333,13 +368,12 @@ def process_dataset(
         jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
     notify = events or (lambda kind, data: None)
     notify("queued", {"rels": [j.rel for j in jobs]})
-    done = len(results)
     total = len(subjects)
-    say(f"{done} of {total} subjects up to date, {len(jobs)} to process", done / total)
+    say(_progress_line(subject_counts(results.values()), None, len(jobs)), len(results) / total)
     dashboard = None
     if jobs:
-        dashboard = _run_jobs(jobs, opts, results, lambda d, frames: say(
-            f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell, notify, stop)
+        dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
+            _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
         remove_stale_work(out)  # work folders of attempts whose worker was killed
     ordered = tuple(results[s.rel] for s in subjects)
     totals = dataset_totals(list(ordered))
@@ -353,12 +387,13 @@ def _run_jobs(
     jobs: list[SubjectJob],
     opts: DatasetOptions,
     results: dict[str, dict[str, Any]],
-    step: Callable[[int, int], None],
+    step: Callable[[int], None],
     tell: Callable[[str], None],
     notify: Callable[[str, dict[str, Any]], None],
     stop: Any = None,
 ) -> str | None:
-    """Submit ``jobs`` to the cluster, collect their outcomes into ``results``."""
+    """Submit ``jobs`` to the cluster, collect their outcomes into ``results``; ``step`` is
+    called after each with the frames of the subjects processed so far."""
     import threading
 
     from distributed import CancelledError, Client, as_completed
@@ -420,7 +455,7 @@ def _run_jobs(
 
             watcher = threading.Thread(target=watch, name="addb-dataset-stop", daemon=True)
             watcher.start()
-        finished, frames = 0, 0
+        frames = 0
         for future in pending:
             job = by_key[future.key]
             try:
@@ -447,9 +482,8 @@ def _run_jobs(
             outcome["attempts"] = attempts[job.rel]
             results[job.rel] = outcome
             notify("done", outcome)
-            finished += 1
             frames += sum(r["frames"] for r in outcome.get("trials") or [])
-            step(finished, frames)
+            step(frames)
     finally:
         with contextlib.suppress(Exception):  # the client may already be closing
             client.unsubscribe_topic(PROGRESS_TOPIC)

@@ -10,10 +10,14 @@ found, on a dataset of symbolic links to the shared subjects (``labA/walk``, ``l
 * A .b3d file in a folder of its own is no subject folder: the run says it is not processed
   and how to make it one (``addb convert``), also when it finds no subject at all (it said
   only "no subject folder").
+* The progress and the last line count the subjects processed, up to date and failed apart:
+  a run with one subject up to date said "2/2 subjects, 907 frames processed" and "2 subjects".
+  An earlier output tree inside the dataset folder is no refusal (it holds no subject folder).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -22,7 +26,7 @@ from addb_viewer.cli import main as cli
 from solver.dataset.discover import scan_dataset, subjects_below
 from solver.dataset.runner import process_dataset
 from tests.conftest import SHARED_DATA, writable_copy
-from tests.dataset.dataset_tree import SUBJECTS
+from tests.dataset.dataset_tree import BROKEN, SUBJECTS, build_tree
 
 B3D = SHARED_DATA / "b3d" / "results.b3d"
 LINKED = {"labA/walk": "rajagopal2016_walk", "labA/run": "rajagopal2016_run", "labB/walk": "rajagopal2016_walk"}
@@ -120,3 +124,30 @@ def test_a_b3d_file_in_a_dataset_of_subject_folders_is_named_as_not_processed(da
     [note] = [m for m in said if ".b3d" in m]
     assert note.startswith("the dataset folder holds 1 .b3d file(s) (labC/p1/results.b3d), which a dataset run does not process")
     assert "addb convert FILE.b3d --out SUBJECT_DIR" in note
+
+
+@pytest.mark.slow
+def test_a_run_counts_subjects_processed_up_to_date_and_failed_apart(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    root = tmp_path / "ds"
+    (root / "labA").mkdir(parents=True)
+    (root / "labA" / "walk").symlink_to(SUBJECTS / "rajagopal2016_walk", target_is_directory=True)
+    out = root / "results"  # inside the dataset folder: left out of the search, and no refusal once it is an output tree
+    assert cli(["process", str(root), "--out", str(out), "--workers", "1"]) == 0
+    (root / "labA" / "run").symlink_to(SUBJECTS / "rajagopal2016_run", target_is_directory=True)
+    build_tree(root, {}, broken=True)
+    capsys.readouterr()
+    assert cli(["process", str(root), "--out", str(out), "--workers", "1"]) == 1  # the broken subject fails
+    printed = capsys.readouterr()
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    assert {s["rel"]: s["status"] for s in summary["subjects"]} == {"labA/run": "ok", "labA/walk": "skipped", BROKEN: "failed"}
+    frames = sum(r["frames"] for s in summary["subjects"] if s["rel"] == "labA/run" for r in s["trials"])
+    assert "s 1 up to date, 0 failed, 2 to process" in printed.err, printed.err
+    assert f"s 1 processed, 1 failed, 1 up to date ({frames} frames processed)" in printed.err, printed.err
+    assert "3 subjects: 1 processed, 1 up to date, 1 failed in " in printed.out, printed.out
+    # nothing changed: nothing runs, and the broken subject is still counted failed
+    assert cli(["process", str(root), "--out", str(out), "--workers", "1"]) == 1
+    printed = capsys.readouterr()
+    assert "s 2 up to date, 1 failed, 0 to process" in printed.err, printed.err
+    assert "3 subjects: 0 processed, 2 up to date, 1 failed in " in printed.out, printed.out
