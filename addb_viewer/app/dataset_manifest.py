@@ -23,7 +23,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.manifest import MANIFEST_NAME, manifest_key, read_manifest
+from solver.dataset.manifest import MANIFEST_NAME, manifest_key, read_manifest, subject_status
 from solver.dataset.summary import subject_rows
 
 
@@ -59,7 +59,7 @@ def mark_reprocessed(subject_dir: str | os.PathLike[str], out_dir: str | os.Path
         **stored,
         "key": now,
         "trials": rows,
-        "status": "ok" if any(r["status"] == "ok" for r in rows) else "kinematics_only",
+        "status": subject_status(rows),
         "fitted_mass_kg": masses[0] if masses else stored.get("fitted_mass_kg"),
         "reprocessed_in_review_app": True,
     }

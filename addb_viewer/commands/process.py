@@ -12,7 +12,13 @@ from pathlib import Path
 
 
 def run_dataset(args: argparse.Namespace) -> int:
-    """A dataset folder: every subject on the Dask cluster, the summary, failures listed."""
+    """A dataset folder: every subject on the Dask cluster, a table of them, the subjects
+    processed, up to date and failed, the dataset's totals, failures listed.
+
+    Returns
+    -------
+    The exit code: 1 when a subject failed (also one that failed before on the same inputs), else 0.
+    """
     from addb_viewer.progress import ProgressBar, table
     from addb_viewer.review_masks import review_digest, subject_masks
     from solver.dataset.runner import REPORT_NAME, SUMMARY_NAME, DatasetOptions, process_dataset
@@ -43,10 +49,12 @@ def run_dataset(args: argparse.Namespace) -> int:
         ])  # fmt: skip
     print(table(rows, ["subject", "status", "trials", "frames (measured/all)", "worst marker RMS (cm)",
                        "worst linear residual (N)", "wall (s)"]))  # fmt: skip
-    t = run.totals
+    t, c = run.totals, run.counts
+    # each kind counted apart: "2 subjects" read as two processed when one was up to date
     print(
-        f"{t['n_subjects']} subjects, {t['trials']} trials, {t['frames']} frames "
-        f"({t['hours']:.4f} h, {t['hours_with_measured_force']:.4f} h with measured force) in {run.seconds:.1f} s"
+        f"{t['n_subjects']} subjects: {c['processed']} processed, {c['up_to_date']} up to date, {c['failed']} failed"
+        + (f", {c['cancelled']} cancelled" if c["cancelled"] else "") + f" in {run.seconds:.1f} s; the dataset: "
+        f"{t['trials']} trials, {t['frames']} frames ({t['hours']:.4f} h, {t['hours_with_measured_force']:.4f} h with measured force)"
     )
     if run.failed:
         print(f"\n{len(run.failed)} subject(s) failed:", file=sys.stderr)

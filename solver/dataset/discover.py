@@ -10,7 +10,13 @@ example one folder per lab::
 
 The search does not descend into a subject folder (its ``trials/`` are not subjects),
 into hidden folders, into addb's own output folders (``addb_out``) or into the output
-folder of the run itself when it lies inside the dataset folder.
+folder of the run itself when it lies inside the dataset folder (:func:`scan_dataset`
+says which excluded folders it met, so that the run can refuse one holding subject
+folders: addb never writes ``_subject.json`` into an output).
+
+AddBiomechanics ``.b3d`` files are not subject folders: the search lists those it meets
+outside subject folders (:attr:`DatasetScan.b3d_files`) so that the run can say they are
+not processed and how to make them subject folders (``addb convert``).
 """
 
 from __future__ import annotations
@@ -52,6 +58,119 @@ def is_subject_folder(path: str | Path) -> bool:
     return (Path(path) / SUBJECT_JSON).is_file()
 
 
+@dataclass(frozen=True)
+class DatasetScan:
+    """What the search below a dataset folder met (:func:`scan_dataset`).
+
+    Attributes
+    ----------
+    subjects
+        The subject folders, sorted by relative path (possibly none).
+    excluded
+        The excluded folders the search met and did not enter (as reached from the
+        dataset folder, not resolved).
+    b3d_files
+        Relative paths (``/`` separators) of the ``.b3d`` files outside subject folders,
+        which a dataset run does not process.
+    """
+
+    subjects: tuple[DatasetSubject, ...]
+    excluded: tuple[Path, ...]
+    b3d_files: tuple[str, ...]
+
+
+def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
+    """The search of :func:`scan_dataset` from ``top`` (``base`` or a folder below it);
+    relative paths are taken from ``base``."""
+    found: list[DatasetSubject] = []
+    excluded: list[Path] = []
+    b3d: list[str] = []
+    for folder, dirs, files in os.walk(top, followlinks=True):
+        here = Path(folder)
+        if SUBJECT_JSON in files and here != base:
+            found.append(DatasetSubject(here.relative_to(base).as_posix(), here))
+            dirs[:] = []  # a subject's trials are not subjects
+            continue
+        b3d += [(here / f).relative_to(base).as_posix() for f in sorted(files) if f.lower().endswith(".b3d") and not f.startswith(".")]
+        kept = []
+        for d in sorted(dirs):
+            if d.startswith(".") or d in SKIPPED_FOLDERS:
+                continue
+            if (here / d).resolve() in skip:
+                excluded.append(here / d)
+                continue
+            kept.append(d)
+        dirs[:] = kept
+    return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded), tuple(sorted(b3d)))
+
+
+def scan_dataset(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> DatasetScan:
+    """Search ``root`` for subject folders (see the module docstring), without requiring any.
+
+    Parameters
+    ----------
+    root
+        The dataset folder.
+    exclude
+        Folders not to search (the run's output folder when it lies inside ``root``).
+
+    Returns
+    -------
+    DatasetScan
+        The subject folders, the excluded folders met and the ``.b3d`` files outside
+        subject folders.
+
+    Raises
+    ------
+    DatasetError
+        ``root`` is not a folder.
+    """
+    base = Path(root).resolve()
+    if not base.is_dir():
+        raise DatasetError("not a folder; expected a dataset folder of subject folders", path=root)
+    return _walk(base, base, {Path(p).resolve() for p in exclude})
+
+
+def subjects_below(root: str | Path, folder: str | Path) -> tuple[DatasetSubject, ...]:
+    """The subject folders at or below ``folder`` (a folder below the dataset folder ``root``,
+    as reached from it: an excluded folder of :class:`DatasetScan`), named relative to ``root``.
+
+    Returns
+    -------
+    tuple of DatasetSubject
+        Possibly none; ``folder`` itself when it is a subject folder.
+    """
+    base = Path(root).resolve()
+    top = Path(folder)
+    if is_subject_folder(top):
+        return (DatasetSubject(top.relative_to(base).as_posix(), top),)
+    return _walk(base, top, set()).subjects
+
+
+def no_subject_error(scan: DatasetScan, root: str | Path) -> DatasetError:
+    """The error of a dataset folder without subject folders; it names the ``.b3d`` files
+    met, which are not subject folders, and how to make them ones."""
+    message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
+    if scan.b3d_files:
+        message += f"; it holds {_b3d_note(scan.b3d_files)}"
+    return DatasetError(message, path=Path(root).resolve())
+
+
+def _b3d_note(b3d_files: tuple[str, ...]) -> str:
+    shown = ", ".join(b3d_files[:5]) + (", ..." if len(b3d_files) > 5 else "")
+    return (
+        f"{len(b3d_files)} .b3d file(s) ({shown}), which a dataset run does not process: convert each into a subject "
+        "folder of the dataset with `addb convert FILE.b3d --out SUBJECT_DIR` (a folder holding one .b3d file can "
+        "become that subject folder: --out that folder), or review a folder of .b3d files with `addb view FOLDER`"
+    )
+
+
+def b3d_note(scan: DatasetScan) -> str | None:
+    """A message for the user naming the ``.b3d`` files of ``scan`` that a dataset run does not
+    process and what it expects instead, or None when there are none."""
+    return f"the dataset folder holds {_b3d_note(scan.b3d_files)}" if scan.b3d_files else None
+
+
 def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> tuple[DatasetSubject, ...]:
     """Every subject folder below ``root``, sorted by relative path.
 
@@ -70,24 +189,10 @@ def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> 
     Raises
     ------
     DatasetError
-        ``root`` is not a folder, or holds no subject folder.
+        ``root`` is not a folder, or holds no subject folder (the message names the
+        ``.b3d`` files found instead, if any).
     """
-    base = Path(root).resolve()
-    if not base.is_dir():
-        raise DatasetError("not a folder; expected a dataset folder of subject folders", path=root)
-    skip = {Path(p).resolve() for p in exclude}
-    found: list[DatasetSubject] = []
-    for folder, dirs, files in os.walk(base, followlinks=True):
-        here = Path(folder)
-        if SUBJECT_JSON in files and here != base:
-            found.append(DatasetSubject(here.relative_to(base).as_posix(), here))
-            dirs[:] = []  # a subject's trials are not subjects
-            continue
-        dirs[:] = sorted(
-            d for d in dirs if not d.startswith(".") and d not in SKIPPED_FOLDERS and (here / d).resolve() not in skip
-        )
-    if not found:
-        raise DatasetError(
-            f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder", path=base
-        )
-    return tuple(sorted(found, key=lambda s: s.rel))
+    scan = scan_dataset(root, exclude=exclude)
+    if not scan.subjects:
+        raise no_subject_error(scan, root)
+    return scan.subjects

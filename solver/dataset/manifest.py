@@ -95,6 +95,20 @@ def manifest_key(subject_dir: str | Path, settings: dict[str, Any], review: str 
     }
 
 
+def subject_status(rows: list[dict[str, Any]]) -> str:
+    """A processed subject's manifest ``status`` from its trials' summary rows
+    (:func:`solver.dataset.summary.subject_rows`).
+
+    Returns
+    -------
+    str
+        ``"ok"`` when a trial has dynamics (a row with status ``"ok"``), else
+        ``"kinematics_only"``. A failed subject has no rows; its ``"failed"`` is set by
+        whoever caught the failure.
+    """
+    return "ok" if any(r["status"] == "ok" for r in rows) else "kinematics_only"
+
+
 def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
     """The manifest stored in a subject's output folder, or None (absent or unreadable)."""
     path = Path(out_dir) / MANIFEST_NAME

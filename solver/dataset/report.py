@@ -32,9 +32,24 @@ def _num(x: Any, fmt: str = "{:.2f}", scale: float = 1.0) -> str:
     return "-" if x is None else fmt.format(x * scale)
 
 
+#: Font size of the charts' labels, px, and a bound on the width of one of their characters
+#: (digits of common sans-serif fonts are 0.55-0.64 em wide): the margins are sized from it.
+CHART_FONT_PX = 10
+CHART_CHAR_PX = 0.68 * CHART_FONT_PX
+
+
+def _text_px(text: str) -> float:
+    """An upper bound on the drawn width of a chart label, px."""
+    return CHART_CHAR_PX * len(text)
+
+
 def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int | None = None,
               width: int = 420, height: int = 180) -> str:
     """An inline SVG bar chart.
+
+    The left margin holds the y-axis label (the tallest bar's count) and half the first
+    x-axis label, the right margin half the last one, so that no label is cut off at the
+    figure's edge (large counts such as ``1.23e+04`` were).
 
     Parameters
     ----------
@@ -46,30 +61,39 @@ def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int |
         Caption under the figure.
     mark
         Index of the bar where a threshold starts (a dashed line is drawn before it).
+
+    Returns
+    -------
+    str
+        A ``<figure>`` holding the ``<svg>`` and its caption.
     """
     n = max(len(counts), 1)
     top = max(max(counts, default=0), 1)
-    pad, bw = 30, (width - 40) / n
+    ymax_label = f"{top:.3g}"
+    ends = (labels[0], labels[n - 1]) if labels else ("", "")
+    left = max(35.0, _text_px(ymax_label) + 6, _text_px(ends[0]) / 2 + 2)
+    right = max(5.0, _text_px(ends[1]) / 2 + 2)
+    pad, bw = 30, (width - left - right) / n
     bars = []
     for i, c in enumerate(counts):
         h = (height - pad - 10) * c / top
-        x = 35 + i * bw
+        x = left + i * bw
         bars.append(
             f'<rect x="{x:.1f}" y="{height - pad - h:.1f}" width="{max(bw - 1, 1):.1f}" height="{h:.1f}" '
             f'fill="#4a7bb7"><title>{_esc(labels[i])}: {c:g}</title></rect>'
         )
     ticks = sorted({0, n // 2, n - 1}) if labels else []
     text = [
-        f'<text x="{35 + i * bw + bw / 2:.1f}" y="{height - pad + 14}" font-size="10" text-anchor="middle">'
+        f'<text x="{left + i * bw + bw / 2:.1f}" y="{height - pad + 14}" font-size="{CHART_FONT_PX}" text-anchor="middle">'
         f"{_esc(labels[i])}</text>"
         for i in ticks
     ]
     line = ""
     if mark is not None:
-        x = 35 + mark * bw
+        x = left + mark * bw
         line = f'<line x1="{x:.1f}" x2="{x:.1f}" y1="5" y2="{height - pad}" stroke="#c33" stroke-dasharray="4 3"/>'
-    axis = f'<line x1="35" x2="{width - 5}" y1="{height - pad}" y2="{height - pad}" stroke="#333"/>'
-    ymax = f'<text x="32" y="14" font-size="10" text-anchor="end">{top:.3g}</text>'
+    axis = f'<line x1="{left:.1f}" x2="{width - right:.1f}" y1="{height - pad}" y2="{height - pad}" stroke="#333"/>'
+    ymax = f'<text x="{left - 3:.1f}" y="14" font-size="{CHART_FONT_PX}" text-anchor="end">{_esc(ymax_label)}</text>'
     svg = (
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" role="img">'
         + "".join(bars) + axis + line + ymax + "".join(text) + "</svg>"

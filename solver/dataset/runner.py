@@ -36,12 +36,19 @@ import json
 import os
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.discover import DatasetSubject, find_subjects
+from solver.dataset.discover import (
+    DatasetScan,
+    DatasetSubject,
+    b3d_note,
+    no_subject_error,
+    scan_dataset,
+    subjects_below,
+)
 from solver.dataset.manifest import current_manifest, manifest_key
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
@@ -52,7 +59,7 @@ from solver.dataset.task import (
     run_subject,
 )
 from solver.errors import DatasetError, OutputFolderError
-from solver.outputs import check_output_folder, write_json
+from solver.outputs import OUTPUT_MARKERS, check_output_folder, write_json
 from solver.provenance import addb_version
 
 SUMMARY_NAME = "dataset_summary.json"
@@ -122,6 +129,41 @@ class DatasetRun:
         """The failed subjects' entries."""
         return tuple(s for s in self.subjects if s["status"] == "failed")
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """How many subjects this run processed, skipped as up to date, found failed and
+        gave up (:func:`subject_counts`)."""
+        return subject_counts(self.subjects)
+
+
+def subject_counts(entries: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+    """Subjects by what a run did with them, from their entries (outcomes).
+
+    Returns
+    -------
+    dict
+        ``processed`` (run now: ``ok`` or ``kinematics_only``), ``up_to_date`` (skipped,
+        their output current), ``failed`` (run now and failed, not started because of their
+        output folder or files, or failed before on the same inputs and not run again) and
+        ``cancelled`` (given up when the run was stopped).
+    """
+    out = {"processed": 0, "up_to_date": 0, "failed": 0, "cancelled": 0}
+    for e in entries:
+        kind = {"skipped": "up_to_date", "failed": "failed", "cancelled": "cancelled"}.get(e["status"], "processed")
+        out[kind] += 1
+    return out
+
+
+def _progress_line(counts: dict[str, int], frames: int | None, to_process: int = 0) -> str:
+    """The progress message of a run, each kind of subject counted apart (a subject skipped
+    as up to date was counted as processed); ``frames``: of the subjects processed so far,
+    None before any ran. The counts come first: the command line's bar shows 50 characters."""
+    if frames is None:
+        return f"{counts['up_to_date']} up to date, {counts['failed']} failed, {to_process} to process"
+    line = f"{counts['processed']} processed, {counts['failed']} failed, {counts['up_to_date']} up to date"
+    line += f", {counts['cancelled']} cancelled" if counts["cancelled"] else ""
+    return f"{line} ({frames} frames processed)"
+
 
 #: The variable Dask's nanny sets in its workers that slows the pipeline (module docstring).
 TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
@@ -178,6 +220,41 @@ def _failure(entry: DatasetSubject, kind: str, message: str, **extra: Any) -> di
     }
 
 
+def _refuse_subject_output(out: Path) -> None:
+    """Raise DatasetError when ``out`` is the output folder of one subject (it holds one of
+    :data:`solver.outputs.OUTPUT_MARKERS`, as ``addb process SUBJECT_DIR --out OUT`` or a
+    dataset run's subject writes it): a dataset run would write its tree among those files."""
+    marker = next((m for m in OUTPUT_MARKERS if (out / m).exists()), None) if out.is_dir() else None
+    if marker is not None:
+        raise DatasetError(
+            f"is the output folder of one subject (it holds {marker}, as `addb process SUBJECT_DIR --out` writes it), "
+            f"and a dataset run would write its output tree (a folder per subject, {SUMMARY_NAME}) among that "
+            f"subject's files; expected a new folder, an empty one, or an earlier dataset output tree (it holds "
+            f"{SUMMARY_NAME})", path=out)
+
+
+def _refuse_output_among_subjects(scan: DatasetScan, source: Path, out: Path) -> None:
+    """Raise DatasetError when the output tree ``out``, inside the dataset folder ``source``,
+    holds subject folders of the dataset (the search leaves it out, so the run would skip
+    them silently; an earlier output tree holds none: addb writes no ``_subject.json``) or
+    lies inside one (its outputs would become that subject's input files)."""
+    for entry in scan.subjects:
+        if entry.path.resolve() in out.parents:
+            raise DatasetError(
+                f"the output tree lies inside the subject folder {entry.rel} of the dataset {source}, whose files "
+                "are that subject's inputs; expected an output folder outside every subject folder, e.g. "
+                f"{source / 'addb_out'}", path=out)
+    for folder in scan.excluded:
+        held = subjects_below(source, folder)
+        if held:
+            names = ", ".join(s.rel for s in held[:5]) + (", ..." if len(held) > 5 else "")
+            raise DatasetError(
+                f"the output tree lies inside the dataset folder {source} and holds {len(held)} of its subject folder(s) "
+                f"({names}), which the run would leave out (the output tree is not searched for subjects) and write "
+                "its outputs among; expected an output folder that holds no subject folder, e.g. "
+                f"{source / 'addb_out'} or a folder outside the dataset", path=out)
+
+
 def process_dataset(
     dataset_dir: str | Path,
     out_dir: str | Path,
@@ -209,7 +286,8 @@ def process_dataset(
     progress
         Called with (message, fraction of subjects finished).
     log
-        Called with one-line messages for the user (the dashboard address, retries).
+        Called with one-line messages for the user (the dashboard address, retries, the
+        ``.b3d`` files below ``dataset_dir`` that are not processed: they are no subject folders).
     events
         Called with ``("queued", {"rels": [...]})`` once the subjects to process are known
         ``("progress", {"rel", "message", "fraction"})`` while a subject runs (from its
@@ -232,7 +310,10 @@ def process_dataset(
     ------
     DatasetError
         No subject below ``dataset_dir``, the scheduler cannot be reached, or ``out_dir``
-        is ``dataset_dir`` or a folder above it (checked first). A subject whose output
+        is ``dataset_dir`` or a folder above it, or lies inside it and holds subject folders
+        (the search leaves the output tree out, so they would be silently left out) or lies
+        inside a subject folder, or is the output folder of one subject (checked before
+        anything is written). A subject whose output
         folder holds what addb did not write (:func:`solver.outputs.check_output_folder`)
         fails alone, with that error, and the others run.
     """
@@ -247,7 +328,14 @@ def process_dataset(
             f"the output tree {out} {'is' if out == source else 'holds'} the dataset folder {source}; each subject's "
             "output folder replaces its namesake in the output tree, so it must be another folder (e.g. "
             f"{source / 'addb_out'})", path=out)
-    subjects = find_subjects(dataset_dir, exclude=(out,))
+    _refuse_subject_output(out)
+    scan = scan_dataset(dataset_dir, exclude=(out,))
+    _refuse_output_among_subjects(scan, source, out)
+    if not scan.subjects:
+        raise no_subject_error(scan, dataset_dir)
+    subjects = scan.subjects
+    if (note := b3d_note(scan)) is not None:  # not processed: say so, and what is expected
+        tell(note)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_work(out)
     settings = {"addb_process": "default", **opts.settings}
@@ -280,13 +368,12 @@ def process_dataset(
         jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
     notify = events or (lambda kind, data: None)
     notify("queued", {"rels": [j.rel for j in jobs]})
-    done = len(results)
     total = len(subjects)
-    say(f"{done} of {total} subjects up to date, {len(jobs)} to process", done / total)
+    say(_progress_line(subject_counts(results.values()), None, len(jobs)), len(results) / total)
     dashboard = None
     if jobs:
-        dashboard = _run_jobs(jobs, opts, results, lambda d, frames: say(
-            f"{done + d}/{total} subjects, {frames} frames processed", (done + d) / total), tell, notify, stop)
+        dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
+            _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
         remove_stale_work(out)  # work folders of attempts whose worker was killed
     ordered = tuple(results[s.rel] for s in subjects)
     totals = dataset_totals(list(ordered))
@@ -300,12 +387,13 @@ def _run_jobs(
     jobs: list[SubjectJob],
     opts: DatasetOptions,
     results: dict[str, dict[str, Any]],
-    step: Callable[[int, int], None],
+    step: Callable[[int], None],
     tell: Callable[[str], None],
     notify: Callable[[str, dict[str, Any]], None],
     stop: Any = None,
 ) -> str | None:
-    """Submit ``jobs`` to the cluster, collect their outcomes into ``results``."""
+    """Submit ``jobs`` to the cluster, collect their outcomes into ``results``; ``step`` is
+    called after each with the frames of the subjects processed so far."""
     import threading
 
     from distributed import CancelledError, Client, as_completed
@@ -367,7 +455,7 @@ def _run_jobs(
 
             watcher = threading.Thread(target=watch, name="addb-dataset-stop", daemon=True)
             watcher.start()
-        finished, frames = 0, 0
+        frames = 0
         for future in pending:
             job = by_key[future.key]
             try:
@@ -394,9 +482,8 @@ def _run_jobs(
             outcome["attempts"] = attempts[job.rel]
             results[job.rel] = outcome
             notify("done", outcome)
-            finished += 1
             frames += sum(r["frames"] for r in outcome.get("trials") or [])
-            step(finished, frames)
+            step(frames)
     finally:
         with contextlib.suppress(Exception):  # the client may already be closing
             client.unsubscribe_topic(PROGRESS_TOPIC)

@@ -164,7 +164,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         subject), ``worker_pid`` and ``worker_peak_rss_mb`` (the worker process's peak
         resident memory so far, MB, from ``getrusage``).
     """
-    from solver.dataset.manifest import MANIFEST_NAME
+    from solver.dataset.manifest import MANIFEST_NAME, subject_status
     from solver.dataset.summary import subject_rows
     from solver.pipeline import options_for_fit, process_subject
 
@@ -187,7 +187,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         for w in caught:
             log(f"warning: {w.message}")
         rows = subject_rows(work / "out")
-        status = "ok" if any(r["status"] == "ok" for r in rows) else "kinematics_only"
+        status = subject_status(rows)
         outcome.update(
             status=status,
             trials=rows,

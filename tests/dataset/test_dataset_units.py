@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from solver.dataset.discover import find_subjects
-from solver.dataset.manifest import current_manifest, input_files, manifest_key
+from solver.dataset.manifest import current_manifest, input_files, manifest_key, subject_status
 from solver.dataset.report import render_report
 from solver.dataset.summary import dataset_totals
 from solver.errors import DatasetError
@@ -93,6 +93,22 @@ def test_a_stored_manifest_counts_only_with_an_equal_key_and_a_final_status(tmp_
     assert current_manifest(tmp_path, key) is None
     (tmp_path / "manifest.json").write_text('{"key": ')  # cut short by a crash: not current
     assert current_manifest(tmp_path, key) is None
+
+
+def test_a_subjects_status_follows_its_trials_in_one_place() -> None:
+    # the worker (task.py) and the review app's Reprocess (dataset_manifest.py) both record it
+    # in the manifest; each computed it itself before
+    import inspect
+
+    from addb_viewer.app import dataset_manifest
+    from solver.dataset import task
+
+    static = {"trial": "static", "status": "kinematics_only"}
+    assert subject_status([static, {"trial": "walk", "status": "ok"}]) == "ok"
+    assert subject_status([static]) == "kinematics_only"
+    for module in (task, dataset_manifest):
+        source = inspect.getsource(module)
+        assert "subject_status(rows)" in source and 'r["status"] == "ok"' not in source, module.__name__
 
 
 def test_report_escapes_names_and_lists_failures_with_file_and_line() -> None:
