@@ -1,11 +1,15 @@
 """``addb diagnose SUBJECT_DIR --trial NAME [--json] [--apply]``: why a trial's residuals remain.
 
 The subject is processed first when the trial has no output yet (with the reviewer's
-flags from the subject's review record, as the app does). The reviewer's flags of
-unmeasured force (the review record, or ``--annotations``: a record or an AddBiomechanics
-``review.json``; :func:`addb_viewer.review_masks.masks_from_file`, the conversion the app
-and ``addb process`` use) are the frames the diagnosis knows to be unmeasured; every other
-frame is evaluated. Writes ``OUT/<trial>/diagnosis.json``
+flags, as the app does). The reviewer's flags of unmeasured force are the frames the
+diagnosis knows to be unmeasured; every other frame is evaluated. They come from one file
+(:func:`addb_viewer.review_masks.masks_from_file`, the conversion the app and ``addb
+process`` use): the subject's review record where ``addb view`` keeps it
+(:func:`addb_viewer.locations.annotations_path`; none there: no flags), or the file given
+with ``--annotations`` (a record or an AddBiomechanics ``review.json``), which then
+replaces the subject's record: that one is not read. An ``--annotations`` path with no
+such file is refused before anything runs
+(:func:`addb_viewer.commands.process.review_file`). Writes ``OUT/<trial>/diagnosis.json``
 (read by the review app) and prints a report, or the JSON object with ``--json``.
 ``--apply`` saves the chosen extension in ``<subject>/addb_extensions.json`` so that the
 next ``addb process`` uses it.
@@ -30,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
 
     Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
+    from addb_viewer.commands.process import review_file
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
     from addb_viewer.review_masks import masks_from_file
@@ -48,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     if info.disable_dynamics or load_trial(files).forces is None:
         raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
     out = Path(args.out) if args.out else default_output_dir(subject)
-    record = Path(args.annotations) if args.annotations else annotations_path(subject, out)
+    # --annotations replaces the subject's record (which is then not read) and must exist
+    record = review_file(args.annotations) if args.annotations else annotations_path(subject, out)
     masks = masks_from_file(record, subject, reviewer="addb diagnose", trials=(args.trial,)) if record.is_file() else {}
     progress = ProgressBar(sys.stderr)
     if args.trial not in processed_trials(out):
@@ -105,6 +111,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
     )
-    p.add_argument("--annotations", help="review record with the reviewer's flags, or an AddBiomechanics review.json (default: the subject's record)")
+    p.add_argument(
+        "--annotations",
+        help="the reviewer's unmeasured-force flags from this file instead of the subject's record: a review "
+             "record or an AddBiomechanics review.json; it must exist, and the subject's own record is then "
+             "not read (default: the subject's record where addb view keeps it, no flags when there is none)",
+    )  # fmt: skip
     p.add_argument("--no-refit", action="store_true", help="skip the refit (fixed-kinematics figures only)")
     p.set_defaults(handler=run)

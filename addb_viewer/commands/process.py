@@ -7,6 +7,7 @@ every subject as a Dask task (:mod:`solver.dataset.runner`) and mirrors the tree
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -58,6 +59,42 @@ def run_dataset(args: argparse.Namespace) -> int:
     return 1 if run.failed else 0
 
 
+def review_file(path: str | os.PathLike[str]) -> Path:
+    """The file an ``--annotations`` argument names (of ``addb process`` and ``addb diagnose``),
+    checked before anything runs: a review record would otherwise be created at a mistyped
+    path (:meth:`annotations.AnnotationStore.open` creates one) and the subject processed as
+    if no flags were given.
+
+    Returns
+    -------
+    Path
+        ``path`` when it is a file (a review record, or an AddBiomechanics ``review.json``:
+        :func:`addb_viewer.review_masks.masks_from_file` tells them apart), or
+        ``path/annotations.json`` when ``path`` is a folder holding a record.
+
+    Raises
+    ------
+    annotations.AnnotationFileError
+        Nothing of the kind is at ``path`` (naming it; nothing is created).
+    """
+    from annotations import AnnotationFileError
+    from annotations.journal import StorePaths
+
+    p = Path(path)
+    if p.is_file():
+        return p
+    record = StorePaths.for_path(p).main
+    if p.is_dir() and record.is_file():
+        return record
+    raise AnnotationFileError(
+        ("no such file or folder" if not p.exists() else f"a folder without {record.name}")
+        + ": --annotations expects an existing review record (the .json that addb view or addb "
+        "convert keeps, or a subject folder holding annotations.json) or an AddBiomechanics review.json; "
+        "nothing was created",
+        path=p,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics of one subject, with a table
     of each trial's measured frames, marker RMS error, residual forces and Hicks verdicts; a
@@ -84,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
     if args.annotations:
         from addb_viewer.review_masks import masks_from_file
 
-        unmeasured_force = masks_from_file(args.annotations, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
+        record = review_file(args.annotations)  # before anything is created
+        unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
     result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
     rows = []
     for t in result.kinematics.kinematics.trials:
@@ -133,7 +171,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "mass solves; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed number of "
              "rounds: the older default; see tests/benchmarks/RESULTS.md)",
     )  # fmt: skip
-    p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
+    p.add_argument("--annotations", help="an existing review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")
     d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")
     d.add_argument("--scheduler", help="submit to a running Dask scheduler, tcp://HOST:PORT, instead")
