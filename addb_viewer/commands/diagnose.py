@@ -12,7 +12,8 @@ such file is refused before anything runs
 (:func:`addb_viewer.commands.process.review_file`). Writes ``OUT/<trial>/diagnosis.json``
 (read by the review app) and prints a report, or the JSON object with ``--json``.
 ``--apply`` saves the chosen extension in ``<subject>/addb_extensions.json`` so that the
-next ``addb process`` uses it.
+next ``addb process`` uses it; a read-only subject folder is refused with ``--apply``
+before the diagnosis runs.
 """
 
 from __future__ import annotations
@@ -38,11 +39,11 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.locations import annotations_path, default_output_dir
     from addb_viewer.progress import ProgressBar
     from addb_viewer.review_masks import masks_from_file
-    from solver.corrections import save_extension
+    from solver.corrections import FILE_NAME, save_extension
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
     from solver.diagnose.report import to_json, to_text, write_report
     from solver.errors import DiagnosisError, SubjectFolderError
-    from solver.io.subject import load_subject, load_trial
+    from solver.io.subject import folder_is_writable, load_subject, load_trial
     from solver.results import processed_trials
 
     subject = Path(args.subject)
@@ -52,6 +53,12 @@ def run(args: argparse.Namespace) -> int:
     files = info.trial(args.trial)  # SubjectFolderError naming the trials
     if info.disable_dynamics or load_trial(files).forces is None:
         raise DiagnosisError(f"trial {args.trial!r} has no force plates (or dynamics are disabled): nothing to diagnose", path=subject)
+    if args.apply and not folder_is_writable(subject):  # before the diagnosis, not after it
+        raise SubjectFolderError(
+            f"--apply saves the extension in the subject folder ({FILE_NAME}), which is read-only; copy the subject "
+            "to a folder you can write to and apply there (or leave out --apply)",
+            path=subject,
+        )
     out = Path(args.out) if args.out else default_output_dir(subject)
     # --annotations replaces the subject's record (which is then not read) and must exist
     record = review_file(args.annotations) if args.annotations else annotations_path(subject, out)
@@ -106,7 +113,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("subject", help="AddBiomechanics subject folder")
     p.add_argument("--trial", required=True, help="trial name")
     p.add_argument("--json", action="store_true", help="print the diagnosis as one JSON object")
-    p.add_argument("--apply", action="store_true", help="save the chosen extension for the next `addb process`")
+    p.add_argument(
+        "--apply", action="store_true",
+        help="save the chosen extension in SUBJECT/addb_extensions.json for the next `addb process` "
+             "(the subject folder must be writable: checked before the diagnosis runs)",
+    )  # fmt: skip
     p.add_argument(
         "--out",
         help="processed output folder (default: <subject>/addb_out, or the user cache for read-only subjects)",
