@@ -119,6 +119,7 @@ def subject_kinematics(
         model = read_osim(scaled_model)
         load_seconds = time.perf_counter() - t0
         kin = run_ik(model, [(t.name, t.markers) for t in loaded], mapping=markers.mapping, options=opts, progress=progress)
+        warn_marker_mismatch(kin)
         return SubjectKinematics(subject, loaded, kin, load_seconds)
     loaded = load_trials(subject)
     generic = read_osim(subject.model_path)
@@ -133,7 +134,59 @@ def subject_kinematics(
         options=opts,
         progress=progress,
     )
+    warn_marker_mismatch(kin)
     return SubjectKinematics(subject, loaded, kin, load_seconds)
+
+
+#: A trial is warned about (:func:`warn_marker_mismatch`) when it matches fewer than this
+#: share of the model's markers and at least as many of its own markers are ignored (not in
+#: the model) as are matched: a lab marker set that does not fit the model, whose few
+#: matched markers give a small marker RMS error that says little. Fewer than half of the
+#: model's markers alone is no sign: the walk subject's model carries 107 markers (several
+#: labs' sets) and its trials match 41 (its static trial ignores 23 more, medial and joint
+#: centre markers); OpenCap's trials match 45 of 49 and ignore 6.
+MIN_MATCHED_SHARE = 0.5
+
+
+def _some(names: Sequence[str], shown: int) -> str:
+    """The first ``shown`` names, then "and N more"."""
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
+def marker_mismatch(kin: KinematicsResult, trial: TrialKinematics) -> str | None:
+    """The warning about a trial whose markers mostly do not match the model's (the rule of
+    :data:`MIN_MATCHED_SHARE`), or None when they do.
+
+    The model's markers are those of the kinematics' model that were not attached from the
+    trials (``markers.yaml``'s ``attach_unmatched``); matched are those the trial was fitted
+    on; ignored are the trial's markers that the model does not carry (``markers_ignored``
+    of results.json). Nothing is computed that the stage uses.
+    """
+    model = [m.name for m in kin.model.markers if m.name not in kin.attached]
+    used = set(trial.marker_names)
+    matched = [n for n in model if n in used]
+    ignored = list(trial.unmatched)
+    if not model or len(matched) >= MIN_MATCHED_SHARE * len(model) or len(ignored) < len(matched):
+        return None
+    missing = [n for n in model if n not in used]
+    return (
+        f"trial {trial.name}: only {len(matched)} of the model's {len(model)} markers are matched by the trial's "
+        f"marker names (the model's {_some(missing, 5)} are left without data); {len(ignored)} of the trial's "
+        f"markers are not in the model and are ignored: {_some(ignored, 8)} (all listed in results.json, "
+        "markers_ignored). Its marker RMS error is over the matched markers only: check the marker names against "
+        "the model's, or map them in markers.yaml next to the subject"
+    )
+
+
+def warn_marker_mismatch(kin: KinematicsResult) -> None:
+    """Warn (UserWarning: on the console, and in a dataset run's process.log) about each
+    trial of ``kin`` whose markers mostly do not match the model's (:func:`marker_mismatch`)."""
+    import warnings
+
+    for trial in kin.trials:
+        message = marker_mismatch(kin, trial)
+        if message is not None:
+            warnings.warn(message, UserWarning, stacklevel=2)
 
 
 def kinematics_metrics(trial: TrialKinematics) -> dict[str, Any]:
