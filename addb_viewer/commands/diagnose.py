@@ -19,9 +19,41 @@ before the diagnosis runs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+
+
+@contextlib.contextmanager
+def each_warning_once() -> Iterator[None]:
+    """Show each warning once for the whole command, however many fits repeat it.
+
+    ``addb diagnose`` runs the dynamics stage several times on one trial: the processing
+    (when the trial has no output yet), the judged fit (:mod:`solver.diagnose.judged_fit`),
+    and the refits with and without the chosen cause (:mod:`solver.diagnose.refit`). Each
+    run warns about the same data again (a fitted mass far from ``massKg``, a plate loaded
+    with no centre of pressure: :mod:`solver.dynamics.stage`), and Python's once-per-place
+    rule does not hold them back: the refits call the stage from another place, and their
+    numbers differ a little (the fitted mass of each fit). Here a warning whose text differs
+    from one already shown only in its numbers is not shown again.
+    """
+    import re
+    import warnings
+
+    shown: set[tuple[type, str]] = set()
+    show = warnings.showwarning
+
+    def once(message, category, filename, lineno, file=None, line=None) -> None:
+        key = (category, re.sub(r"[-+]?\d+(\.\d+)?", "#", str(message)))
+        if key not in shown:
+            shown.add(key)
+            show(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = once
+        yield
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,19 +96,20 @@ def run(args: argparse.Namespace) -> int:
     record = review_file(args.annotations) if args.annotations else annotations_path(subject, out)
     masks = masks_from_file(record, subject, reviewer="addb diagnose", trials=(args.trial,)) if record.is_file() else {}
     progress = ProgressBar(sys.stderr)
-    if args.trial not in processed_trials(out):
-        from solver.pipeline import process_subject
+    with each_warning_once():
+        if args.trial not in processed_trials(out):
+            from solver.pipeline import process_subject
 
-        process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
-    diag = diagnose_trial(
-        subject,
-        args.trial,
-        out,
-        unmeasured_force=masks.get(args.trial),
-        subject_flags=masks,
-        options=DiagnoseOptions(refit=not args.no_refit),
-        progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
-    )
+            process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
+        diag = diagnose_trial(
+            subject,
+            args.trial,
+            out,
+            unmeasured_force=masks.get(args.trial),
+            subject_flags=masks,
+            options=DiagnoseOptions(refit=not args.no_refit),
+            progress=lambda m, f: progress(m, 0.8 + 0.2 * f),
+        )
     report = to_json(diag)
     write_report(diag, out, args.trial)
     applied = None
