@@ -30,7 +30,7 @@ import numpy as np
 
 from solver import single_threaded_blas
 from solver.corrections import apply_extensions, extend_subject, extension_masks
-from solver.errors import KinematicsError
+from solver.errors import DynamicsError, KinematicsError
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
@@ -337,12 +337,20 @@ def process_subject(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
         Bad input, naming the file or trial; a name in ``options.trials`` that the subject
         does not have raises KinematicsError before any stage runs.
+    DynamicsError
+        After ``out_dir`` was written, when a trial's own recordings could not enter the
+        dynamics stage (NaN or absurd plate forces, forces that do not overlap the markers:
+        :func:`solver.dynamics.stage.run_dynamics`'s ``skip_trial``): that trial is written
+        as a kinematics-only trial is (motion, marker errors) with the error in its
+        results.json (``dynamics_error``, the error's ``to_dict()``), the other trials'
+        dynamics are fitted without it, and the error of the first such trial is raised as
+        it is (``addb process`` adds what was written: :func:`addb_viewer.commands.process.with_kept_kinematics`).
     OutputFolderError
         Before any stage runs: ``out_dir`` is a file, is or holds ``subject_dir``, or holds
         what is not an output of addb (:func:`solver.outputs.check_output_folder`).
     """
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress)
+        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress, keep_kinematics=True)
 
 
 def reprocess_dynamics(
@@ -591,7 +599,12 @@ def _process_subject(
     *,
     dynamics_only: bool = False,
     warm_start: bool = False,
+    keep_kinematics: bool = False,
 ) -> ProcessResult:
+    """:func:`process_subject` (``keep_kinematics``: a trial the dynamics stage cannot take
+    is written without dynamics, then its DynamicsError raised) and
+    :func:`reprocess_dynamics` (``dynamics_only``: that error is raised before anything is
+    written, as every other)."""
     opts = options or ProcessOptions()
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
@@ -616,6 +629,7 @@ def _process_subject(
     t_kin = time.perf_counter()
     load_s = t_kin - t0 if dynamics_only else sk.load_seconds  # from the cache: loading is all it took
     dyn = None
+    failed: dict[str, DynamicsError] = {}  # trial -> why the dynamics stage left it out (keep_kinematics)
     if not subject.disable_dynamics:
         from solver.dynamics.stage import DynamicsOptions, run_dynamics
 
@@ -630,6 +644,7 @@ def _process_subject(
             options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),
             start_q=start_q or None,
+            skip_trial=failed.__setitem__ if keep_kinematics else None,
         )
     t_dyn = time.perf_counter()
     say("writing results", 0.96)
@@ -651,6 +666,8 @@ def _process_subject(
             if td is None:
                 write_trial_kinematics(folder, trial, rotational)
                 metrics["rate_hz"] = frame_rate(trial.time) if trial.time.size > 1 else None
+                if trial.name in failed:
+                    metrics["dynamics_error"] = failed[trial.name].to_dict()
                 processed = build_processed(sk, trial, model_path=str(model_file), metrics=metrics)
             else:
                 write_dynamics_files(folder, trial.name, td, model, rotational)
@@ -683,6 +700,8 @@ def _process_subject(
         if not dynamics_only:
             save_kinematics_cache(tmp, sk, key)
     say("done", 1.0)
+    if failed:  # written: now the first trial's error, as it was before the outputs were kept
+        raise next(iter(failed.values()))
     return ProcessResult(sk, dyn, out_path)
 
 

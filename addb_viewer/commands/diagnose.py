@@ -56,6 +56,17 @@ def each_warning_once() -> Iterator[None]:
         yield
 
 
+def _dynamics_error(out: Path, trial: str) -> dict | None:
+    """The ``dynamics_error`` of ``OUT/<trial>/results.json`` (a trial the dynamics stage
+    could not take, written with its kinematics only: :func:`solver.pipeline.process_subject`),
+    or None."""
+    try:
+        error = json.loads((out / trial / "results.json").read_text()).get("dynamics_error")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return error if isinstance(error, dict) else None
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb diagnose SUBJECT_DIR --trial NAME``: diagnose the trial (processing the subject first
     when it has no output), print the report or its JSON, write
@@ -74,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from solver.corrections import FILE_NAME, save_extension
     from solver.diagnose.core import DiagnoseOptions, diagnose_trial
     from solver.diagnose.report import to_json, to_text, write_report
-    from solver.errors import DiagnosisError, SubjectFolderError
+    from solver.errors import DiagnosisError, DynamicsError, SubjectFolderError
     from solver.io.subject import folder_is_writable, load_subject, load_trial
     from solver.results import processed_trials
 
@@ -98,9 +109,20 @@ def run(args: argparse.Namespace) -> int:
     progress = ProgressBar(sys.stderr)
     with each_warning_once():
         if args.trial not in processed_trials(out):
+            from addb_viewer.commands.process import with_kept_kinematics
             from solver.pipeline import process_subject
 
-            process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
+            try:
+                process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
+            except DynamicsError as exc:
+                raise with_kept_kinematics(exc, out) from None
+        failed = _dynamics_error(out, args.trial)
+        if failed is not None:  # written without dynamics by an earlier `addb process`
+            raise DiagnosisError(
+                f"trial {args.trial!r} was processed without dynamics: {failed.get('message')} "
+                f"({failed.get('path') or 'its recordings'}); nothing to diagnose (process the subject again once that is mended)",
+                path=out / args.trial / "results.json",
+            )
         diag = diagnose_trial(
             subject,
             args.trial,

@@ -95,6 +95,36 @@ def review_file(path: str | os.PathLike[str]) -> Path:
     )
 
 
+def with_kept_kinematics(exc: Exception, out: Path) -> Exception:
+    """``exc`` (a DynamicsError of :func:`solver.pipeline.process_subject`) saying which
+    trials were written without dynamics when the output holds them: a trial whose
+    recordings the dynamics stage could not take keeps its kinematics, with the error in its
+    results.json (``dynamics_error``). Any other error is returned as it is."""
+    import json
+
+    from solver.errors import DynamicsError
+
+    failed = {}
+    for results in sorted(out.glob("*/results.json")):
+        try:
+            error = json.loads(results.read_text()).get("dynamics_error")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(error, dict):
+            failed[results.parent.name] = error
+    if not isinstance(exc, DynamicsError) or exc.to_dict() not in failed.values():
+        return exc  # raised before anything was written
+    others = [n for n, e in failed.items() if e != exc.to_dict()]
+    trial = next(n for n, e in failed.items() if e == exc.to_dict())
+    return DynamicsError(
+        f"{exc.message}; the trial's kinematics were written without dynamics ({out / trial}: motion and marker "
+        "errors; results.json: dynamics_error)"
+        + (f", and those of {', '.join(others)} with their own errors" if others else "")
+        + "; the other trials were processed as usual",
+        path=exc.path, line=exc.line, where=exc.where,
+    )  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics of one subject, with a table
     of each trial's measured frames, marker RMS error, residual forces and Hicks verdicts; a
@@ -105,7 +135,9 @@ def run(args: argparse.Namespace) -> int:
     The exit code: 0 when the subject's outputs were written; for a dataset, 1 when a
     subject failed.
 
-    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`); a trial whose
+    recordings the dynamics stage could not take is written with its kinematics first, and
+    its DynamicsError says so (:func:`solver.pipeline.process_subject`).
     """
     from solver.dataset.discover import is_subject_folder
 
@@ -114,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     if any(x is not None for x in (args.workers, args.scheduler)) or args.force:
         raise SystemExit("addb process: --workers, --scheduler and --force apply to a dataset folder")
     from addb_viewer.progress import ProgressBar, table
+    from solver.errors import DynamicsError
     from solver.pipeline import options_for_fit, process_subject
 
     opts = options_for_fit(args.fit, args.trial)
@@ -123,7 +156,10 @@ def run(args: argparse.Namespace) -> int:
 
         record = review_file(args.annotations)  # before anything is created
         unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
-    result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+    try:
+        result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+    except DynamicsError as exc:
+        raise with_kept_kinematics(exc, Path(args.out)) from None
     rows = []
     for t in result.kinematics.kinematics.trials:
         if opts.trials and t.name not in opts.trials:
