@@ -30,7 +30,7 @@ import numpy as np
 
 from solver import single_threaded_blas
 from solver.corrections import apply_extensions, extend_subject, extension_masks
-from solver.errors import KinematicsError
+from solver.errors import DynamicsError, KinematicsError
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
@@ -119,6 +119,7 @@ def subject_kinematics(
         model = read_osim(scaled_model)
         load_seconds = time.perf_counter() - t0
         kin = run_ik(model, [(t.name, t.markers) for t in loaded], mapping=markers.mapping, options=opts, progress=progress)
+        warn_marker_mismatch(kin)
         return SubjectKinematics(subject, loaded, kin, load_seconds)
     loaded = load_trials(subject)
     generic = read_osim(subject.model_path)
@@ -133,7 +134,59 @@ def subject_kinematics(
         options=opts,
         progress=progress,
     )
+    warn_marker_mismatch(kin)
     return SubjectKinematics(subject, loaded, kin, load_seconds)
+
+
+#: A trial is warned about (:func:`warn_marker_mismatch`) when it matches fewer than this
+#: share of the model's markers and at least as many of its own markers are ignored (not in
+#: the model) as are matched: a lab marker set that does not fit the model, whose few
+#: matched markers give a small marker RMS error that says little. Fewer than half of the
+#: model's markers alone is no sign: the walk subject's model carries 107 markers (several
+#: labs' sets) and its trials match 41 (its static trial ignores 23 more, medial and joint
+#: centre markers); OpenCap's trials match 45 of 49 and ignore 6.
+MIN_MATCHED_SHARE = 0.5
+
+
+def _some(names: Sequence[str], shown: int) -> str:
+    """The first ``shown`` names, then "and N more"."""
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
+def marker_mismatch(kin: KinematicsResult, trial: TrialKinematics) -> str | None:
+    """The warning about a trial whose markers mostly do not match the model's (the rule of
+    :data:`MIN_MATCHED_SHARE`), or None when they do.
+
+    The model's markers are those of the kinematics' model that were not attached from the
+    trials (``markers.yaml``'s ``attach_unmatched``); matched are those the trial was fitted
+    on; ignored are the trial's markers that the model does not carry (``markers_ignored``
+    of results.json). Nothing is computed that the stage uses.
+    """
+    model = [m.name for m in kin.model.markers if m.name not in kin.attached]
+    used = set(trial.marker_names)
+    matched = [n for n in model if n in used]
+    ignored = list(trial.unmatched)
+    if not model or len(matched) >= MIN_MATCHED_SHARE * len(model) or len(ignored) < len(matched):
+        return None
+    missing = [n for n in model if n not in used]
+    return (
+        f"trial {trial.name}: only {len(matched)} of the model's {len(model)} markers are matched by the trial's "
+        f"marker names (the model's {_some(missing, 5)} are left without data); {len(ignored)} of the trial's "
+        f"markers are not in the model and are ignored: {_some(ignored, 8)} (all listed in results.json, "
+        "markers_ignored). Its marker RMS error is over the matched markers only: check the marker names against "
+        "the model's, or map them in markers.yaml next to the subject"
+    )
+
+
+def warn_marker_mismatch(kin: KinematicsResult) -> None:
+    """Warn (UserWarning: on the console, and in a dataset run's process.log) about each
+    trial of ``kin`` whose markers mostly do not match the model's (:func:`marker_mismatch`)."""
+    import warnings
+
+    for trial in kin.trials:
+        message = marker_mismatch(kin, trial)
+        if message is not None:
+            warnings.warn(message, UserWarning, stacklevel=2)
 
 
 def kinematics_metrics(trial: TrialKinematics) -> dict[str, Any]:
@@ -284,12 +337,20 @@ def process_subject(
     SubjectFolderError, FileFormatError, KinematicsError, MarkerMismatchError, DynamicsError
         Bad input, naming the file or trial; a name in ``options.trials`` that the subject
         does not have raises KinematicsError before any stage runs.
+    DynamicsError
+        After ``out_dir`` was written, when a trial's own recordings could not enter the
+        dynamics stage (NaN or absurd plate forces, forces that do not overlap the markers:
+        :func:`solver.dynamics.stage.run_dynamics`'s ``skip_trial``): that trial is written
+        as a kinematics-only trial is (motion, marker errors) with the error in its
+        results.json (``dynamics_error``, the error's ``to_dict()``), the other trials'
+        dynamics are fitted without it, and the error of the first such trial is raised as
+        it is (``addb process`` adds what was written: :func:`addb_viewer.commands.process.with_kept_kinematics`).
     OutputFolderError
         Before any stage runs: ``out_dir`` is a file, is or holds ``subject_dir``, or holds
         what is not an output of addb (:func:`solver.outputs.check_output_folder`).
     """
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress)
+        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress, keep_kinematics=True)
 
 
 def reprocess_dynamics(
@@ -538,7 +599,12 @@ def _process_subject(
     *,
     dynamics_only: bool = False,
     warm_start: bool = False,
+    keep_kinematics: bool = False,
 ) -> ProcessResult:
+    """:func:`process_subject` (``keep_kinematics``: a trial the dynamics stage cannot take
+    is written without dynamics, then its DynamicsError raised) and
+    :func:`reprocess_dynamics` (``dynamics_only``: that error is raised before anything is
+    written, as every other)."""
     opts = options or ProcessOptions()
     say = progress or (lambda m, f: None)
     t0 = time.perf_counter()
@@ -563,6 +629,7 @@ def _process_subject(
     t_kin = time.perf_counter()
     load_s = t_kin - t0 if dynamics_only else sk.load_seconds  # from the cache: loading is all it took
     dyn = None
+    failed: dict[str, DynamicsError] = {}  # trial -> why the dynamics stage left it out (keep_kinematics)
     if not subject.disable_dynamics:
         from solver.dynamics.stage import DynamicsOptions, run_dynamics
 
@@ -577,6 +644,7 @@ def _process_subject(
             options=opts.dynamics or DynamicsOptions(),
             progress=lambda m, f: say(m, 0.4 + 0.55 * f),
             start_q=start_q or None,
+            skip_trial=failed.__setitem__ if keep_kinematics else None,
         )
     t_dyn = time.perf_counter()
     say("writing results", 0.96)
@@ -598,6 +666,8 @@ def _process_subject(
             if td is None:
                 write_trial_kinematics(folder, trial, rotational)
                 metrics["rate_hz"] = frame_rate(trial.time) if trial.time.size > 1 else None
+                if trial.name in failed:
+                    metrics["dynamics_error"] = failed[trial.name].to_dict()
                 processed = build_processed(sk, trial, model_path=str(model_file), metrics=metrics)
             else:
                 write_dynamics_files(folder, trial.name, td, model, rotational)
@@ -630,6 +700,8 @@ def _process_subject(
         if not dynamics_only:
             save_kinematics_cache(tmp, sk, key)
     say("done", 1.0)
+    if failed:  # written: now the first trial's error, as it was before the outputs were kept
+        raise next(iter(failed.values()))
     return ProcessResult(sk, dyn, out_path)
 
 

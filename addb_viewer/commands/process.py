@@ -7,6 +7,7 @@ every subject as a Dask task (:mod:`solver.dataset.runner`) and mirrors the tree
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -66,6 +67,72 @@ def run_dataset(args: argparse.Namespace) -> int:
     return 1 if run.failed else 0
 
 
+def review_file(path: str | os.PathLike[str]) -> Path:
+    """The file an ``--annotations`` argument names (of ``addb process`` and ``addb diagnose``),
+    checked before anything runs: a review record would otherwise be created at a mistyped
+    path (:meth:`annotations.AnnotationStore.open` creates one) and the subject processed as
+    if no flags were given.
+
+    Returns
+    -------
+    Path
+        ``path`` when it is a file (a review record, or an AddBiomechanics ``review.json``:
+        :func:`addb_viewer.review_masks.masks_from_file` tells them apart), or
+        ``path/annotations.json`` when ``path`` is a folder holding a record.
+
+    Raises
+    ------
+    annotations.AnnotationFileError
+        Nothing of the kind is at ``path`` (naming it; nothing is created).
+    """
+    from annotations import AnnotationFileError
+    from annotations.journal import StorePaths
+
+    p = Path(path)
+    if p.is_file():
+        return p
+    record = StorePaths.for_path(p).main
+    if p.is_dir() and record.is_file():
+        return record
+    raise AnnotationFileError(
+        ("no such file or folder" if not p.exists() else f"a folder without {record.name}")
+        + ": --annotations expects an existing review record (the .json that addb view or addb "
+        "convert keeps, or a subject folder holding annotations.json) or an AddBiomechanics review.json; "
+        "nothing was created",
+        path=p,
+    )
+
+
+def with_kept_kinematics(exc: Exception, out: Path) -> Exception:
+    """``exc`` (a DynamicsError of :func:`solver.pipeline.process_subject`) saying which
+    trials were written without dynamics when the output holds them: a trial whose
+    recordings the dynamics stage could not take keeps its kinematics, with the error in its
+    results.json (``dynamics_error``). Any other error is returned as it is."""
+    import json
+
+    from solver.errors import DynamicsError
+
+    failed = {}
+    for results in sorted(out.glob("*/results.json")):
+        try:
+            error = json.loads(results.read_text()).get("dynamics_error")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(error, dict):
+            failed[results.parent.name] = error
+    if not isinstance(exc, DynamicsError) or exc.to_dict() not in failed.values():
+        return exc  # raised before anything was written
+    others = [n for n, e in failed.items() if e != exc.to_dict()]
+    trial = next(n for n, e in failed.items() if e == exc.to_dict())
+    return DynamicsError(
+        f"{exc.message}; the trial's kinematics were written without dynamics ({out / trial}: motion and marker "
+        "errors; results.json: dynamics_error)"
+        + (f", and those of {', '.join(others)} with their own errors" if others else "")
+        + "; the other trials were processed as usual",
+        path=exc.path, line=exc.line, where=exc.where,
+    )  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics of one subject, with a table
     of each trial's measured frames, marker RMS error, residual forces and Hicks verdicts; a
@@ -76,7 +143,9 @@ def run(args: argparse.Namespace) -> int:
     The exit code: 0 when the subject's outputs were written; for a dataset, 1 when a
     subject failed.
 
-    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`); a trial whose
+    recordings the dynamics stage could not take is written with its kinematics first, and
+    its DynamicsError says so (:func:`solver.pipeline.process_subject`).
     """
     from solver.dataset.discover import is_subject_folder
 
@@ -85,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
     if any(x is not None for x in (args.workers, args.scheduler)) or args.force:
         raise SystemExit("addb process: --workers, --scheduler and --force apply to a dataset folder")
     from addb_viewer.progress import ProgressBar, table
+    from solver.errors import DynamicsError
     from solver.pipeline import options_for_fit, process_subject
 
     opts = options_for_fit(args.fit, args.trial)
@@ -92,8 +162,12 @@ def run(args: argparse.Namespace) -> int:
     if args.annotations:
         from addb_viewer.review_masks import masks_from_file
 
-        unmeasured_force = masks_from_file(args.annotations, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
-    result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+        record = review_file(args.annotations)  # before anything is created
+        unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
+    try:
+        result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+    except DynamicsError as exc:
+        raise with_kept_kinematics(exc, Path(args.out)) from None
     rows = []
     for t in result.kinematics.kinematics.trials:
         if opts.trials and t.name not in opts.trials:
@@ -141,7 +215,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "mass solves; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed number of "
              "rounds: the older default; see tests/benchmarks/RESULTS.md)",
     )  # fmt: skip
-    p.add_argument("--annotations", help="review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
+    p.add_argument("--annotations", help="an existing review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")
     d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")
     d.add_argument("--scheduler", help="submit to a running Dask scheduler, tcp://HOST:PORT, instead")

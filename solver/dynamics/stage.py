@@ -246,6 +246,7 @@ def run_dynamics(
     known_unmeasured: Mapping[str, NDArray[np.bool_]] | None = None,
     proposal_q: Mapping[str, NDArray[np.float64]] | None = None,
     start_q: Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
+    skip_trial: Callable[[str, DynamicsError], None] | None = None,
 ) -> DynamicsResult | None:
     """Run the dynamics stage on the trials that have force data.
 
@@ -286,10 +287,16 @@ def run_dynamics(
         common frames (to 1e-9 s) and ``q`` has the model's coordinates; otherwise the
         trial starts as usual. Only the fit's starting coordinates change: contact, the
         mass fit and the root shift are computed from the kinematics as without it.
+    skip_trial
+        Called with ``(name, error)`` for a trial whose own recordings cannot enter the
+        stage (NaN or absurd plate forces, forces that do not overlap the markers in time),
+        which is then left out: the others go on as if the subject had no such trial.
+        None (default): that DynamicsError is raised.
 
     Returns
     -------
-    DynamicsResult, or None when no trial has force data.
+    DynamicsResult, or None when no trial has force data (or, with ``skip_trial``, every
+    such trial was left out).
 
     Raises
     ------
@@ -316,11 +323,17 @@ def run_dynamics(
     for name, markers, forces in with_forces:
         say(f"preprocessing {name}", 0.02)
         kin: TrialKinematics = kinematics.trial(name)
-        time = trial_frames(markers, forces, opts.rate_hz, name)
+        try:  # the trial's own recordings
+            time = trial_frames(markers, forces, opts.rate_hz, name)
+            plates = _filtered_plates(forces, time, opts, bw, name)
+        except DynamicsError as exc:
+            if skip_trial is None:
+                raise
+            skip_trial(name, exc)
+            continue
         rate_m = frame_rate(kin.time, what=f"trial {name}")
         q = resample(kin.time, lowpass(kin.q, rate_m, opts.cutoff_hz, opts.filter_order), time)
         obs = resample(kin.time, kin.observed, time)
-        plates = _filtered_plates(forces, time, opts, bw, name)
         q_contact = q
         if proposal_q is not None and name in proposal_q:
             q_contact = resample(kin.time, lowpass(np.asarray(proposal_q[name], dtype=float), rate_m, opts.cutoff_hz, opts.filter_order), time)
@@ -354,6 +367,8 @@ def run_dynamics(
             unobserved = join_masks({name: unobserved}, {name: known})[name]
         prepared.append(_Prepared(name, time, q, obs, kin.marker_names, plates, contact, unobserved, reasons))
     t_pre = _time.perf_counter()
+    if not prepared:  # every trial with forces left out (skip_trial)
+        return None
 
     # ---- centre-of-mass fit: mass and a force-consistent path
     if not any((~p.unobserved[1:-1]).any() for p in prepared):

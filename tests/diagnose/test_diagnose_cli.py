@@ -275,6 +275,41 @@ def test_bad_input_gives_clear_errors(walk: tuple[Path, dict]) -> None:
         (subject / "addb_extensions.json").unlink()
 
 
+def test_apply_on_a_read_only_subject_is_refused_before_the_diagnosis(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--apply writes into the subject folder: a read-only one is refused at once (naming it),
+    not after the processing and the diagnosis; without --apply the same folder is diagnosed."""
+    import solver.pipeline
+
+    def never(*args, **kw):
+        raise AssertionError("the subject was processed before --apply was refused")
+
+    monkeypatch.setattr(solver.pipeline, "process_subject", never)
+    subject = copy_subject(WALK, tmp_path / "walk", trials=("walk",))
+    subject.chmod(0o555)
+    try:
+        code, err = _run(str(subject), "--trial", "walk", "--out", str(tmp_path / "out"), "--apply")
+        assert code == 1
+        assert f"SubjectFolderError ({subject})" in err and "addb_extensions.json" in err and "read-only" in err
+        assert not (tmp_path / "out").exists() and not (subject / "addb_extensions.json").exists()
+        with pytest.raises(AssertionError, match="processed before"):  # without --apply it goes on to process
+            _run(str(subject), "--trial", "walk", "--out", str(tmp_path / "out"))
+    finally:
+        subject.chmod(0o755)
+
+
+def test_a_warning_about_the_data_is_shown_once_however_many_fits_repeat_it(tmp_path: Path) -> None:
+    """A wrong massKg: the processing, the judged fit and both refits each warn that the
+    fitted mass is far from it (the refits with their own fitted masses, from another
+    place); the command shows the warning once."""
+    subject = copy_subject(WALK, tmp_path / "walk")
+    data = json.loads((subject / "_subject.json").read_text())
+    (subject / "_subject.json").write_text(json.dumps({**data, "massKg": 65.0}))
+    code, err = _run(str(subject), "--trial", "walk", "--out", str(tmp_path / "out"))
+    assert code == 0
+    lines = [x for x in err.splitlines() if "addb: warning:" in x]
+    assert len(lines) == 1 and "the fitted mass 85.0 kg is +31 % from the subject's massKg (65 kg)" in lines[0], lines
+
+
 def test_the_scale_response_changes_the_misplacement_reported_not_what_is_named(walk, monkeypatch) -> None:
     # the marker estimate adds back what the scale fit took up (m = (I - L)^-1 (offset +
     # residual shift)); its t value stays that of the residual shift: when it divided by the

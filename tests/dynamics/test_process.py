@@ -176,6 +176,25 @@ def _damage_grf(subject: Path, fn) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def _kinematics_kept(subject: Path, out: Path, tmp_path: Path, match: str) -> None:
+    """The trial the dynamics stage could not take is written as a kinematics-only trial:
+    the motion file and marker errors of the kinematics stage alone (byte for byte those of
+    ``process_kinematics``), with the error in its results.json."""
+    from solver.pipeline import process_kinematics
+
+    results = json.loads((out / "walk" / "results.json").read_text())
+    error = results["dynamics_error"]
+    assert error["type"] == "DynamicsError" and error["where"] == "trial walk" and match in error["message"]
+    assert "linear_residual_rms_N" not in results and not load_processed(out, "walk").has_dynamics
+    assert sorted(p.name for p in (out / "walk").iterdir()) == ["results.json", "trial.npz", "walk_ik.mot"]
+    process_kinematics(subject, tmp_path / "kinematics")
+    assert (out / "walk" / "walk_ik.mot").read_bytes() == (tmp_path / "kinematics" / "walk" / "walk_ik.mot").read_bytes()
+    alone = json.loads((tmp_path / "kinematics" / "walk" / "results.json").read_text())
+    for key in ("n_frames", "marker_rms_m", "marker_max_m", "marker_rms_by_marker_m", "markers_used", "markers_ignored"):
+        assert results[key] == alone[key], key
+    assert "dynamics_error" not in json.loads((out / "static" / "results.json").read_text())
+
+
 @pytest.mark.parametrize(
     "damage, match",
     [
@@ -184,28 +203,68 @@ def _damage_grf(subject: Path, fn) -> None:
     ],
     ids=["nan_force", "absurd_force"],
 )
-def test_bad_forces_name_the_trial_and_leave_out_untouched(tmp_path: Path, damage, match: str) -> None:
+def test_bad_forces_name_the_trial_and_keep_its_kinematics(tmp_path: Path, damage, match: str) -> None:
     subject = _copy_subject(tmp_path)
     _damage_grf(subject, damage)
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "subject.json").write_text("{}")  # an earlier output (addb replaces only its own)
-    (out / "keep.txt").write_text("previous results")
     with pytest.raises(DynamicsError, match=match) as err:
         process_subject(subject, out)
-    assert "walk" in str(err.value)
-    assert (out / "keep.txt").read_text() == "previous results"  # nothing half-written
-    assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "subject.json"]
+    assert "trial walk" in str(err.value)  # the stage's error as it is (a dataset run lists it so)
+    _kinematics_kept(subject, out, tmp_path, match)
     assert not list(tmp_path.glob(".out.tmp-*"))
 
 
-def test_forces_that_do_not_overlap_the_markers(tmp_path: Path) -> None:
+def test_forces_that_do_not_overlap_the_markers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from solver.pipeline import reprocess_dynamics
+
     subject = _copy_subject(tmp_path)
     _damage_grf(subject, lambda i, line: "\t".join([f"{float(line.split(chr(9))[0]) + 100.0:.6f}", *line.split("\t")[1:]]))
-    with pytest.raises(DynamicsError, match="do not overlap in time") as err:
-        process_subject(subject, tmp_path / "out")
-    assert "walk" in str(err.value)
-    assert not (tmp_path / "out").exists()
+    out = tmp_path / "out"
+    assert cli(["process", str(subject), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "addb process: DynamicsError (trial walk): markers (" in err and "do not overlap in time" in err
+    assert f"the trial's kinematics were written without dynamics ({out / 'walk'}: motion and marker errors" in err
+    _kinematics_kept(subject, out, tmp_path, "do not overlap in time")
+    # a Reprocess (the review app's, after a flag edit) raises before it writes, as before
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    with pytest.raises(DynamicsError, match="do not overlap in time"):
+        reprocess_dynamics(subject, out, ["walk"])
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_the_other_trials_dynamics_are_fitted_without_the_one_that_failed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OpenCap with NaN in walking1's forces: DJ1's dynamics are fitted (on DJ1 alone, as
+    for a subject without walking1), walking1 keeps its kinematics, the error says both, and
+    ``addb diagnose`` of walking1 names the error instead of diagnosing nothing."""
+    subject = writable_copy(SUBJECTS / "opencap_uhlrich2023", tmp_path / "oc")
+    path = subject / "trials" / "walking1" / "grf.mot"
+    lines = path.read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 2
+    cells = lines[head + 100].split("\t")
+    cells[2] = "nan"
+    lines[head + 100] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    with pytest.raises(DynamicsError, match="force is NaN") as err:
+        process_subject(subject, out)
+    assert "trial walking1" in str(err.value)
+    assert "dynamics_error" in json.loads((out / "walking1" / "results.json").read_text())
+    dj1 = json.loads((out / "DJ1" / "results.json").read_text())
+    assert "dynamics_error" not in dj1 and np.isfinite(dj1["linear_residual_rms_N"])
+    # DJ1's dynamics are the stage's on the same kinematics with walking1 given no forces
+    from solver.dynamics.stage import run_dynamics
+    from solver.io.subject import load_subject
+    from solver.pipeline import subject_kinematics
+
+    info = load_subject(subject)
+    sk = subject_kinematics(info)
+    trials = [(t.name, t.markers, t.forces if t.name == "DJ1" else None) for t in sk.trials]
+    dyn = run_dynamics(sk.kinematics, trials, mass_kg=info.mass_kg, foot_bodies=info.foot_body_names, height_m=info.height_m)
+    assert dj1["mass_kg"] == dyn.mass_kg  # the residuals to rounding (the pipeline runs its BLAS on one thread)
+    assert dj1["linear_residual_rms_N"] == pytest.approx(dyn.trial("DJ1").metrics["linear_residual_rms_N"], rel=1e-9)
+    capsys.readouterr()
+    assert cli(["diagnose", str(subject), "--trial", "walking1", "--out", str(out)]) == 1
+    assert "trial 'walking1' was processed without dynamics: plate" in capsys.readouterr().err
 
 
 def test_missing_mass_names_the_file_and_key(tmp_path: Path) -> None:

@@ -198,3 +198,45 @@ def test_markers_ten_times_too_large_name_the_marker_files_not_the_model(walk: P
         process_kinematics(walk, tmp_path / "out")
     assert "markers.trc" in str(err.value) and "Units line" in str(err.value)
     assert not (tmp_path / "out").exists()
+
+
+def _rename_markers(path: Path, keep: int) -> list[str]:
+    """Prefix ``LAB_`` to every marker name of a TRC after the first ``keep`` (a lab's own
+    names the model does not carry); returns the renamed names."""
+    lines = path.read_text().splitlines()
+    cells = lines[3].split("\t")
+    named = [i for i, c in enumerate(cells) if i >= 2 and c.strip()]
+    for i in named[keep:]:
+        cells[i] = "LAB_" + cells[i]
+    lines[3] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    return [cells[i] for i in named[keep:]]
+
+
+def test_a_marker_set_that_misses_most_of_the_model_is_warned_about(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OpenCap's walking1 with all but 10 of its 51 markers renamed: a small marker RMS error
+    over the 10 the model carries, and a warning (console too) that names the trial, the 10
+    of 49 and the ignored markers; DJ1 (45 of 49 matched, 6 ignored) is not warned about."""
+    from addb_viewer.cli import main as cli
+
+    subject = writable_copy(SHARED_DATA / "subjects" / "opencap_uhlrich2023", tmp_path / "oc")
+    renamed = _rename_markers(subject / "trials" / "walking1" / "markers.trc", keep=10)
+    with pytest.warns(UserWarning, match=r"trial walking1: only 10 of the model's 49 markers are matched") as rec:
+        process_kinematics(subject, tmp_path / "out")
+    [message] = [str(w.message) for w in rec if "markers are matched" in str(w.message)]  # one, and none for DJ1
+    results = json.loads((tmp_path / "out" / "walking1" / "results.json").read_text())
+    ignored = results["markers_ignored"]
+    assert sorted(ignored) == sorted(renamed) and len(ignored) == 41
+    assert f"41 of the trial's markers are not in the model and are ignored: {', '.join(ignored[:8])} and 33 more" in message
+    assert "and 34 more are left without data" in message  # 39 model markers left: 5 named
+    assert cli(["kinematics", str(subject), "--out", str(tmp_path / "cli")]) == 0
+    assert "addb: warning: trial walking1: only 10 of the model's 49 markers are matched" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023"])
+def test_the_shared_marker_sets_are_not_warned_about(name: str, tmp_path: Path) -> None:
+    """The walk's model carries 107 markers and its trials match 41 (the static trial
+    ignores 23 more): fewer than half of the model's alone is no warning (MIN_MATCHED_SHARE)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        process_kinematics(SHARED_DATA / "subjects" / name, tmp_path / "out")

@@ -119,6 +119,33 @@ def test_app_process_and_diagnose_give_the_solver_the_same_masks(camargo: Path, 
     np.testing.assert_array_equal(diagnose, expected)
 
 
+def test_an_annotations_path_with_no_record_is_refused_and_nothing_created(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``addb process``/``addb diagnose --annotations`` with a mistyped path: exit 1 naming the
+    path before anything runs, no record created there (the store would create one) and no
+    output; the subject's own record is not read in its place. A folder holding a record is
+    taken as that record."""
+    from addb_viewer.cli import main as cli
+
+    walk = SHARED_DATA / "subjects" / "rajagopal2016_walk"
+    seen: dict = {}
+    _capture(monkeypatch, seen)  # the solver never runs: it would raise _Captured
+    for argv in (["process", str(walk), "--out", str(tmp_path / "out")],
+                 ["diagnose", str(walk), "--trial", "walk", "--out", str(tmp_path / "out")]):  # fmt: skip
+        for typo in (tmp_path / "typo.json", tmp_path / "typo", tmp_path):
+            assert cli([*argv, "--annotations", str(typo)]) == 1, (argv[0], typo)
+            err = capsys.readouterr().err
+            assert f"addb {argv[0]}: AnnotationFileError ({typo})" in err and "nothing was created" in err
+            assert "no such file or folder" in err if typo != tmp_path else "a folder without annotations.json" in err
+            assert sorted(p.name for p in tmp_path.iterdir()) == [], (argv[0], typo)
+    assert seen == {}
+    subject = writable_copy(walk, tmp_path / "walk")
+    with AnnotationStore.open(subject, reviewer="ana") as store:
+        store.set_unmeasured("walk", range(10, 20))
+    with pytest.raises(_Captured):
+        cli(["process", str(subject), "--out", str(tmp_path / "p"), "--annotations", str(subject)])
+    assert seen.pop("process")["walk"][10:20].all()
+
+
 def test_a_record_at_the_marker_rate_is_resampled_by_the_overlap_rule(camargo: Path) -> None:
     """A record on the marker frames (an older ``addb convert``'s, here 200 Hz): marker
     frames 1000-1099 ([5.0025, 5.5025) s) become processed frames 500-550 (frame 550 overlaps
