@@ -344,14 +344,15 @@ class Workbench:
                 review_digest=review_digest, events=event, stop=self._stop,
                 progress=lambda m, f: setattr(self.run_status, "content", f"Background processing: {m}"),
             )  # fmt: skip
-            failed = len(run.failed)
-            skipped = sum(s["status"] == "skipped" for s in run.subjects)
-            ran = len(run.subjects) - skipped
-            # the counts: a run with nothing to do said only "finished in 0 s", as the run before it
+            # the counts, each kind apart (solver.dataset.runner.subject_counts): a run with
+            # nothing to do said only "finished in 0 s", as the run before it, and a failed
+            # subject was also counted as processed
+            c = run.counts
             self.run_status.content = (
-                f"Background processing finished in {run.seconds:.0f} s: {ran} subject(s) processed, {skipped} up to date"
-                + (f"; {failed} failed." if failed else ".")
-            )
+                f"Background processing finished in {run.seconds:.0f} s: {c['processed']} subject(s) processed, "
+                f"{c['up_to_date']} up to date" + (f"; {c['failed']} failed" if c["failed"] else "")
+                + (f"; {c['cancelled']} cancelled" if c["cancelled"] else "") + "."
+            )  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.run_status.content = f"Background processing stopped: {exc}"
         finally:
