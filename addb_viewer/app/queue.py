@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
-from solver.dataset.discover import find_subjects
+from solver.dataset.discover import b3d_note, find_subjects, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
 from solver.io.subject import folder_is_writable
@@ -168,6 +168,20 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
     out = Path(out_dir).resolve() if out_dir is not None else dataset_output_dir(p)
     found = find_subjects(p, exclude=(out,))
     return p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in found)
+
+
+def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> str | None:
+    """What below the dataset folder the queue leaves out, for the reviewer, or None.
+
+    The ``.b3d`` files outside subject folders are not subject folders: the dataset run
+    does not process them and the queue does not list them
+    (:func:`solver.dataset.discover.b3d_note` names them and how to make them subject
+    folders or review them). ``dataset_dir`` and ``out_dir`` are those of
+    :func:`dataset_subjects`; a dataset folder that is gone (an output tree moved without
+    it) gives None."""
+    if not Path(dataset_dir).is_dir():
+        return None
+    return b3d_note(scan_dataset(dataset_dir, exclude=(out_dir,)))
 
 
 def _review_state(snapshot: Any | None) -> tuple[str, str | None]:

@@ -12,6 +12,11 @@ runner (:func:`solver.dataset.runner.process_dataset`, a Dask LocalCluster of
 reviewer's own Reprocess keeps a core) while the reviewer works on others; the queue
 shows them as "processing" and refreshes as each one finishes. The queue is also read
 again every few seconds, so reviews saved from another page or machine show up.
+
+Below the run's status line the window keeps the notes a reviewer needs about the dataset
+and its run: the ``.b3d`` files of the dataset, which are not subject folders and so are
+neither processed nor listed (:func:`addb_viewer.app.queue.unqueued_note`), and what the
+background run told its user (the Dask dashboard, a subject retried after its worker died).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from addb_viewer.app.queue import (
     build_queue,
     dataset_subjects,
     next_to_review,
+    unqueued_note,
 )
 
 #: Size of the queue's floating window, px (narrower on a narrower canvas), and its gap
@@ -128,6 +134,8 @@ class Workbench:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
+        self._dataset_note: str | None = None  # the .b3d files the queue leaves out
+        self._run_notes: list[str] = []  # what the background run told its user
         gui = app.server.gui
         # a window of its own floating over the top of the 3D view (the subject is framed
         # below it), movable and minimizable; not a tab beside the timeline, whose charts
@@ -143,6 +151,7 @@ class Workbench:
                 "(a failed subject after its files were mended) are processed, the others skipped",
             )
             self.run_status = gui.add_markdown("")
+            self.notes = gui.add_markdown("")
             self.table = gui.add_markdown("Reading the dataset…")
         self.panel.float(x=QUEUE_GAP_PX, y=QUEUE_GAP_PX, width=QUEUE_WIDTH_PX, height=QUEUE_HEIGHT_PX)
         self.width = float(QUEUE_WIDTH_PX)
@@ -154,6 +163,8 @@ class Workbench:
         self.again_button.on_click(guard("Process changed subjects", lambda e: self.process_again()))
         self.command.on_trigger(guard("Next trial to review", lambda e: self.open_next()))
         app.workbench = self
+        self._dataset_note = unqueued_note(self.dataset_dir, self.out_dir)
+        self._draw_notes()
         self.refresh()
         n = (os.cpu_count() or 2) - 1 if workers is None else workers
         self.workers = max(n, 0)
@@ -211,8 +222,24 @@ class Workbench:
         since the app started joins the queue (the background run finds it as it scans
         the dataset)."""
         _, _, subjects = dataset_subjects(*self._given)
+        note = unqueued_note(self.dataset_dir, self.out_dir)
         with self._lock:
             self.subjects, self.by_rel = subjects, {s.rel: s for s in subjects}
+            self._dataset_note = note
+            self._draw_notes()
+
+    def _draw_notes(self) -> None:
+        """Show the dataset's note and the background run's notes, each once."""
+        with self._lock:
+            shown = [f"Not in the queue: {self._dataset_note}"] if self._dataset_note else []
+            shown += [n for n in dict.fromkeys(self._run_notes) if n != self._dataset_note]
+            self.notes.content = "\n\n".join(_md(n) for n in shown)
+
+    def _run_note(self, message: str) -> None:
+        """A message of the background run for its user (``log`` of the dataset runner)."""
+        with self._lock:
+            self._run_notes.append(message)
+            self._draw_notes()
 
     def _poll(self) -> None:
         while not self._stop.wait(REFRESH_S):
@@ -337,11 +364,14 @@ class Workbench:
                         self._failed.get(data["rel"], "see the dataset queue"),
                     )
 
+        with self._lock:
+            self._run_notes = []  # this run's, not the run's before
+            self._draw_notes()
         try:
             dataset = self.dataset_dir
             run = process_dataset(
                 dataset, self.out_dir, options=DatasetOptions(workers=workers), masks=subject_masks,
-                review_digest=review_digest, events=event, stop=self._stop,
+                review_digest=review_digest, events=event, stop=self._stop, log=self._run_note,
                 progress=lambda m, f: setattr(self.run_status, "content", f"Background processing: {m}"),
             )  # fmt: skip
             # the counts, each kind apart (solver.dataset.runner.subject_counts): a run with

@@ -27,6 +27,7 @@ from addb_viewer.app.workbench import Workbench, queue_markdown
 from tests.conftest import SHARED_DATA, writable_copy
 
 pytestmark = pytest.mark.slow
+B3D = SHARED_DATA / "b3d" / "results.b3d"
 SUBJECTS = {"labA/walk": "rajagopal2016_walk", "labB/run": "rajagopal2016_run"}
 
 
@@ -47,12 +48,19 @@ def test_workbench_processes_in_the_background_and_opens_subjects_from_the_queue
     first = subjects[0]
     app = make_app(ReviewPaths.for_subject(first.subject_dir, first.out_dir), process_missing=False)
     assert app.trial is None and not app.jobs.running  # the app does not process it itself
+    (dataset / "labC").mkdir()
+    shutil.copyfile(B3D, dataset / "labC" / "s03.b3d")  # no subject folder: neither processed nor listed
     bench = Workbench(app, dataset, workers=1)
     bench.current = (first.rel, None)
     assert bench.processing_done.wait(600), bench.run_status.content
+    # the window says what the queue leaves out, once (the run told the same), and what the
+    # run told its user
+    assert bench.notes.content.startswith("Not in the queue: the dataset folder holds 1 .b3d file(s) (labC/s03.b3d)")
+    assert bench.notes.content.count("labC/s03.b3d") == 1 and "addb convert" in bench.notes.content
+    assert "1 Dask workers, scheduler tcp://127.0.0.1:" in bench.notes.content
     rows = bench.refresh()
     listed = {(r.subject.rel, r.trial): r.processing for r in rows}
-    assert listed == {
+    assert listed == {  # labC's .b3d file is no subject
         ("labA/walk", "walk"): PROCESSED, ("labA/walk", "static"): KINEMATICS_ONLY,
         ("labB/run", "run"): PROCESSED, ("labB/run", "static"): KINEMATICS_ONLY,
     }  # fmt: skip
@@ -167,3 +175,23 @@ def test_a_subject_is_named_by_its_place_in_the_dataset(dataset: Path, make_app,
     assert app._subject_label(paths) == paths.subject_dir.name  # no dataset: the folder's name
     Workbench(app, dataset, workers=0)
     assert app._subject_label(paths) == subjects[1].rel and "/" in subjects[1].rel
+
+
+def test_the_window_names_the_b3d_files_the_queue_leaves_out(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
+    """A dataset folder holding a ``.b3d`` file beside its subject folders: the queue lists the
+    subject folders only, and its window names the file and how to review it; a file added
+    later is named once the dataset is read again (Process changed subjects), one removed is
+    no longer named."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, _, subjects = dataset_subjects(dataset)
+    app = make_app(ReviewPaths.for_subject(subjects[0].subject_dir, subjects[0].out_dir), process_missing=False)
+    bench = Workbench(app, dataset, workers=0)
+    assert bench.notes.content == ""  # nothing left out
+    shutil.copyfile(B3D, dataset / "s03.b3d")
+    bench.rediscover()
+    assert {r.subject.rel for r in bench.refresh()} == set(SUBJECTS)
+    assert "Not in the queue: the dataset folder holds 1 .b3d file(s) (s03.b3d)" in bench.notes.content
+    assert "`addb view FOLDER`" in bench.notes.content
+    (dataset / "s03.b3d").unlink()
+    bench.rediscover()
+    assert bench.notes.content == ""
