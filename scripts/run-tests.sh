@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Install addb with its test and mlp extras into .venv (PyTorch CPU for the benchmark's
-# networks, which are optional for users) and run the whole test suite.
+# Install addb with its test, mlp and plot extras into .venv (PyTorch CPU for the benchmark's
+# networks and matplotlib for its filtering study's plot, both optional for users) and run the
+# whole test suite.
 # Usage: bash scripts/run-tests.sh [pytest arguments]
 # The tests run in ADDB_TEST_WORKERS processes (default 2, this machine's cores; pytest-xdist),
 # each test file on one worker (--dist loadfile: module and session fixtures, such as the
@@ -15,5 +16,5 @@ cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e ".[test,mlp]"
+.venv/bin/python -m pip install -q -e ".[test,mlp,plot]"
 exec .venv/bin/python -m pytest -q -rfEs -n "${ADDB_TEST_WORKERS:-2}" --dist loadfile "$@"

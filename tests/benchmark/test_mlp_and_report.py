@@ -13,7 +13,7 @@ from solver.benchmark.filtering import filtering_markdown, filtering_study, plot
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, history_index, torch_available, train_mlp
 from solver.benchmark.report import PAPER, dataset_summary, to_json, to_markdown, write_report
 from solver.benchmark.run import run_benchmark
-from tests.conftest import TORCH_REASON, needs_tool, tool_available
+from tests.conftest import TORCH_REASON, in_ci, needs_tool, tool_available
 
 from .conftest import motion, processed_trial
 
@@ -85,7 +85,8 @@ def test_report_layout(three_subjects, tmp_path) -> None:
 
 def test_filtering_study_table_and_plot(three_subjects, tmp_path) -> None:
     """The study's rows and table; the plot is a PNG when matplotlib is installed, and
-    without it (not a dependency) nothing is written and the call says so (False)."""
+    without it (not a dependency) nothing is written and the call says so (False). Under
+    CI=true a missing matplotlib fails the test: the test command installs the plot extra."""
     rows = filtering_study(three_subjects, cutoffs=(4.0, 30.0, 60.0))
     assert [r["cutoff_hz"] for r in rows] == [4.0, 30.0, 60.0]
     # smooth synthetic motion: heavy filtering distorts it, light filtering hardly
@@ -94,6 +95,8 @@ def test_filtering_study_table_and_plot(three_subjects, tmp_path) -> None:
     png = tmp_path / "f.png"
     drawn = plot_filtering(rows, png)
     assert drawn == tool_available("matplotlib")
+    if in_ci():
+        assert drawn, "CI=true and matplotlib (the plot extra, installed by scripts/run-tests.sh) is missing"
     if drawn:
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
     else:

@@ -15,7 +15,7 @@ unless ``--fresh``), then runs, each in a fresh process as a user would:
 Markdown (standard output; progress on standard error): the processing and benchmark wall
 times, the networks' training times, the dataset, the table of each run, the per-trial
 GRF and CoM acceleration errors of the kinematic-input run and the filtering study. Needs
-PyTorch (``pip install torch==2.13.0``) and, for the plot, matplotlib.
+PyTorch (``pip install torch==2.13.0``) and, for the plot, matplotlib (the ``plot`` extra).
 """
 
 from __future__ import annotations
@@ -134,7 +134,9 @@ def main() -> None:
             if (report / "filtering_study.png").exists():
                 shutil.copy(report / "filtering_study.png", args.docs / "filtering_study.png")
             else:
-                print(f"**The plot {args.docs / 'filtering_study.png'} was not redrawn: matplotlib is not installed.**\n")
+                plot = args.docs.resolve() / "filtering_study.png"
+                shown = plot.relative_to(REPO) if plot.is_relative_to(REPO) else plot  # as the repository names it
+                print(f"**The plot {shown} was not redrawn: matplotlib is not installed (the `plot` extra).**\n")
 
 
 if __name__ == "__main__":
