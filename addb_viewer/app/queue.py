@@ -170,18 +170,35 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
     return p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in found)
 
 
-def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> str | None:
-    """What below the dataset folder the queue leaves out, for the reviewer, or None.
+def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | None, str | None]:
+    """What below the dataset folder the queue leaves out, for the reviewer.
 
     The ``.b3d`` files outside subject folders are not subject folders: the dataset run
-    does not process them and the queue does not list them
-    (:func:`solver.dataset.discover.b3d_note` names them and how to make them subject
-    folders or review them). ``dataset_dir`` and ``out_dir`` are those of
-    :func:`dataset_subjects`; a dataset folder that is gone (an output tree moved without
-    it) gives None."""
+    does not process them and the queue does not list them. ``dataset_dir`` and ``out_dir``
+    are those of :func:`dataset_subjects`.
+
+    Returns
+    -------
+    note, run_note
+        A short note naming them and the commands that take them (``addb convert``, ``addb
+        view FOLDER``), and the message the dataset run gives its user about the same files
+        (:func:`solver.dataset.discover.b3d_note`, so that a page showing both shows it
+        once); both None when there are none, or when the dataset folder is gone (an output
+        tree moved without it).
+    """
     if not Path(dataset_dir).is_dir():
-        return None
-    return b3d_note(scan_dataset(dataset_dir, exclude=(out_dir,)))
+        return None, None
+    scan = scan_dataset(dataset_dir, exclude=(out_dir,))
+    files = scan.b3d_files
+    if not files:
+        return None, None
+    shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+    note = (
+        f"Not in the queue: {shown}, {'a .b3d file' if len(files) == 1 else f'{len(files)} .b3d files'} "
+        "(no subject folder): `addb convert FILE.b3d --out SUBJECT_DIR` makes a subject folder of one, "
+        "`addb view FOLDER` reviews a folder of them."
+    )
+    return note, b3d_note(scan)
 
 
 def _review_state(snapshot: Any | None) -> tuple[str, str | None]:

@@ -13,10 +13,10 @@ reviewer's own Reprocess keeps a core) while the reviewer works on others; the q
 shows them as "processing" and refreshes as each one finishes. The queue is also read
 again every few seconds, so reviews saved from another page or machine show up.
 
-Below the run's status line the window keeps the notes a reviewer needs about the dataset
-and its run: the ``.b3d`` files of the dataset, which are not subject folders and so are
-neither processed nor listed (:func:`addb_viewer.app.queue.unqueued_note`), and what the
-background run told its user (the Dask dashboard, a subject retried after its worker died).
+Below the run's status line the window names the ``.b3d`` files of the dataset, which are
+not subject folders and so are neither processed nor listed
+(:func:`addb_viewer.app.queue.unqueued_note`), and, while a background run goes on, what it
+tells its user (its Dask dashboard, a subject retried after its worker died).
 """
 
 from __future__ import annotations
@@ -134,8 +134,8 @@ class Workbench:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
-        self._dataset_note: str | None = None  # the .b3d files the queue leaves out
-        self._run_notes: list[str] = []  # what the background run told its user
+        self._dataset_note: tuple[str | None, str | None] = (None, None)  # the .b3d files left out (unqueued_note)
+        self._run_notes: list[str] = []  # what the running background run told its user
         gui = app.server.gui
         # a window of its own floating over the top of the 3D view (the subject is framed
         # below it), movable and minimizable; not a tab beside the timeline, whose charts
@@ -229,14 +229,16 @@ class Workbench:
             self._draw_notes()
 
     def _draw_notes(self) -> None:
-        """Show the dataset's note and the background run's notes, each once."""
+        """Show the dataset's note and the running background run's notes, each once."""
         with self._lock:
-            shown = [f"Not in the queue: {self._dataset_note}"] if self._dataset_note else []
-            shown += [n for n in dict.fromkeys(self._run_notes) if n != self._dataset_note]
+            note, run_note = self._dataset_note
+            shown = [note] if note else []
+            shown += [n for n in dict.fromkeys(self._run_notes) if n != run_note]  # the files named once
             self.notes.content = "\n\n".join(_md(n) for n in shown)
 
     def _run_note(self, message: str) -> None:
-        """A message of the background run for its user (``log`` of the dataset runner)."""
+        """A message of the background run for its user (``log`` of the dataset runner); shown
+        until the run ends (its dashboard closes with it)."""
         with self._lock:
             self._run_notes.append(message)
             self._draw_notes()
@@ -364,9 +366,6 @@ class Workbench:
                         self._failed.get(data["rel"], "see the dataset queue"),
                     )
 
-        with self._lock:
-            self._run_notes = []  # this run's, not the run's before
-            self._draw_notes()
         try:
             dataset = self.dataset_dir
             run = process_dataset(
@@ -388,6 +387,8 @@ class Workbench:
         finally:
             with self._lock:
                 self.running.clear()
+                self._run_notes = []  # about the run that ended: its dashboard is gone
+                self._draw_notes()
             self.processing_done.set()
             if not self._stop.is_set():
                 self.refresh()

@@ -50,14 +50,25 @@ def test_workbench_processes_in_the_background_and_opens_subjects_from_the_queue
     assert app.trial is None and not app.jobs.running  # the app does not process it itself
     (dataset / "labC").mkdir()
     shutil.copyfile(B3D, dataset / "labC" / "s03.b3d")  # no subject folder: neither processed nor listed
-    bench = Workbench(app, dataset, workers=1)
+    notes_seen: list[str] = []
+
+    class Recorded(Workbench):  # every content the window's notes take
+        def _draw_notes(self) -> None:
+            super()._draw_notes()
+            notes_seen.append(self.notes.content)
+
+    bench = Recorded(app, dataset, workers=1)
     bench.current = (first.rel, None)
     assert bench.processing_done.wait(600), bench.run_status.content
-    # the window says what the queue leaves out, once (the run told the same), and what the
-    # run told its user
-    assert bench.notes.content.startswith("Not in the queue: the dataset folder holds 1 .b3d file(s) (labC/s03.b3d)")
-    assert bench.notes.content.count("labC/s03.b3d") == 1 and "addb convert" in bench.notes.content
-    assert "1 Dask workers, scheduler tcp://127.0.0.1:" in bench.notes.content
+    # the window named the file the queue leaves out, once (the run told the same), and while
+    # the run went on what it told its user; once it ended, the file alone (its dashboard is gone)
+    seen = [c for c in notes_seen if "Dask workers" in c]
+    assert seen and all(c.count("labC/s03.b3d") == 1 for c in seen), notes_seen
+    assert "1 Dask workers, scheduler tcp://127.0.0.1:" in seen[-1]
+    assert bench.notes.content == (
+        "Not in the queue: labC/s03.b3d, a .b3d file (no subject folder): `addb convert FILE.b3d --out "
+        "SUBJECT_DIR` makes a subject folder of one, `addb view FOLDER` reviews a folder of them."
+    )
     rows = bench.refresh()
     listed = {(r.subject.rel, r.trial): r.processing for r in rows}
     assert listed == {  # labC's .b3d file is no subject
@@ -190,8 +201,13 @@ def test_the_window_names_the_b3d_files_the_queue_leaves_out(dataset: Path, make
     shutil.copyfile(B3D, dataset / "s03.b3d")
     bench.rediscover()
     assert {r.subject.rel for r in bench.refresh()} == set(SUBJECTS)
-    assert "Not in the queue: the dataset folder holds 1 .b3d file(s) (s03.b3d)" in bench.notes.content
+    assert bench.notes.content.startswith("Not in the queue: s03.b3d, a .b3d file (no subject folder)")
     assert "`addb view FOLDER`" in bench.notes.content
-    (dataset / "s03.b3d").unlink()
+    for k in range(4, 9):  # more files: three named, the others counted
+        shutil.copyfile(B3D, dataset / f"s0{k}.b3d")
+    bench.rediscover()
+    assert bench.notes.content.startswith("Not in the queue: s03.b3d, s04.b3d, s05.b3d and 3 more, 6 .b3d files")
+    for k in range(3, 9):
+        (dataset / f"s0{k}.b3d").unlink()
     bench.rediscover()
     assert bench.notes.content == ""
