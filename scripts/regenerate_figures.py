@@ -429,6 +429,8 @@ FIGURES: tuple[Figure, ...] = (
     *_joint_two_rows("0.03"),
     *_joint_two_rows("0.3"),
     *_walk_two_rows(),
+    # a lead for the walk's two rows: the centre of pressure's place in the foot as a tie-break
+    Figure("diagnose-cop-symmetry-probe", RESULTS, f"{PY} tests/benchmarks/probe_cop_symmetry.py --sigma 0.1", "accuracy", 14.0, fence=False),
     Figure("diagnose-run-registration-probe", RESULTS, f"{PY} tests/benchmarks/probe_joint_choice.py --sigma 0.1 --seeds 9021 9023 9025",
            "accuracy", 3.0, fence=False, retired=BEFORE_CONFIRMATION),
     Figure("diagnose-registration-gain-draws-0-19", "", f"{PY} tests/benchmarks/probe_registration_gain.py --gain 0.05 -- --draws 20 "
