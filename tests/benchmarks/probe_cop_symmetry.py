@@ -81,12 +81,11 @@ class FootFrames:
 
 
 def shifted(recording: Any, plate: str, shift: Any) -> Any:
-    """``recording`` with belt ``plate``'s centre of pressure moved by ``shift`` (3,) m."""
-    from solver.io.types import ForcePlate, ForceRecording
+    """``recording`` with belt ``plate``'s centre of pressure moved by ``shift`` (3,) m (as the
+    harness hides a shift: the ``plate_position_offset`` correction of ``-shift``)."""
+    from solver.corrections import correct_forces
 
-    plates = tuple(ForcePlate(p.name, p.force, np.asarray(p.cop) + (np.asarray(shift) if p.name == plate else 0.0),
-                              p.free_moment, p.corners) for p in recording.plates)  # fmt: skip
-    return ForceRecording(recording.time, recording.rate_hz, plates, recording.source)
+    return correct_forces(recording, {"cause": "plate_position_offset", "plate": plate, "shift_m": -np.asarray(shift)})
 
 
 def hidden_recording(recording: Any, cause: str, plate: str | None, truth: dict[str, Any]) -> Any:
@@ -99,14 +98,11 @@ def hidden_recording(recording: Any, cause: str, plate: str | None, truth: dict[
 
 
 def undone(recording: Any, candidate: dict[str, Any]) -> Any:
-    """``recording`` with a candidate's estimate undone (as its extension would apply it)."""
-    from solver.corrections import register_plates
+    """``recording`` with a candidate's estimate undone, as its extension would apply it
+    (:func:`solver.corrections.correct_forces`: its parameters are the extension's fields)."""
+    from solver.corrections import correct_forces
 
-    p = candidate["parameters"]
-    if candidate["cause"] == "plate_position_offset":
-        return shifted(recording, p["plate"], -np.asarray(p["shift_m"]))
-    o, s = np.asarray(p["centre_m"]), np.asarray(p["shift_m"])
-    return register_plates(recording, -s, -float(p.get("rotation_rad", 0.0)), o + s)
+    return correct_forces(recording, {"cause": candidate["cause"], **candidate["parameters"]})
 
 
 def tie_break(row: dict[str, Any], report: dict[str, Any], base_report: dict[str, Any], scored: dict[tuple[str, str | None], float],
