@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.force and (Path(args.out) / SUBJECT_JSON).exists():
         raise SubjectFolderError(
             f"exists and already holds a subject ({SUBJECT_JSON}); add --force to write the converted subject "
-            "over it (trial folders the .b3d file does not have are kept), or give a new folder as --out",
+            "over it, or give a new folder as --out",
             path=args.out,
         )
     converted = b3d_to_subject(args.file, args.out, pass_index=args.pass_index, overwrite=args.force)
@@ -90,6 +90,13 @@ def run(args: argparse.Namespace) -> int:
     for t in converted.trials:
         n_missing = int(t.missing_mask.sum())
         print(f"  {t.name}: {t.n_frames} frames at {t.rate_hz:g} Hz, {n_missing} frames with missing GRF")
+    if converted.removed:
+        print(f"  removed the trial folders of the earlier conversion that this file does not have: {', '.join(converted.removed)}")
+    if converted.kept:
+        print(
+            f"  kept trial folders of the earlier conversion that this file does not have, as they hold other files "
+            f"(addb process solves them with this subject; remove them if they do not belong to it): {', '.join(converted.kept)}"
+        )
     print(f"wrote {converted.path} (review record {record})")
     print(f"next: addb process {converted.path} --out OUT --annotations {record}")
     return 0
@@ -112,6 +119,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="write over the subject already in --out (its model, _subject.json and the file's trials; other trial folders are kept)",
+        help=(
+            "write over the subject already in --out (its model, _subject.json and the file's trials; trial folders an "
+            "earlier conversion wrote that this file does not have are removed, other trial folders are kept)"
+        ),
     )
     p.set_defaults(handler=run)

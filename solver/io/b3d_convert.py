@@ -72,6 +72,11 @@ class ConvertedSubject:
     path: Path
     source: Path
     trials: tuple[ConvertedTrial, ...]
+    #: Trial folders an earlier conversion into the folder wrote that this file does not
+    #: have, removed by ``overwrite``.
+    removed: tuple[str, ...] = ()
+    #: Such folders kept because something other than the conversion's files is in them.
+    kept: tuple[str, ...] = ()
 
 
 def _folder_name(name: str, used: set[str]) -> str:
@@ -113,7 +118,11 @@ def b3d_to_subject(
     pass_index
         Which pass's model to embed.
     overwrite
-        Replace the files of an existing converted subject.
+        Replace the files of an existing converted subject. Trial folders the earlier
+        conversion wrote (named in its ``b3d_source.json``) that this file does not have are
+        removed, so that ``addb process`` does not solve them with the new subject; such a
+        folder that holds anything else, and every trial folder it did not write, is kept
+        (:attr:`ConvertedSubject.kept`).
 
     Returns
     -------
@@ -137,6 +146,7 @@ def b3d_to_subject(
         raise SubjectFolderError(f"the file has {len(h.passes)} processing passes, no pass {pass_index} to take the model from", path=b3d.path)
     if not any(t.n_frames for t in h.trials):
         raise SubjectFolderError("the file has no trial with frames", path=b3d.path)
+    earlier = _converted_trials(out) if overwrite else ()
     out.mkdir(parents=True, exist_ok=True)
     (out / MODEL_FILE).write_text(b3d.model_text(pass_index), encoding="utf-8")
     keep = [j for j, name in enumerate(h.marker_names) if name]
@@ -190,7 +200,30 @@ def b3d_to_subject(
         "trials": {c.name: {"b3d_trial": c.b3d_name, "frames": c.n_frames, "rate_hz": c.rate_hz} for c in trials},
     }
     (out / SOURCE_JSON).write_text(json.dumps(source, indent=2) + "\n")
-    return ConvertedSubject(out, Path(b3d.path), tuple(trials))
+    gone = [name for name in earlier if name not in source["trials"] and (out / "trials" / name).is_dir()]
+    removed = tuple(name for name in gone if _remove_converted_trial(out / "trials" / name))
+    return ConvertedSubject(out, Path(b3d.path), tuple(trials), removed, tuple(n for n in gone if n not in removed))
+
+
+def _converted_trials(out: Path) -> tuple[str, ...]:
+    """The trial folders an earlier conversion into ``out`` wrote (its ``b3d_source.json``);
+    none when there is none or it cannot be read (a folder it did not write is not touched)."""
+    try:
+        trials = json.loads((out / SOURCE_JSON).read_text(encoding="utf-8")).get("trials", {})
+    except (OSError, ValueError, AttributeError):
+        return ()
+    return tuple(str(name) for name in trials if isinstance(name, str) and name and "/" not in name and name not in (".", ".."))
+
+
+def _remove_converted_trial(folder: Path) -> bool:
+    """Remove ``folder`` when it holds only what a conversion writes (``markers.trc``,
+    ``grf.mot``). True when it was removed; a folder with anything else in it is kept whole."""
+    if not folder.is_dir() or any(f.name not in ("markers.trc", "grf.mot") or not f.is_file() for f in folder.iterdir()):
+        return False
+    for f in folder.iterdir():
+        f.unlink()
+    folder.rmdir()
+    return True
 
 
 ReviewWriter = Callable[[ConvertedSubject], Any]

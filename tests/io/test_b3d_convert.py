@@ -123,3 +123,35 @@ def test_convert_process_compare(tmp_path: Path) -> None:
         assert r["linear_residual_rms_N"] <= r["hicks_linear_threshold_N"]
         assert r["angular_residual_rms_Nm"] <= r["hicks_angular_threshold_Nm"]
     (tmp_path / "rows.json").write_text(json.dumps(rows))
+
+
+def test_force_removes_the_trials_of_the_earlier_conversion_only(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``addb convert --force`` of a file with fewer trials: the trial folders the earlier
+    conversion wrote and this file does not have go (``addb process`` would otherwise solve
+    them with the new subject); a trial folder of the user's own, and one of the earlier
+    conversion's with another file in it, stay, and the command says which."""
+    f = open_b3d(B3D)
+    first, second = (t.name for t in f.header.trials)
+    one = tmp_path / "one_trial.b3d"
+    write_b3d(one, dataclasses.replace(f.header, trials=f.header.trials[:1]), [f.read_trial(0)])
+    out = tmp_path / "subject"
+    assert main(["convert", str(B3D), "--out", str(out)]) == 0
+    mine = out / "trials" / "mine"
+    mine.mkdir()
+    (mine / "markers.trc").write_bytes((out / "trials" / first / "markers.trc").read_bytes())
+    (out / "trials" / second / "notes.txt").write_text("the reviewer's own file\n")
+    capsys.readouterr()
+    assert main(["convert", str(one), "--out", str(out), "--force"]) == 0
+    printed = capsys.readouterr().out
+    assert "kept trial folders of the earlier conversion that this file does not have, as they hold other files" in printed
+    assert printed.rstrip().count(second) == 1 and "removed" not in printed
+    assert sorted(p.name for p in (out / "trials").iterdir()) == sorted([first, second, "mine"])
+    (out / "trials" / second / "notes.txt").unlink()
+    assert main(["convert", str(B3D), "--out", str(out), "--force"]) == 0
+    capsys.readouterr()
+    assert main(["convert", str(one), "--out", str(out), "--force"]) == 0
+    printed = capsys.readouterr().out
+    assert f"removed the trial folders of the earlier conversion that this file does not have: {second}" in printed
+    assert sorted(p.name for p in (out / "trials").iterdir()) == sorted([first, "mine"])
+    assert [t.name for t in load_subject(out).trials] == sorted([first, "mine"])
+    assert np.array_equal(read_trc(mine / "markers.trc").positions, read_trc(out / "trials" / first / "markers.trc").positions, equal_nan=True)
