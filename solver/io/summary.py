@@ -20,20 +20,22 @@ from typing import Any
 import numpy as np
 
 from solver.constants import GRAVITY
-from solver.errors import FileFormatError, XmlFormatError
+from solver.errors import FileFormatError, SubjectFolderError, XmlFormatError
 from solver.io.c3d import read_c3d
 from solver.io.external_loads import read_external_loads
 from solver.io.mot import estimate_rate, is_force_table, read_forces, read_table
 from solver.io.review import KEY as REVIEW_KEY
 from solver.io.review import read_review
-from solver.io.subject import load_subject, load_trial
+from solver.io.subject import SUBJECT_JSON, load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.masks import true_runs
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
-    """Summary of a TRC, MOT/STO, C3D, .osim, OpenSim XML or review JSON file, or a subject folder.
+    """Summary of a TRC, MOT/STO, C3D, .osim, OpenSim XML, review JSON or .b3d file, a subject
+    folder, or a folder of .b3d files (one without ``_subject.json``: each file's trials,
+    frames, mass, height and processing passes, kind ``b3d_folder``).
 
     Returns
     -------
@@ -71,6 +73,17 @@ def summarize(path: str | Path) -> dict[str, Any]:
 
 def _dispatch(p: Path) -> dict[str, Any]:
     if p.is_dir():
+        b3d_files = sorted(f for f in p.iterdir() if f.suffix.lower() == ".b3d" and f.is_file())
+        if b3d_files and not (p / SUBJECT_JSON).exists():
+            return _b3d_folder(p, b3d_files)
+        inner = [] if (p / SUBJECT_JSON).exists() else sorted(p.rglob(SUBJECT_JSON))
+        if inner:
+            names = ", ".join(str(f.parent.relative_to(p)) for f in inner[:3]) + (f" and {len(inner) - 3} more" if len(inner) > 3 else "")
+            raise SubjectFolderError(
+                f"is a dataset folder ({len(inner)} subject folders: {names}), not a subject folder; "
+                "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all",
+                path=p,
+            )
         return _subject(p)
     readers: dict[str, Callable[[Path], dict[str, Any]]] = {
         ".trc": _trc,
@@ -380,11 +393,42 @@ def _b3d(p: Path) -> dict[str, Any]:
     }
 
 
+def _b3d_folder(p: Path, files: list[Path]) -> dict[str, Any]:
+    """A folder of .b3d files (no ``_subject.json``): each file's header, one entry each."""
+    from solver.io.b3d import open_b3d
+
+    entries = []
+    for f in files:
+        h = open_b3d(f).header
+        entries.append({
+            "name": f.name,
+            "trials": len(h.trials),
+            "frames": sum(t.n_frames for t in h.trials),
+            "mass_kg": h.mass_kg,
+            "height_m": h.height_m,
+            "passes": [ps.type for ps in h.passes],
+        })
+    return {"kind": "b3d_folder", "path": str(p), "files": entries, "frames": sum(e["frames"] for e in entries)}
+
+
+def _b3d_folder_lines(d: dict[str, Any]) -> list[str]:
+    lines = [f"  {len(d['files'])} .b3d files, {d['frames']} frames (addb info FILE.b3d for one; addb view FOLDER reviews them):"]
+    for e in d["files"]:
+        lines.append(
+            f"    {e['name']}: {e['trials']} trials, {e['frames']} frames; {_fmt(e['mass_kg'])} kg, {_fmt(e['height_m'])} m; "
+            f"passes {', '.join(e['passes']) or 'none'}"
+        )
+    return lines
+
+
 def _b3d_lines(d: dict[str, Any]) -> list[str]:
+    # the format stores an unknown age as -1 (and 0 in files that leave it unset)
+    age = f"age {d['age_years']}" if d["age_years"] > 0 else "age unknown"
+    tags = ", ".join(d["subject_tags"]) or "none"
     lines = [
         (
-            f"  version {d['version']}, {d['bytes']:,} bytes; subject: {d['sex']}, age {d['age_years']}, "
-            f"{_fmt(d['mass_kg'])} kg, {_fmt(d['height_m'])} m, tags {d['subject_tags']}"
+            f"  version {d['version']}, {d['bytes']:,} bytes; subject: {d['sex'] or 'unknown'}, {age}, "
+            f"{_fmt(d['mass_kg'])} kg, {_fmt(d['height_m'])} m, tags: {tags}"
         ),
         f"  {d['dofs']} DOFs, {d['markers']} markers, contact bodies {', '.join(d['ground_contact_bodies'])}",
         f"  processing passes: {', '.join(d['passes']) or 'none'}",
@@ -423,6 +467,8 @@ def format_summary(d: dict[str, Any]) -> str:
         lines.append(f"  <{d['element']}> {d['name']}")
     if kind == "b3d":
         lines = lines[:1] + _b3d_lines(d)
+    if kind == "b3d_folder":
+        lines = lines[:1] + _b3d_folder_lines(d)
     if kind == "review":
         lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
     if kind == "subject":

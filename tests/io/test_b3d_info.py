@@ -63,3 +63,40 @@ def test_each_trial_is_named_once(capsys: pytest.CaptureFixture[str], tmp_path: 
     out = capsys.readouterr().out
     assert "    overground (from walking2 part 0): 132 frames" in out
     assert "    walking1: 131 frames" in out and out.count("walking1") == 1
+
+
+def test_unknown_age_and_a_folder_of_b3d_files(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The format's unknown age (-1, as ``addb export`` writes for a subject without one) read
+    "age -1"; a folder of .b3d files failed as a subject folder without ``_subject.json``, and a
+    dataset folder the same way. The folder of files is listed, the dataset folder named."""
+    import dataclasses
+    import shutil
+
+    from solver.io.b3d import open_b3d
+    from solver.io.b3d_writer import write_b3d
+
+    f = open_b3d(B3D)
+    header = dataclasses.replace(f.header, age_years=-1, tags=("healthy", "walking"))
+    folder = tmp_path / "published"
+    folder.mkdir()
+    write_b3d(folder / "s01.b3d", header, [f.read_trial(k) for k in range(len(header.trials))])
+    shutil.copy(B3D, folder / "s02.b3d")
+    assert main(["info", str(folder / "s01.b3d")]) == 0
+    out = capsys.readouterr().out
+    assert ", age unknown, 68 kg, 1.7 m, tags: healthy, walking" in out and "age -1" not in out
+    assert main(["info", str(B3D)]) == 0
+    assert f", age {f.header.age_years}, 68 kg" in capsys.readouterr().out
+    s = summarize(folder)
+    assert s["kind"] == "b3d_folder" and [e["name"] for e in s["files"]] == ["s01.b3d", "s02.b3d"]
+    assert [e["frames"] for e in s["files"]] == [sum(t.n_frames for t in f.header.trials)] * 2
+    assert main(["info", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert f"  2 .b3d files, {2 * s['files'][0]['frames']} frames" in out
+    assert "    s02.b3d: 2 trials, 263 frames; 68 kg, 1.7 m; passes kinematics" in out
+    dataset = tmp_path / "dataset"
+    for rel in ("labA/s1", "labB/s2"):
+        (dataset / rel).mkdir(parents=True)
+        (dataset / rel / "_subject.json").write_text('{"massKg": 70, "heightM": 1.7}')
+    assert main(["info", str(dataset)]) == 1
+    err = capsys.readouterr().err
+    assert f"SubjectFolderError ({dataset}): is a dataset folder (2 subject folders: labA/s1, labB/s2), not a subject folder" in err
