@@ -14,7 +14,8 @@ from pathlib import Path
 
 def run_dataset(args: argparse.Namespace) -> int:
     """A dataset folder: every subject on the Dask cluster, a table of them, the subjects
-    processed, up to date and failed, the dataset's totals, failures listed.
+    processed, up to date and failed, the dataset's totals, the subjects with warnings (the
+    first of each, the others counted) and the failures listed.
 
     Returns
     -------
@@ -23,6 +24,7 @@ def run_dataset(args: argparse.Namespace) -> int:
     from addb_viewer.progress import ProgressBar, table
     from addb_viewer.review_masks import review_digest, subject_masks
     from solver.dataset.runner import REPORT_NAME, SUMMARY_NAME, DatasetOptions, process_dataset
+    from solver.dataset.task import LOG_NAME
 
     if args.trial or args.annotations:
         raise SystemExit("addb process: --trial and --annotations apply to one subject folder, not a dataset")
@@ -57,6 +59,13 @@ def run_dataset(args: argparse.Namespace) -> int:
         + (f", {c['cancelled']} cancelled" if c["cancelled"] else "") + f" in {run.seconds:.1f} s; the dataset: "
         f"{t['trials']} trials, {t['frames']} frames ({t['hours']:.4f} h, {t['hours_with_measured_force']:.4f} h with measured force)"
     )
+    warned = [s for s in run.subjects if s.get("warnings")]
+    if warned:
+        # each subject's warnings were only in its process.log: the terminal names them
+        print(f"\n{len(warned)} subject(s) with warnings (each in full in {run.out_dir}/SUBJECT/{LOG_NAME}):", file=sys.stderr)
+        for s in warned:
+            more = len(s["warnings"]) - 1
+            print(f"  {s['rel']}: {s['warnings'][0]}" + (f" (and {more} more)" if more else ""), file=sys.stderr)
     if run.failed:
         print(f"\n{len(run.failed)} subject(s) failed:", file=sys.stderr)
         for s in run.failed:

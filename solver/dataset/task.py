@@ -160,7 +160,9 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         ``rel``, ``status`` (``"ok"``, ``"kinematics_only"``, ``"failed"``, or
         ``"cancelled"`` when the run's stop event was set: nothing was written), ``error``
         (:meth:`AddbError.to_dict` form, failed only), ``trials`` (summary rows),
-        ``mass_kg`` (given) and ``fitted_mass_kg``, ``seconds`` (wall time of the
+        ``mass_kg`` (given) and ``fitted_mass_kg``, ``warnings`` (the distinct messages of
+        the warnings raised while the subject ran, also in its ``process.log``; not for a
+        cancelled subject), ``seconds`` (wall time of the
         subject), ``worker_pid`` and ``worker_peak_rss_mb`` (the worker process's peak
         resident memory so far, MB, from ``getrusage``).
     """
@@ -175,6 +177,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     log = _Log(work / LOG_NAME, job.rel, job.stop_event)
     log(f"subject {job.rel}: {job.subject_dir} -> {job.out_dir} (pid {os.getpid()})")
     outcome: dict[str, Any] = {"rel": job.rel, "worker_pid": os.getpid()}
+    caught: list[warnings.WarningMessage] = []
     try:
         log.check_stop()
         with warnings.catch_warnings(record=True) as caught:
@@ -184,8 +187,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
                 log(f"reviewer flags used for {', '.join(sorted(unmeasured_force))}")
             fit = str((job.key.get("settings") or {}).get("fit", "default"))
             result = process_subject(job.subject_dir, work / "out", options=options_for_fit(fit), unmeasured_force=unmeasured_force, progress=log)
-        for w in caught:
-            log(f"warning: {w.message}")
+        outcome["warnings"] = _log_warnings(log, caught)
         rows = subject_rows(work / "out")
         status = subject_status(rows)
         outcome.update(
@@ -205,6 +207,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         log.close()
         outcome = {"rel": job.rel, "worker_pid": os.getpid(), "status": "cancelled", "trials": [], "seconds": time.perf_counter() - t0}
     except Exception as exc:  # noqa: BLE001 - the data's or the solver's failure: recorded, the batch goes on
+        outcome["warnings"] = _log_warnings(log, caught)
         log(f"failed: {exc}")
         log(traceback.format_exc().rstrip())
         log.close()
@@ -214,6 +217,14 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         shutil.rmtree(work, ignore_errors=True)
     outcome["worker_peak_rss_mb"] = _peak_rss_mb()
     return outcome
+
+
+def _log_warnings(log: Callable[[str], None], caught: list[warnings.WarningMessage]) -> list[str]:
+    """Write each warning of the subject's run to its log; returns their distinct messages, in
+    order (the subject's ``warnings`` in its manifest and the dataset summary)."""
+    for w in caught:
+        log(f"warning: {w.message}")
+    return list(dict.fromkeys(str(w.message) for w in caught))
 
 
 def _peak_rss_mb() -> float | None:

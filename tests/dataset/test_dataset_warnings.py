@@ -1,0 +1,41 @@
+"""A dataset run names the subjects whose processing warned: their warnings were only in each
+subject's ``process.log``, so a header that contradicts its own data went unseen in a batch.
+
+The warning here is a real one of the readers: the walk's TRC header says 120 Hz while its
+Time column steps 0.01 s (:func:`solver.io.trc.read_trc`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from addb_viewer.cli import main as cli
+from solver.dataset.manifest import read_manifest
+from tests.dataset.dataset_tree import SUBJECTS
+from tests.conftest import writable_copy
+
+pytestmark = pytest.mark.slow
+
+
+def test_a_subjects_warnings_reach_the_summary_the_manifest_and_the_terminal(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    tree = tmp_path / "in"
+    walk = writable_copy(SUBJECTS / "rajagopal2016_walk", tree / "labA" / "walk")
+    writable_copy(SUBJECTS / "rajagopal2016_walk", tree / "labA" / "quiet")
+    trc = walk / "trials" / "walk" / "markers.trc"
+    lines = trc.read_text().splitlines(keepends=True)
+    assert lines[2].split()[:2] == ["100.0", "100.0"]  # DataRate, CameraRate
+    lines[2] = lines[2].replace("100.0", "120.0", 2)
+    trc.write_text("".join(lines))
+    message = f"{trc}: DataRate says 120 Hz but the Time column steps 0.01 s (100 Hz); rate_hz keeps the header's value"
+    out = tmp_path / "out"
+    for run in ("first", "second (both up to date)"):
+        assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 0, run
+        err = capsys.readouterr().err
+        assert f"\n1 subject(s) with warnings (each in full in {out}/SUBJECT/process.log):\n  labA/walk: {message}\n" in err, run
+        assert "labA/quiet:" not in err, run
+        subjects = {s["rel"]: s for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+        assert subjects["labA/walk"]["warnings"] == [message] and subjects["labA/quiet"]["warnings"] == [], run
+    assert read_manifest(out / "labA" / "walk")["warnings"] == [message]
+    assert f"warning: {message}" in (out / "labA" / "walk" / "process.log").read_text()
