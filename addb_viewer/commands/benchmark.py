@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         png = Path(args.output) / "filtering_study.png"
         plotted = plot_filtering(rows, png, title=f"analytical baseline ({contacts[0]} contact), {dataset.n_frames} frames")
         print(filtering_markdown(rows), end="")
-        print(f"wrote {Path(args.output) / 'filtering_study.md'}" + (f" and {png}" if plotted else " (install matplotlib for the plot)"))
+        print(f"wrote {Path(args.output) / 'filtering_study.md'}" + (f" and {png}" if plotted else " (no plot: matplotlib is not installed; pip install 'addb[plot]')"))
     print(f"wrote {js} and {md}")
     return 0
 

@@ -76,7 +76,9 @@ def plot_filtering(rows: Sequence[dict[str, float]], path: str | Path, *, title:
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
     if fc and max(fc) >= RATE_HZ / 2:
-        axes[0].annotate("unfiltered", (max(fc), rows[-1]["com_acc"]), fontsize=8, ha="right", va="bottom")
+        # below the point, clear of the panel's title
+        axes[0].annotate("unfiltered", (max(fc), rows[-1]["com_acc"]), xytext=(0, -8), textcoords="offset points",
+                         fontsize=8, ha="right", va="top")
     if title:
         fig.suptitle(title, fontsize=10)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
