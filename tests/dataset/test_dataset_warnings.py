@@ -13,8 +13,8 @@ import pytest
 
 from addb_viewer.cli import main as cli
 from solver.dataset.manifest import read_manifest
-from tests.dataset.dataset_tree import SUBJECTS
 from tests.conftest import writable_copy
+from tests.dataset.dataset_tree import SUBJECTS
 
 pytestmark = pytest.mark.slow
 
