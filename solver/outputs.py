@@ -43,6 +43,16 @@ CACHE_DIR = ".addb_cache"
 OUTPUT_MARKERS = ("subject.json", "manifest.json", CACHE_DIR)
 
 
+def output_marker(folder: str | Path) -> str | None:
+    """The first of :data:`OUTPUT_MARKERS` that ``folder`` holds (it is an output of addb),
+    or None (also when ``folder`` is not a folder). The one test of "is this an output
+    folder of addb" that the output check, the dataset run and the recording commands share."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return None
+    return next((m for m in OUTPUT_MARKERS if (folder / m).exists()), None)
+
+
 def _clean(value: Any) -> Any:
     """JSON-safe copy: numpy scalars/arrays to Python, NaN/inf to None."""
     if isinstance(value, dict):
@@ -99,7 +109,7 @@ def check_output_folder(out_dir: str | Path, inputs: tuple[str | Path, ...] = ()
         raise OutputFolderError("exists and is not a folder; expected a folder for the output (new, empty, or an earlier output of addb)", path=out)
     if out.is_dir():
         entries = sorted(e.name for e in out.iterdir())
-        if entries and not any(m in entries for m in OUTPUT_MARKERS):
+        if entries and output_marker(out) is None:
             shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
             raise OutputFolderError(
                 f"holds {len(entries)} entries ({shown}) and is not an output of addb (no "

@@ -40,13 +40,13 @@ def refuse_output_folder(subject: str | os.PathLike[str], out: str | os.PathLike
     from addb_viewer.locations import OUTPUT_NAME, default_output_dir
     from solver.errors import SubjectFolderError
     from solver.io.subject import SUBJECT_JSON
-    from solver.outputs import OUTPUT_MARKERS
+    from solver.outputs import output_marker
     from solver.results import processed_trials
 
     folder = Path(subject)
     if not folder.is_dir() or (folder / SUBJECT_JSON).is_file():
         return
-    marker = next((m for m in OUTPUT_MARKERS if (folder / m).exists()), None)
+    marker = output_marker(folder)
     if marker is None or processed_trials(out if out is not None else default_output_dir(folder)):
         return
     parent = folder.resolve().parent

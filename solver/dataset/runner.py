@@ -59,7 +59,7 @@ from solver.dataset.task import (
     run_subject,
 )
 from solver.errors import DatasetError, OutputFolderError
-from solver.outputs import OUTPUT_MARKERS, check_output_folder, write_json
+from solver.outputs import check_output_folder, output_marker, write_json
 from solver.provenance import addb_version
 
 SUMMARY_NAME = "dataset_summary.json"
@@ -224,7 +224,7 @@ def _refuse_subject_output(out: Path) -> None:
     """Raise DatasetError when ``out`` is the output folder of one subject (it holds one of
     :data:`solver.outputs.OUTPUT_MARKERS`, as ``addb process SUBJECT_DIR --out OUT`` or a
     dataset run's subject writes it): a dataset run would write its tree among those files."""
-    marker = next((m for m in OUTPUT_MARKERS if (out / m).exists()), None) if out.is_dir() else None
+    marker = output_marker(out)
     if marker is not None:
         raise DatasetError(
             f"is the output folder of one subject (it holds {marker}, as `addb process SUBJECT_DIR --out` writes it), "
