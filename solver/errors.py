@@ -99,7 +99,18 @@ class KinematicsError(AddbError):
 
 
 class DynamicsError(AddbError):
-    """The dynamics stage (filtering, contact, centre-of-mass or residual fit) failed."""
+    """The dynamics stage (filtering, contact, centre-of-mass or residual fit) failed.
+
+    Attributes
+    ----------
+    kept_trials
+        Set by :func:`solver.pipeline.process_subject` on the error it raises after writing
+        its outputs: every trial written without dynamics (its kinematics kept), in order,
+        with the error that left it out (this one among them). Empty for an error raised
+        before anything was written.
+    """
+
+    kept_trials: tuple[tuple[str, DynamicsError], ...] = ()
 
 
 class DiagnosisError(AddbError):

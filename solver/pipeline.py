@@ -344,7 +344,8 @@ def process_subject(
         as a kinematics-only trial is (motion, marker errors) with the error in its
         results.json (``dynamics_error``, the error's ``to_dict()``), the other trials'
         dynamics are fitted without it, and the error of the first such trial is raised as
-        it is (``addb process`` adds what was written: :func:`addb_viewer.commands.process.with_kept_kinematics`).
+        it is, with every such trial in its ``kept_trials`` (``addb process`` adds what was
+        written: :func:`addb_viewer.commands.process.with_kept_kinematics`).
     OutputFolderError
         Before any stage runs: ``out_dir`` is a file, is or holds ``subject_dir``, or holds
         what is not an output of addb (:func:`solver.outputs.check_output_folder`).
@@ -701,7 +702,9 @@ def _process_subject(
             save_kinematics_cache(tmp, sk, key)
     say("done", 1.0)
     if failed:  # written: now the first trial's error, as it was before the outputs were kept
-        raise next(iter(failed.values()))
+        error = next(iter(failed.values()))
+        error.kept_trials = tuple(failed.items())
+        raise error
     return ProcessResult(sk, dyn, out_path)
 
 

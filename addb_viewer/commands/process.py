@@ -114,25 +114,16 @@ def review_file(path: str | os.PathLike[str]) -> Path:
 
 def with_kept_kinematics(exc: Exception, out: Path) -> Exception:
     """``exc`` (a DynamicsError of :func:`solver.pipeline.process_subject`) saying which
-    trials were written without dynamics when the output holds them: a trial whose
+    trials were written to ``out`` without dynamics (its ``kept_trials``): a trial whose
     recordings the dynamics stage could not take keeps its kinematics, with the error in its
-    results.json (``dynamics_error``). Any other error is returned as it is."""
-    import json
-
+    results.json (``dynamics_error``). Any other error, and one raised before anything was
+    written, is returned as it is."""
     from solver.errors import DynamicsError
 
-    failed = {}
-    for results in sorted(out.glob("*/results.json")):
-        try:
-            error = json.loads(results.read_text()).get("dynamics_error")
-        except (OSError, ValueError, AttributeError):
-            continue
-        if isinstance(error, dict):
-            failed[results.parent.name] = error
-    if not isinstance(exc, DynamicsError) or exc.to_dict() not in failed.values():
-        return exc  # raised before anything was written
-    others = [n for n, e in failed.items() if e != exc.to_dict()]
-    trial = next(n for n, e in failed.items() if e == exc.to_dict())
+    if not isinstance(exc, DynamicsError) or not exc.kept_trials:
+        return exc
+    trial = next(name for name, error in exc.kept_trials if error is exc)
+    others = [name for name, error in exc.kept_trials if error is not exc]
     return DynamicsError(
         f"{exc.message}; the trial's kinematics were written without dynamics ({out / trial}: motion and marker "
         "errors; results.json: dynamics_error)"
