@@ -2,7 +2,7 @@
 
 Opens from disk without a server or a network: the figures are inline SVG (bar charts
 drawn here from the summary's counts), no scripts. Sections: dataset totals in the
-paper's terms, failures (subject, error, file and line), the distributions of marker RMS
+paper's terms, failures (subject, error, file and line), the subjects' warnings, the distributions of marker RMS
 error and of per-frame residual force and moment (with the Hicks thresholds), and one
 table row per subject and trial.
 """
@@ -202,6 +202,12 @@ def render_report(summary: dict[str, Any]) -> str:
             for s in failed
         )
         fail_html = f'<h2>Failures ({len(failed)})</h2><table><tr><th class="l">subject</th><th class="l">error</th></tr>{items}</table>'
+    warned = [s for s in summary["subjects"] if s.get("warnings")]
+    if warned:  # each subject's distinct warnings (all of them also in its process.log)
+        items = "".join(
+            f'<tr><td class="l">{_esc(s["rel"])}</td><td class="l">{"<br>".join(_esc(w) for w in s["warnings"])}</td></tr>' for s in warned
+        )
+        fail_html += f'<h2>Warnings ({len(warned)} subject{"s" if len(warned) != 1 else ""})</h2><table><tr><th class="l">subject</th><th class="l">warning</th></tr>{items}</table>'
     return (
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>addb dataset report</title>"
         f"<style>{_CSS}</style></head><body>"

@@ -7,6 +7,7 @@ Time column steps 0.01 s (:func:`solver.io.trc.read_trc`)."""
 from __future__ import annotations
 
 import json
+from html import escape as html_escape
 from pathlib import Path
 
 import pytest
@@ -38,4 +39,6 @@ def test_a_subjects_warnings_reach_the_summary_the_manifest_and_the_terminal(tmp
         subjects = {s["rel"]: s for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
         assert subjects["labA/walk"]["warnings"] == [message] and subjects["labA/quiet"]["warnings"] == [], run
     assert read_manifest(out / "labA" / "walk")["warnings"] == [message]
+    html = (out / "dataset_report.html").read_text()
+    assert "<h2>Warnings (1 subject)</h2>" in html and f'<td class="l">labA/walk</td><td class="l">{html_escape(message)}</td>' in html
     assert f"warning: {message}" in (out / "labA" / "walk" / "process.log").read_text()
