@@ -42,3 +42,28 @@ def test_a_subjects_warnings_reach_the_summary_the_manifest_and_the_terminal(tmp
     html = (out / "dataset_report.html").read_text()
     assert "<h2>Warnings (1 subject)</h2>" in html and f'<td class="l">labA/walk</td><td class="l">{html_escape(message)}</td>' in html
     assert f"warning: {message}" in (out / "labA" / "walk" / "process.log").read_text()
+
+
+def test_a_failed_subject_keeps_the_warnings_raised_before_it_failed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A subject whose markers warn (the same DataRate) and whose force file is cut in the
+    middle of a row fails; the warning raised before the failure is in its record beside the
+    error, and the terminal names it among the warnings as well as the failures."""
+    tree = tmp_path / "in"
+    broken = writable_copy(SUBJECTS / "rajagopal2016_walk", tree / "labB" / "broken")
+    trc = broken / "trials" / "walk" / "markers.trc"
+    lines = trc.read_text().splitlines(keepends=True)
+    lines[2] = lines[2].replace("100.0", "120.0", 2)
+    trc.write_text("".join(lines))
+    mot = broken / "trials" / "walk" / "grf.mot"
+    rows = mot.read_text().splitlines()
+    cut = len(rows) // 2
+    mot.write_text("\n".join(rows[:cut]) + "\n" + rows[cut][:20] + "\n")
+    message = f"{trc}: DataRate says 120 Hz but the Time column steps 0.01 s (100 Hz); rate_hz keeps the header's value"
+    out = tmp_path / "out"
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert f"\n1 subject(s) with warnings (each in full in {out}/SUBJECT/process.log):\n  labB/broken: {message}\n" in err
+    assert "\n1 subject(s) failed:\n  labB/broken: " in err and "grf.mot" in err
+    [entry] = json.loads((out / "dataset_summary.json").read_text())["subjects"]
+    assert entry["status"] == "failed" and entry["warnings"] == [message] and entry["error"]["path"].endswith("grf.mot")
+    assert read_manifest(out / "labB" / "broken")["warnings"] == [message]
