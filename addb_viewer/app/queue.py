@@ -32,7 +32,13 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
-from solver.dataset.discover import b3d_note, find_subjects, scan_dataset
+from solver.dataset.discover import (
+    DatasetScan,
+    b3d_note,
+    find_subjects,
+    no_subject_error,
+    scan_dataset,
+)
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
 from solver.io.subject import folder_is_writable
@@ -151,8 +157,21 @@ def is_dataset(path: str | Path) -> bool:
     return True
 
 
-def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tuple[Path, Path, tuple[QueueSubject, ...]]:
-    """The dataset folder, the output tree and the subjects of ``path`` (see module doc).
+@dataclass(frozen=True)
+class OpenedDataset:
+    """A dataset as the workbench opens it (:func:`open_dataset`): one search of its folder."""
+
+    dataset_dir: Path
+    out_dir: Path
+    subjects: tuple[QueueSubject, ...]
+    #: The short note on what the queue leaves out, and the dataset run's message about the
+    #: same files (:func:`unqueued_note`).
+    notes: tuple[str | None, str | None]
+
+
+def open_dataset(path: str | Path, out_dir: str | Path | None = None) -> OpenedDataset:
+    """The dataset folder, the output tree, the subjects of ``path`` (see module doc) and what
+    the queue leaves out, from one search of the dataset folder.
 
     Raises
     ------
@@ -164,10 +183,27 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
         summary = json.loads((p / SUMMARY_NAME).read_text())
         dataset = Path(summary["dataset"])
         rels = [s["rel"] for s in summary["subjects"]]
-        return dataset, p, tuple(QueueSubject(r, dataset.joinpath(*PurePosixPath(r).parts), p.joinpath(*PurePosixPath(r).parts)) for r in rels)
+        subjects = tuple(QueueSubject(r, dataset.joinpath(*PurePosixPath(r).parts), p.joinpath(*PurePosixPath(r).parts)) for r in rels)
+        scan = scan_dataset(dataset, exclude=(p,)) if dataset.is_dir() else None  # gone: an output tree moved without it
+        return OpenedDataset(dataset, p, subjects, _notes(scan))
     out = Path(out_dir).resolve() if out_dir is not None else dataset_output_dir(p)
-    found = find_subjects(p, exclude=(out,))
-    return p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in found)
+    scan = scan_dataset(p, exclude=(out,))
+    if not scan.subjects:
+        raise no_subject_error(scan, p)
+    return OpenedDataset(p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in scan.subjects), _notes(scan))
+
+
+def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tuple[Path, Path, tuple[QueueSubject, ...]]:
+    """The dataset folder, the output tree and the subjects of ``path`` (:func:`open_dataset`
+    without its notes).
+
+    Raises
+    ------
+    DatasetError
+        A tree without any subject folder.
+    """
+    opened = open_dataset(path, out_dir)
+    return opened.dataset_dir, opened.out_dir, opened.subjects
 
 
 def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | None, str | None]:
@@ -175,7 +211,7 @@ def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | N
 
     The ``.b3d`` files outside subject folders are not subject folders: the dataset run
     does not process them and the queue does not list them. ``dataset_dir`` and ``out_dir``
-    are those of :func:`dataset_subjects`.
+    are those of :func:`dataset_subjects` (:func:`open_dataset` gives both at once).
 
     Returns
     -------
@@ -188,9 +224,13 @@ def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | N
     """
     if not Path(dataset_dir).is_dir():
         return None, None
-    scan = scan_dataset(dataset_dir, exclude=(out_dir,))
-    files = scan.b3d_files
-    if not files:
+    return _notes(scan_dataset(dataset_dir, exclude=(out_dir,)))
+
+
+def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
+    """:func:`unqueued_note` of a search already made (None: no dataset folder)."""
+    files = scan.b3d_files if scan is not None else ()
+    if scan is None or not files:
         return None, None
     shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
     note = (

@@ -15,8 +15,9 @@ again every few seconds, so reviews saved from another page or machine show up.
 
 Below the run's status line the window names the ``.b3d`` files of the dataset, which are
 not subject folders and so are neither processed nor listed
-(:func:`addb_viewer.app.queue.unqueued_note`), and, while a background run goes on, what it
-tells its user (its Dask dashboard, a subject retried after its worker died).
+(:func:`addb_viewer.app.queue.unqueued_note`; found in the same search of the dataset folder
+as the subjects, :func:`addb_viewer.app.queue.open_dataset`), and, while a background run
+goes on, what it tells its user (its Dask dashboard, a subject retried after its worker died).
 """
 
 from __future__ import annotations
@@ -36,9 +37,8 @@ from addb_viewer.app.queue import (
     QueueRow,
     QueueSubject,
     build_queue,
-    dataset_subjects,
     next_to_review,
-    unqueued_note,
+    open_dataset,
 )
 
 #: Size of the queue's floating window, px (narrower on a narrower canvas), and its gap
@@ -122,7 +122,8 @@ class Workbench:
     def __init__(self, app: Any, dataset_dir: str | Path, out_dir: str | Path | None = None, *, workers: int | None = None) -> None:
         self.app = app
         self._given = (dataset_dir, out_dir)  # as asked: the subject folders are read again from them
-        self.dataset_dir, self.out_dir, self.subjects = dataset_subjects(dataset_dir, out_dir)
+        opened = open_dataset(dataset_dir, out_dir)  # one search of the dataset folder: subjects and notes
+        self.dataset_dir, self.out_dir, self.subjects = opened.dataset_dir, opened.out_dir, opened.subjects
         self.by_rel = {s.rel: s for s in self.subjects}
         self.running: dict[str, str] = {}
         self.progress_seen: list[tuple[str, float]] = []  # (subject, fraction) as reported
@@ -163,7 +164,7 @@ class Workbench:
         self.again_button.on_click(guard("Process changed subjects", lambda e: self.process_again()))
         self.command.on_trigger(guard("Next trial to review", lambda e: self.open_next()))
         app.workbench = self
-        self._dataset_note = unqueued_note(self.dataset_dir, self.out_dir)
+        self._dataset_note = opened.notes
         self._draw_notes()
         self.refresh()
         n = (os.cpu_count() or 2) - 1 if workers is None else workers
@@ -221,11 +222,10 @@ class Workbench:
         """Read the dataset's subject folders again: a subject folder added (or removed)
         since the app started joins the queue (the background run finds it as it scans
         the dataset)."""
-        _, _, subjects = dataset_subjects(*self._given)
-        note = unqueued_note(self.dataset_dir, self.out_dir)
+        opened = open_dataset(*self._given)
         with self._lock:
-            self.subjects, self.by_rel = subjects, {s.rel: s for s in subjects}
-            self._dataset_note = note
+            self.subjects, self.by_rel = opened.subjects, {s.rel: s for s in opened.subjects}
+            self._dataset_note = opened.notes
             self._draw_notes()
 
     def _draw_notes(self) -> None:

@@ -219,3 +219,24 @@ def test_the_window_names_the_b3d_files_the_queue_leaves_out(dataset: Path, make
     bench.rediscover()
     assert bench.notes.content == ""
 
+
+def test_the_workbench_searches_the_dataset_folder_once(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
+    """Opening the workbench and reading the dataset again each searched the dataset folder
+    twice (once for the subjects, once for the .b3d files the queue leaves out); one search
+    now gives both, the same as the two calls apart."""
+    import addb_viewer.app.queue as queue_module
+    from addb_viewer.app.queue import open_dataset, unqueued_note
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    shutil.copyfile(B3D, dataset / "s03.b3d")
+    opened = open_dataset(dataset)
+    assert (opened.dataset_dir, opened.out_dir, opened.subjects) == dataset_subjects(dataset)
+    assert opened.notes == unqueued_note(opened.dataset_dir, opened.out_dir) and opened.notes[0] is not None
+    searches = []
+    real = queue_module.scan_dataset
+    monkeypatch.setattr(queue_module, "scan_dataset", lambda *a, **k: searches.append(a) or real(*a, **k))
+    app = make_app(ReviewPaths.for_subject(opened.subjects[0].subject_dir, opened.subjects[0].out_dir), process_missing=False)
+    bench = Workbench(app, dataset, workers=0)
+    assert len(searches) == 1 and bench.notes.content.startswith("Not in the queue: s03.b3d")
+    bench.rediscover()
+    assert len(searches) == 2
