@@ -229,9 +229,9 @@ def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | N
 
 def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
     """:func:`unqueued_note` of a search already made (None: no dataset folder)."""
-    files = scan.b3d_files if scan is not None else ()
-    if scan is None or not files:
+    if scan is None or not scan.b3d_files:
         return None, None
+    files = scan.b3d_files
     shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
     note = (
         f"Not in the queue: {shown}, {'a .b3d file' if len(files) == 1 else f'{len(files)} .b3d files'} "
