@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def run(args: argparse.Namespace) -> int:
@@ -22,8 +23,34 @@ def run(args: argparse.Namespace) -> int:
         from addb_viewer.demo import DEMO_SUBJECT
 
         path = DEMO_SUBJECT
+    _refuse_dataset_folder(Path(path))
     print(format_summary(summarize(path)))
     return 0
+
+
+def _refuse_dataset_folder(path: Path) -> None:
+    """Raise SubjectFolderError when ``path`` is a dataset folder: a folder without
+    ``_subject.json`` with subject folders below it (:func:`solver.dataset.discover.scan_dataset`,
+    which does not enter subject, output or hidden folders). The message names some of them and
+    the ``.b3d`` files beside them, if any."""
+    from solver.dataset.discover import is_subject_folder, scan_dataset
+    from solver.errors import SubjectFolderError
+
+    if not path.is_dir() or is_subject_folder(path):
+        return
+    scan = scan_dataset(path)
+    if not scan.subjects:
+        return
+    rels = [s.rel for s in scan.subjects]
+    names = ", ".join(rels[:3]) + (f" and {len(rels) - 3} more" if len(rels) > 3 else "")
+    message = (
+        f"is a dataset folder ({len(rels)} subject folder{'s' if len(rels) != 1 else ''}: {names}), not a subject folder; "
+        "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all"
+    )
+    if scan.b3d_files:
+        shown = ", ".join(scan.b3d_files[:3]) + (", ..." if len(scan.b3d_files) > 3 else "")
+        message += f"; it also holds {len(scan.b3d_files)} .b3d file(s) ({shown}): addb info FILE.b3d summarizes one"
+    raise SubjectFolderError(message, path=path)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from solver.constants import GRAVITY
-from solver.errors import FileFormatError, SubjectFolderError, XmlFormatError
+from solver.errors import FileFormatError, XmlFormatError
 from solver.io.c3d import read_c3d
 from solver.io.external_loads import read_external_loads
 from solver.io.mot import estimate_rate, is_force_table, read_forces, read_table
@@ -35,7 +35,10 @@ from solver.masks import true_runs
 def summarize(path: str | Path) -> dict[str, Any]:
     """Summary of a TRC, MOT/STO, C3D, .osim, OpenSim XML, review JSON or .b3d file, a subject
     folder, or a folder of .b3d files (one without ``_subject.json``: each file's trials,
-    frames, mass, height and processing passes, kind ``b3d_folder``).
+    frames, mass, height and processing passes, kind ``b3d_folder``; a file that cannot be
+    read is an entry with its ``error``, so that one damaged file does not hide the others).
+    A folder of subject folders is not summarized here: ``addb info`` names it as a dataset
+    folder (:mod:`addb_viewer.commands.info`).
 
     Returns
     -------
@@ -76,15 +79,7 @@ def _dispatch(p: Path) -> dict[str, Any]:
         b3d_files = sorted(f for f in p.iterdir() if f.suffix.lower() == ".b3d" and f.is_file())
         if b3d_files and not (p / SUBJECT_JSON).exists():
             return _b3d_folder(p, b3d_files)
-        inner = [] if (p / SUBJECT_JSON).exists() else sorted(p.rglob(SUBJECT_JSON))
-        if inner:
-            names = ", ".join(str(f.parent.relative_to(p)) for f in inner[:3]) + (f" and {len(inner) - 3} more" if len(inner) > 3 else "")
-            raise SubjectFolderError(
-                f"is a dataset folder ({len(inner)} subject folders: {names}), not a subject folder; "
-                "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all",
-                path=p,
-            )
-        return _subject(p)
+        return _subject(p)  # a folder without _subject.json: the reader's error names it
     readers: dict[str, Callable[[Path], dict[str, Any]]] = {
         ".trc": _trc,
         ".mot": _table,
@@ -397,9 +392,13 @@ def _b3d_folder(p: Path, files: list[Path]) -> dict[str, Any]:
     """A folder of .b3d files (no ``_subject.json``): each file's header, one entry each."""
     from solver.io.b3d import open_b3d
 
-    entries = []
+    entries: list[dict[str, Any]] = []
     for f in files:
-        h = open_b3d(f).header
+        try:
+            h = open_b3d(f).header
+        except FileFormatError as exc:  # one damaged file does not hide the others
+            entries.append({"name": f.name, "error": str(exc), "frames": 0})
+            continue
         entries.append({
             "name": f.name,
             "trials": len(h.trials),
@@ -414,6 +413,9 @@ def _b3d_folder(p: Path, files: list[Path]) -> dict[str, Any]:
 def _b3d_folder_lines(d: dict[str, Any]) -> list[str]:
     lines = [f"  {len(d['files'])} .b3d files, {d['frames']} frames (addb info FILE.b3d for one; addb view FOLDER reviews them):"]
     for e in d["files"]:
+        if "error" in e:
+            lines.append(f"    {e['name']}: cannot be read: {e['error']}")
+            continue
         lines.append(
             f"    {e['name']}: {e['trials']} trials, {e['frames']} frames; {_fmt(e['mass_kg'])} kg, {_fmt(e['height_m'])} m; "
             f"passes {', '.join(e['passes']) or 'none'}"

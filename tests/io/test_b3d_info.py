@@ -100,3 +100,35 @@ def test_unknown_age_and_a_folder_of_b3d_files(capsys: pytest.CaptureFixture[str
     assert main(["info", str(dataset)]) == 1
     err = capsys.readouterr().err
     assert f"SubjectFolderError ({dataset}): is a dataset folder (2 subject folders: labA/s1, labB/s2), not a subject folder" in err
+
+
+def test_a_damaged_file_in_a_folder_and_a_mixed_folder(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """A folder with one cut .b3d file listed the others' headers only up to that file's error;
+    now the damaged file is a line naming its error and the others are listed. A folder holding
+    both .b3d files and subject folders was listed as a folder of .b3d files; it is a dataset
+    folder, and the error names both."""
+    import shutil
+
+    folder = tmp_path / "published"
+    folder.mkdir()
+    shutil.copy(B3D, folder / "a_good.b3d")
+    (folder / "b_cut.b3d").write_bytes(B3D.read_bytes()[:300])
+    s = summarize(folder)
+    good, cut = s["files"]
+    assert good["name"] == "a_good.b3d" and good["frames"] == s["frames"] > 0
+    assert cut["name"] == "b_cut.b3d" and "b_cut.b3d" in cut["error"]
+    assert main(["info", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "    a_good.b3d: 2 trials, 263 frames" in out
+    assert f"    b_cut.b3d: cannot be read: {cut['error']}" in out
+    # the subject folders below: a dataset folder, whose output folder is not searched
+    for rel in ("s1", "addb_out/s1"):
+        (folder / rel).mkdir(parents=True)
+        (folder / rel / "_subject.json").write_text('{"massKg": 70, "heightM": 1.7}')
+    assert main(["info", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert (
+        f"({folder}): is a dataset folder (1 subject folder: s1), not a subject folder; addb info SUBJECT_FOLDER "
+        "summarizes one subject, addb process FOLDER processes them all; it also holds 2 .b3d file(s) "
+        "(a_good.b3d, b_cut.b3d): addb info FILE.b3d summarizes one"
+    ) in err
