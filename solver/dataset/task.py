@@ -81,7 +81,8 @@ class Stopped(Exception):
 class _Log:
     """``process.log``: timestamped lines, flushed as they come (readable while running);
     on a Dask worker, the progress also goes to the client as :data:`PROGRESS_TOPIC`
-    events (at most one per :data:`PROGRESS_INTERVAL_S`)."""
+    events (at most one per :data:`PROGRESS_INTERVAL_S`, but always the last one, at fraction 1,
+    so that a fast subject's client still sees it finish)."""
 
     def __init__(self, path: Path, rel: str = "", stop_event: str | None = None) -> None:
         self.path = path
@@ -103,7 +104,7 @@ class _Log:
             return
         self._last = message
         now = time.perf_counter()
-        if self._worker is not None and fraction is not None and now - self._sent >= PROGRESS_INTERVAL_S:
+        if self._worker is not None and fraction is not None and (now - self._sent >= PROGRESS_INTERVAL_S or fraction >= 1.0):
             self._sent = now
             self._worker.log_event(PROGRESS_TOPIC, {"rel": self.rel, "message": message, "fraction": float(fraction)})
             self.check_stop()
