@@ -194,28 +194,38 @@ def _subject_table(subjects: list[dict[str, Any]]) -> str:
 
 def render_report(summary: dict[str, Any]) -> str:
     """The HTML page of a ``dataset_summary.json`` (as parsed JSON)."""
-    failed = [s for s in summary["subjects"] if s["status"] == "failed"]
-    fail_html = ""
-    if failed:
-        items = "".join(
-            f'<tr class="failed"><td class="l">{_esc(s["rel"])}</td><td class="l">{_esc(_error_text(s.get("error")))}</td></tr>'
-            for s in failed
-        )
-        fail_html = f'<h2>Failures ({len(failed)})</h2><table><tr><th class="l">subject</th><th class="l">error</th></tr>{items}</table>'
-    warned = [s for s in summary["subjects"] if s.get("warnings")]
-    if warned:  # each subject's distinct warnings (all of them also in its process.log)
-        items = "".join(
-            f'<tr><td class="l">{_esc(s["rel"])}</td><td class="l">{"<br>".join(_esc(w) for w in s["warnings"])}</td></tr>' for s in warned
-        )
-        fail_html += f'<h2>Warnings ({len(warned)} subject{"s" if len(warned) != 1 else ""})</h2><table><tr><th class="l">subject</th><th class="l">warning</th></tr>{items}</table>'
     return (
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>addb dataset report</title>"
         f"<style>{_CSS}</style></head><body>"
         f"<h1>Dataset report</h1><p>{_esc(summary['dataset'])} &rarr; {_esc(summary['out'])}<br>"
         f"addb {_esc(summary['addb_version'])}, finished {_esc(summary['finished'])} "
         f"in {summary['seconds']:.1f} s</p>"
-        f"<h2>Totals</h2>{_totals_table(summary['totals'])}{fail_html}"
+        f"<h2>Totals</h2>{_totals_table(summary['totals'])}{_failures(summary['subjects'])}{_warnings(summary['subjects'])}"
         f"<h2>Distributions</h2>{_figures(summary)}"
         f"<h2>Subjects and trials</h2>{_subject_table(summary['subjects'])}"
         "</body></html>\n"
     )
+
+
+def _failures(subjects: list[dict[str, Any]]) -> str:
+    """The Failures section: each failed subject and its error ("" when none failed)."""
+    failed = [s for s in subjects if s["status"] == "failed"]
+    if not failed:
+        return ""
+    items = "".join(
+        f'<tr class="failed"><td class="l">{_esc(s["rel"])}</td><td class="l">{_esc(_error_text(s.get("error")))}</td></tr>'
+        for s in failed
+    )
+    return f'<h2>Failures ({len(failed)})</h2><table><tr><th class="l">subject</th><th class="l">error</th></tr>{items}</table>'
+
+
+def _warnings(subjects: list[dict[str, Any]]) -> str:
+    """The Warnings section: each subject's distinct warnings, all of them also in its
+    process.log ("" when no subject warned)."""
+    warned = [s for s in subjects if s.get("warnings")]
+    if not warned:
+        return ""
+    items = "".join(
+        f'<tr><td class="l">{_esc(s["rel"])}</td><td class="l">{"<br>".join(_esc(w) for w in s["warnings"])}</td></tr>' for s in warned
+    )
+    return f'<h2>Warnings ({len(warned)} subject{"s" if len(warned) != 1 else ""})</h2><table><tr><th class="l">subject</th><th class="l">warning</th></tr>{items}</table>'

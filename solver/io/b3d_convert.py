@@ -216,9 +216,10 @@ def _converted_trials(out: Path) -> tuple[str, ...]:
 
 
 def _remove_converted_trial(folder: Path) -> bool:
-    """Remove ``folder`` when it holds only what a conversion writes (``markers.trc``,
-    ``grf.mot``). True when it was removed; a folder with anything else in it is kept whole."""
-    if not folder.is_dir() or any(f.name not in ("markers.trc", "grf.mot") or not f.is_file() for f in folder.iterdir()):
+    """Remove ``folder`` (an existing folder) when it holds only what a conversion writes
+    (``markers.trc``, ``grf.mot``). True when it was removed; a folder with anything else in it
+    is kept whole."""
+    if any(f.name not in ("markers.trc", "grf.mot") or not f.is_file() for f in folder.iterdir()):
         return False
     for f in folder.iterdir():
         f.unlink()
