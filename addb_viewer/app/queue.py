@@ -6,7 +6,7 @@ A dataset is opened from either
 * a dataset output tree (it holds ``dataset_summary.json``, written by
   ``addb process DATASET_DIR``): its subjects are those of the summary and their input
   folders are below the summary's ``dataset``; or
-* a tree of subject folders (:func:`solver.dataset.discover.find_subjects`): outputs go to
+* a tree of subject folders (:func:`solver.dataset.discover.scan_dataset`): outputs go to
   ``<DATASET_DIR>/addb_out`` (mirroring the tree) when the folder is writable, else to the
   user's cache (:func:`dataset_output_dir`).
 
@@ -35,8 +35,6 @@ from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import (
     DatasetScan,
     b3d_note,
-    find_subjects,
-    no_subject_error,
     scan_dataset,
 )
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
@@ -150,11 +148,7 @@ def is_dataset(path: str | Path) -> bool:
         return True
     if not p.is_dir() or (p / "_subject.json").is_file():
         return False
-    try:
-        find_subjects(p)
-    except Exception:  # noqa: BLE001 - no subject below: not a dataset
-        return False
-    return True
+    return bool(scan_dataset(p).subjects)
 
 
 @dataclass(frozen=True)
@@ -188,9 +182,7 @@ def open_dataset(path: str | Path, out_dir: str | Path | None = None) -> OpenedD
         return OpenedDataset(dataset, p, subjects, _notes(scan))
     out = Path(out_dir).resolve() if out_dir is not None else dataset_output_dir(p)
     scan = scan_dataset(p, exclude=(out,))
-    if not scan.subjects:
-        raise no_subject_error(scan, p)
-    return OpenedDataset(p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in scan.subjects), _notes(scan))
+    return OpenedDataset(p, out, tuple(QueueSubject(s.rel, s.path, s.out_dir(out)) for s in scan.require_subjects(p)), _notes(scan))
 
 
 def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tuple[Path, Path, tuple[QueueSubject, ...]]:

@@ -78,6 +78,22 @@ class DatasetScan:
     excluded: tuple[Path, ...]
     b3d_files: tuple[str, ...]
 
+    def require_subjects(self, root: str | Path) -> tuple[DatasetSubject, ...]:
+        """The subject folders of the scan of ``root``: at least one.
+
+        Raises
+        ------
+        DatasetError
+            There is none below ``root``; the message names the ``.b3d`` files met instead,
+            which are not subject folders, and how to make them ones.
+        """
+        if not self.subjects:
+            message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
+            if self.b3d_files:
+                message += f"; it holds {_b3d_note(self.b3d_files)}"
+            raise DatasetError(message, path=Path(root).resolve())
+        return self.subjects
+
 
 def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
     """The search of :func:`scan_dataset` from ``top`` (``base`` or a folder below it);
@@ -147,15 +163,6 @@ def subjects_below(root: str | Path, folder: str | Path) -> tuple[DatasetSubject
     return _walk(base, top, set()).subjects
 
 
-def no_subject_error(scan: DatasetScan, root: str | Path) -> DatasetError:
-    """The error of a dataset folder without subject folders; it names the ``.b3d`` files
-    met, which are not subject folders, and how to make them ones."""
-    message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
-    if scan.b3d_files:
-        message += f"; it holds {_b3d_note(scan.b3d_files)}"
-    return DatasetError(message, path=Path(root).resolve())
-
-
 def _b3d_note(b3d_files: tuple[str, ...]) -> str:
     shown = ", ".join(b3d_files[:5]) + (", ..." if len(b3d_files) > 5 else "")
     return (
@@ -192,7 +199,4 @@ def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> 
         ``root`` is not a folder, or holds no subject folder (the message names the
         ``.b3d`` files found instead, if any).
     """
-    scan = scan_dataset(root, exclude=exclude)
-    if not scan.subjects:
-        raise no_subject_error(scan, root)
-    return scan.subjects
+    return scan_dataset(root, exclude=exclude).require_subjects(root)

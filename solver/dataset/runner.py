@@ -45,7 +45,6 @@ from solver.dataset.discover import (
     DatasetScan,
     DatasetSubject,
     b3d_note,
-    no_subject_error,
     scan_dataset,
     subjects_below,
 )
@@ -331,9 +330,7 @@ def process_dataset(
     _refuse_subject_output(out)
     scan = scan_dataset(dataset_dir, exclude=(out,))
     _refuse_output_among_subjects(scan, source, out)
-    if not scan.subjects:
-        raise no_subject_error(scan, dataset_dir)
-    subjects = scan.subjects
+    subjects = scan.require_subjects(dataset_dir)
     if (note := b3d_note(scan)) is not None:  # not processed: say so, and what is expected
         tell(note)
     out.mkdir(parents=True, exist_ok=True)
