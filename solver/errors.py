@@ -2,11 +2,13 @@
 
 Every error carries where it happened (file, line or frame, element) and what was
 expected, so that the command line and the review app can show an actionable message.
-``to_dict()`` gives a JSON-serializable form for the UI.
+``to_dict()`` gives a JSON-serializable form for the UI; :func:`listed` names the first
+few of many files or folders in a message.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -150,3 +152,10 @@ class B3dFormatError(FileFormatError):
         out = super().to_dict()
         out["offset"] = self.offset
         return out
+
+
+def listed(names: Sequence[str], limit: int) -> str:
+    """The first ``limit`` of ``names`` for a message, and how many more there are:
+    ``"a, b, c and 4 more"``."""
+    more = len(names) - limit
+    return ", ".join(names[:limit]) + (f" and {more} more" if more > 0 else "")

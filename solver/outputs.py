@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.errors import OutputFolderError
+from solver.errors import OutputFolderError, listed
 from solver.files import as_created
 
 CACHE_DIR = ".addb_cache"
@@ -110,9 +110,8 @@ def check_output_folder(out_dir: str | Path, inputs: tuple[str | Path, ...] = ()
     if out.is_dir():
         entries = sorted(e.name for e in out.iterdir())
         if entries and output_marker(out) is None:
-            shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
             raise OutputFolderError(
-                f"holds {len(entries)} entries ({shown}) and is not an output of addb (no "
+                f"holds {len(entries)} entries ({listed(entries, 5)}) and is not an output of addb (no "
                 f"{' or '.join(OUTPUT_MARKERS)}); writing the output replaces the whole folder and would delete them. "
                 "Expected a new folder, an empty one, or an earlier output of addb",
                 path=out,

@@ -30,7 +30,7 @@ import numpy as np
 
 from solver import single_threaded_blas
 from solver.corrections import apply_extensions, extend_subject, extension_masks
-from solver.errors import DynamicsError, KinematicsError
+from solver.errors import DynamicsError, KinematicsError, listed
 from solver.io.external_loads import ExternalForce, ExternalLoads, write_external_loads
 from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
@@ -522,7 +522,7 @@ def load_kinematics_cache(out_dir: str | Path, key: dict[str, Any]) -> tuple[Sub
         if "inputs" in changed:
             a, b = old.get("inputs") or {}, key["inputs"]
             files = sorted(n for n in set(a) | set(b) if a.get(n) != b.get(n))
-            changed[changed.index("inputs")] = "input files " + ", ".join(files[:5]) + (" ..." if len(files) > 5 else "")
+            changed[changed.index("inputs")] = "input files " + listed(files, 5)
         return None, f"kinematics cache is stale ({'; '.join(changed) or 'key'} changed)"
     return data["kinematics"], "kinematics cache is valid"
 

@@ -39,6 +39,7 @@ from solver.dataset.discover import (
 )
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
+from solver.errors import listed
 from solver.io.subject import folder_is_writable
 
 #: Output folder of a dataset inside a writable dataset folder.
@@ -224,9 +225,8 @@ def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
     if scan is None or not scan.b3d_files:
         return None, None
     files = scan.b3d_files
-    shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
     note = (
-        f"Not in the queue: {shown}, {'a .b3d file' if len(files) == 1 else f'{len(files)} .b3d files'} "
+        f"Not in the queue: {listed(files, 3)}, {'a .b3d file' if len(files) == 1 else f'{len(files)} .b3d files'} "
         "(no subject folder): `addb convert FILE.b3d --out SUBJECT_DIR` makes a subject folder of one, "
         "`addb view FOLDER` reviews a folder of them."
     )

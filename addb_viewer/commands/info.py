@@ -34,7 +34,7 @@ def _refuse_dataset_folder(path: Path) -> None:
     which does not enter subject, output or hidden folders). The message names some of them and
     the ``.b3d`` files beside them, if any."""
     from solver.dataset.discover import is_subject_folder, scan_dataset
-    from solver.errors import SubjectFolderError
+    from solver.errors import SubjectFolderError, listed
 
     if not path.is_dir() or is_subject_folder(path):
         return
@@ -42,14 +42,12 @@ def _refuse_dataset_folder(path: Path) -> None:
     if not scan.subjects:
         return
     rels = [s.rel for s in scan.subjects]
-    names = ", ".join(rels[:3]) + (f" and {len(rels) - 3} more" if len(rels) > 3 else "")
     message = (
-        f"is a dataset folder ({len(rels)} subject folder{'s' if len(rels) != 1 else ''}: {names}), not a subject folder; "
+        f"is a dataset folder ({len(rels)} subject folder{'s' if len(rels) != 1 else ''}: {listed(rels, 3)}), not a subject folder; "
         "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all"
     )
     if scan.b3d_files:
-        shown = ", ".join(scan.b3d_files[:3]) + (", ..." if len(scan.b3d_files) > 3 else "")
-        message += f"; it also holds {len(scan.b3d_files)} .b3d file(s) ({shown}): addb info FILE.b3d summarizes one"
+        message += f"; it also holds {len(scan.b3d_files)} .b3d file(s) ({listed(scan.b3d_files, 3)}): addb info FILE.b3d summarizes one"
     raise SubjectFolderError(message, path=path)
 
 

@@ -25,7 +25,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from solver.errors import DatasetError
+from solver.errors import DatasetError, listed
 from solver.io.subject import SUBJECT_JSON
 
 #: Folder names never searched for subjects (addb's default output folder).
@@ -164,9 +164,8 @@ def subjects_below(root: str | Path, folder: str | Path) -> tuple[DatasetSubject
 
 
 def _b3d_note(b3d_files: tuple[str, ...]) -> str:
-    shown = ", ".join(b3d_files[:5]) + (", ..." if len(b3d_files) > 5 else "")
     return (
-        f"{len(b3d_files)} .b3d file(s) ({shown}), which a dataset run does not process: convert each into a subject "
+        f"{len(b3d_files)} .b3d file(s) ({listed(b3d_files, 5)}), which a dataset run does not process: convert each into a subject "
         "folder of the dataset with `addb convert FILE.b3d --out SUBJECT_DIR` (a folder holding one .b3d file can "
         "become that subject folder: --out that folder), or review a folder of .b3d files with `addb view FOLDER`"
     )

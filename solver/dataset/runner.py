@@ -57,7 +57,7 @@ from solver.dataset.task import (
     remove_stale_work,
     run_subject,
 )
-from solver.errors import DatasetError, OutputFolderError
+from solver.errors import DatasetError, OutputFolderError, listed
 from solver.outputs import check_output_folder, output_marker, write_json
 from solver.provenance import addb_version
 
@@ -246,10 +246,9 @@ def _refuse_output_among_subjects(scan: DatasetScan, source: Path, out: Path) ->
     for folder in scan.excluded:
         held = subjects_below(source, folder)
         if held:
-            names = ", ".join(s.rel for s in held[:5]) + (", ..." if len(held) > 5 else "")
             raise DatasetError(
                 f"the output tree lies inside the dataset folder {source} and holds {len(held)} of its subject folder(s) "
-                f"({names}), which the run would leave out (the output tree is not searched for subjects) and write "
+                f"({listed([s.rel for s in held], 5)}), which the run would leave out (the output tree is not searched for subjects) and write "
                 "its outputs among; expected an output folder that holds no subject folder, e.g. "
                 f"{source / 'addb_out'} or a folder outside the dataset", path=out)
 
