@@ -92,6 +92,10 @@ class OsimModelError(AddbError):
     """An .osim model is malformed or uses a feature the converter does not support."""
 
 
+class ScaleFactorError(OsimModelError):
+    """A body's scale factors are not 3 positive, finite numbers (:func:`solver.model.scaling.scale_model`)."""
+
+
 class MarkerMismatchError(AddbError):
     """Markers of a trial and of the model do not match (none in common, all missing)."""
 

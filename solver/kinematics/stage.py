@@ -132,13 +132,11 @@ def _scale_fit(problem: ScaleFitProblem, q0: FloatArray, scales0: FloatArray, tr
     KinematicsError
         The fit asked for a non-positive scale factor, naming the marker files.
     """
-    from solver.errors import OsimModelError
+    from solver.errors import ScaleFactorError
 
     try:
         return fit_model(problem, q0, scales0)
-    except OsimModelError as exc:
-        if "scale factors of" not in str(exc):
-            raise
+    except ScaleFactorError as exc:
         files = ", ".join(str(m.source) for _, m in trials if m.source) or "the marker files"
         raise KinematicsError(
             f"the scale fit drove a body's size to zero or below ({exc.message}): the markers and the model are far "

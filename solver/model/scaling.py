@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from solver.errors import OsimModelError
+from solver.errors import OsimModelError, ScaleFactorError
 from solver.model.functions import Multiplier
 from solver.model.osim import Body, Joint, Marker, Mesh, Offset, OsimModel, TransformAxis
 
@@ -89,7 +89,8 @@ def scale_model(
     Raises
     ------
     OsimModelError
-        Unknown body name or a non-positive / non-finite scale factor.
+        Unknown body name; :class:`~solver.errors.ScaleFactorError` (a subclass) for scale
+        factors that are not 3 positive, finite numbers.
     """
     names = set(model.body_names)
     fac: dict[str, np.ndarray] = {}
@@ -100,7 +101,7 @@ def scale_model(
         if body not in names:
             raise OsimModelError(f"scale factors given for unknown body {body!r}", path=model.source)
         if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
-            raise OsimModelError(f"scale factors of {body} must be 3 positive numbers, got {arr}", path=model.source)
+            raise ScaleFactorError(f"scale factors of {body} must be 3 positive numbers, got {arr}", path=model.source)
         fac[body] = arr
     one = np.ones(3)
 
