@@ -7,8 +7,9 @@ from pathlib import Path
 
 
 def run(args: argparse.Namespace) -> int:
-    """``addb info [PATH]``: print the summary of a lab file, model, .b3d file or subject folder
-    (default: the demo subject).
+    """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder or
+    folder of .b3d files (default: the demo subject); a dataset folder is refused, naming its
+    subject folders.
 
     Returns
     -------
@@ -53,6 +54,6 @@ def _refuse_dataset_folder(path: Path) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
-    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file or a subject folder")
-    p.add_argument("path", nargs="?", help="file or subject folder (default: the bundled demo subject)")
+    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file, a subject folder or a folder of .b3d files")
+    p.add_argument("path", nargs="?", help="file, subject folder or folder of .b3d files (default: the bundled demo subject)")
     p.set_defaults(handler=run)
