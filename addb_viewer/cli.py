@@ -71,7 +71,7 @@ def one_blas_thread() -> None:
 # mallopt(3) parameters (glibc's malloc.h)
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 #: glibc's mmap threshold and trim threshold for :func:`run_to_completion`, bytes.
-MMAP_THRESHOLD, TRIM_THRESHOLD = 32 << 20, 128 << 20
+MMAP_THRESHOLD, TRIM_THRESHOLD = 8 << 20, 128 << 20
 #: Generation-2 threshold of the garbage collector for :func:`run_to_completion` (Python's default 10).
 FULL_COLLECTION_THRESHOLD = 1000
 
@@ -85,7 +85,12 @@ def run_to_completion() -> bool:
       over that size are mapped, faulted in page by page and unmapped again until the
       threshold has adapted; from the heap they reuse pages already faulted in. Setting
       either alone turns the adaptation off and is slower (mallopt(3); the same effect as
-      Dask's ``MALLOC_TRIM_THRESHOLD_``, which the dataset runner removes).
+      Dask's ``MALLOC_TRIM_THRESHOLD_``, which the dataset runner removes). The threshold is
+      8 MB, not higher: at 32 MB a 2,000-frame trial's many arrays of 8-32 MB shared the heap
+      and fragmented it, its peak memory 448-493 MB from one run to the next against 428-430 MB
+      at 8 MB, CPU time the same within the host's noise (tests/benchmarks/RESULTS.md, blocks
+      ``growth`` and ``growth-mmap-32``; the ``addb process`` runs of the shared subjects
+      within 2 % of the 32 MB threshold's CPU time, run by run, 2026-11-29).
     * Full garbage collections (generation 2) once every :data:`FULL_COLLECTION_THRESHOLD`
       collections of generation 1 instead of 10: each traverses every object the imports
       made (numpy, scipy, pinocchio), some 20 ms apiece, and a command's own cycles are few.

@@ -338,7 +338,7 @@ FIGURES: tuple[Figure, ...] = (
            "timing", 1.5, fence=False),
     Figure("joint-fit", RESULTS, f"{PY} tests/benchmarks/bench_joint_fit.py --sigma 0.5 1", "timing", 1.5, fence=False),
     Figure("growth", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --memory-runs 3", "timing", 0.7, fence=False),
-    Figure("growth-mmap-8", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --cuts --memory-runs 3 --mmap-threshold-mb 8", "timing", 0.5, fence=False),
+    Figure("growth-mmap-32", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --cuts --memory-runs 3 --mmap-threshold-mb 32", "timing", 0.5, fence=False),
     Figure("growth-band", RESULTS, f"{PY} tests/benchmarks/bench_growth.py --fit band", "timing", 1.0, fence=False),
     Figure("annotations", RESULTS, f"{PY} tests/benchmarks/bench_annotations.py", "timing", 0.3),
     Figure("recordings", RESULTS, f"{PY} tests/benchmarks/bench_recordings.py", "timing", 0.5),
