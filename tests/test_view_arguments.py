@@ -68,3 +68,29 @@ def test_a_file_other_than_a_b3d_file_is_named_as_a_file(name: str, capsys: pyte
 def test_a_missing_path_is_still_no_such_subject_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["view", str(tmp_path / "nope"), "--port", "0"]) == 1
     assert f"no such subject folder: {tmp_path / 'nope'}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("beside", [True, False], ids=["with a subject folder", "alone"])
+def test_a_folder_of_b3d_files_is_a_dataset_when_it_also_holds_subject_folders(
+    beside: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A folder holding a .b3d file and a subject folder was taken as a folder of .b3d files:
+    the file was converted and reviewed alone and the subject folder left out, where ``addb
+    process`` and ``addb info`` take the same folder as a dataset folder. It now opens as that
+    dataset (the workbench queues the subject folder and names the .b3d file it leaves out);
+    a folder of .b3d files alone still opens the converted files."""
+    from addb_viewer.commands import view
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    (folder / "s02.b3d").write_bytes(b"not read: the dispatch only looks at names")
+    if beside:
+        writable_copy(WALK, folder / "s01")
+    opened: list[Path] = []
+    monkeypatch.setattr(view, "open_dataset", lambda args, dataset: (opened.append(dataset), (None, None))[1])
+    monkeypatch.setattr(view, "_serve", lambda app, args: 0)
+    converted = tmp_path / "converted"  # what b3d_dataset makes: a tree of subject folders
+    writable_copy(WALK, converted / "s02")
+    monkeypatch.setattr(view, "b3d_dataset", lambda f: converted)
+    assert main(["view", str(folder), "--port", "0"]) == 0
+    assert opened == [folder if beside else converted]

@@ -1,10 +1,11 @@
 """``addb view [SUBJECT_DIR]``: review a subject in the browser (default: the bundled demo).
 
 ``addb view FILE.b3d`` converts the AddBiomechanics file into a cached subject folder
-first (:func:`b3d_subject`), then reviews that; ``addb view FOLDER`` of .b3d files converts
-each and reviews them as a dataset, in the workbench's queue (:func:`b3d_dataset`).
-``addb view DATASET_DIR`` (subject folders at any depth, or a dataset output tree) opens the
-review workbench (:mod:`addb_viewer.app.workbench`).
+first (:func:`b3d_subject`), then reviews that; ``addb view FOLDER`` of .b3d files (and no
+subject folder) converts each and reviews them as a dataset, in the workbench's queue
+(:func:`b3d_dataset`). ``addb view DATASET_DIR`` (subject folders at any depth, or a dataset
+output tree) opens the review workbench (:mod:`addb_viewer.app.workbench`); .b3d files beside
+its subject folders are named in the queue's note, not converted.
 
 Prints the page's address, then serves until Ctrl-C (or SIGTERM). A subject without
 processed output is processed first, with the progress in the page; a subject that
@@ -91,8 +92,19 @@ def b3d_dataset(folder: Path) -> Path:
 
 
 def is_b3d_folder(path: Path) -> bool:
-    """A folder holding .b3d files (and no subject folder of its own)."""
-    return path.is_dir() and not (path / "_subject.json").is_file() and any(path.glob("*.b3d"))
+    """A folder holding .b3d files and no subject folder (neither its own ``_subject.json``
+    nor subject folders below it, :func:`addb_viewer.app.queue.is_dataset`).
+
+    A folder holding both is a dataset folder, as ``addb process`` and ``addb info`` take it:
+    the workbench queues its subject folders and names the .b3d files it leaves out."""
+    from addb_viewer.app.queue import is_dataset
+
+    return (
+        path.is_dir()
+        and not (path / "_subject.json").is_file()
+        and any(p.is_file() for p in path.glob("*.b3d"))
+        and not is_dataset(path)
+    )
 
 
 def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, object]:
@@ -220,7 +232,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "subject",
         nargs="?",
         help="AddBiomechanics subject folder or .b3d file, or a dataset: a folder of subject folders "
-        "or a dataset output tree, reviewed through its queue (default: the bundled demo subject)",
+        "or a dataset output tree, reviewed through its queue, or a folder of .b3d files (no subject "
+        "folder), each converted and queued (default: the bundled demo subject)",
     )
     p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080; the next free one if busy; 0: any)")
     p.add_argument(
