@@ -87,10 +87,10 @@ def run_to_completion() -> bool:
       either alone turns the adaptation off and is slower (mallopt(3); the same effect as
       Dask's ``MALLOC_TRIM_THRESHOLD_``, which the dataset runner removes). The threshold is
       8 MB, not higher: at 32 MB a 2,000-frame trial's many arrays of 8-32 MB shared the heap
-      and fragmented it, its peak memory 448-493 MB from one run to the next against 428-430 MB
-      at 8 MB, CPU time the same within the host's noise (tests/benchmarks/RESULTS.md, blocks
-      ``growth`` and ``growth-mmap-32``; the ``addb process`` runs of the shared subjects
-      within 2 % of the 32 MB threshold's CPU time, run by run, 2026-11-29).
+      and fragmented it: its peak memory moved by tens of MB from one run to the next, close
+      to issue 29's 500 MB, where at 8 MB it is lower and repeats, CPU time the same
+      within the host's noise (tests/benchmarks/RESULTS.md, blocks ``growth-mmap-32`` and
+      ``growth``, each the whole trial run three times in fresh processes; README note 7).
     * Full garbage collections (generation 2) once every :data:`FULL_COLLECTION_THRESHOLD`
       collections of generation 1 instead of 10: each traverses every object the imports
       made (numpy, scipy, pinocchio), some 20 ms apiece, and a command's own cycles are few.

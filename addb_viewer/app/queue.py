@@ -32,11 +32,7 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
-from solver.dataset.discover import (
-    DatasetScan,
-    b3d_note,
-    scan_dataset,
-)
+from solver.dataset.discover import DatasetScan, b3d_note, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
 from solver.errors import listed
@@ -160,7 +156,7 @@ class OpenedDataset:
     out_dir: Path
     subjects: tuple[QueueSubject, ...]
     #: The short note on what the queue leaves out, and the dataset run's message about the
-    #: same files (:func:`unqueued_note`).
+    #: same files (:func:`_notes`).
     notes: tuple[str | None, str | None]
 
 
@@ -199,12 +195,12 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
     return opened.dataset_dir, opened.out_dir, opened.subjects
 
 
-def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | None, str | None]:
-    """What below the dataset folder the queue leaves out, for the reviewer.
+def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
+    """What below the dataset folder the queue leaves out, for the reviewer, from the search
+    of the dataset folder (None: the folder is gone, an output tree moved without it).
 
     The ``.b3d`` files outside subject folders are not subject folders: the dataset run
-    does not process them and the queue does not list them. ``dataset_dir`` and ``out_dir``
-    are those of :func:`dataset_subjects` (:func:`open_dataset` gives both at once).
+    does not process them and the queue does not list them.
 
     Returns
     -------
@@ -212,16 +208,8 @@ def unqueued_note(dataset_dir: str | Path, out_dir: str | Path) -> tuple[str | N
         A short note naming them and the commands that take them (``addb convert``, ``addb
         view FOLDER``), and the message the dataset run gives its user about the same files
         (:func:`solver.dataset.discover.b3d_note`, so that a page showing both shows it
-        once); both None when there are none, or when the dataset folder is gone (an output
-        tree moved without it).
+        once); both None when there are none or no search.
     """
-    if not Path(dataset_dir).is_dir():
-        return None, None
-    return _notes(scan_dataset(dataset_dir, exclude=(out_dir,)))
-
-
-def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
-    """:func:`unqueued_note` of a search already made (None: no dataset folder)."""
     if scan is None or not scan.b3d_files:
         return None, None
     files = scan.b3d_files

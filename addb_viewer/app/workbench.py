@@ -14,10 +14,10 @@ shows them as "processing" and refreshes as each one finishes. The queue is also
 again every few seconds, so reviews saved from another page or machine show up.
 
 Below the run's status line the window names the ``.b3d`` files of the dataset, which are
-not subject folders and so are neither processed nor listed
-(:func:`addb_viewer.app.queue.unqueued_note`; found in the same search of the dataset folder
-as the subjects, :func:`addb_viewer.app.queue.open_dataset`), and, while a background run
-goes on, what it tells its user (its Dask dashboard, a subject retried after its worker died).
+not subject folders and so are neither processed nor listed (the notes of
+:func:`addb_viewer.app.queue.open_dataset`, found in the same search of the dataset folder
+as the subjects), and, while a background run goes on, what it tells its user (its Dask
+dashboard, a subject retried after its worker died).
 """
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ class Workbench:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
-        self._dataset_note: tuple[str | None, str | None] = (None, None)  # the .b3d files left out (unqueued_note)
+        self._dataset_note: tuple[str | None, str | None] = (None, None)  # the .b3d files left out (OpenedDataset.notes)
         self._run_notes: list[str] = []  # what the running background run told its user
         gui = app.server.gui
         # a window of its own floating over the top of the 3D view (the subject is framed

@@ -225,13 +225,15 @@ def test_the_workbench_searches_the_dataset_folder_once(dataset: Path, make_app,
     twice (once for the subjects, once for the .b3d files the queue leaves out); one search
     now gives both, the same as the two calls apart."""
     import addb_viewer.app.queue as queue_module
-    from addb_viewer.app.queue import open_dataset, unqueued_note
+    from addb_viewer.app.queue import open_dataset
+    from solver.dataset.discover import b3d_note, scan_dataset
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     shutil.copyfile(B3D, dataset / "s03.b3d")
     opened = open_dataset(dataset)
     assert (opened.dataset_dir, opened.out_dir, opened.subjects) == dataset_subjects(dataset)
-    assert opened.notes == unqueued_note(opened.dataset_dir, opened.out_dir) and opened.notes[0] is not None
+    note, run_note = opened.notes
+    assert note.startswith("Not in the queue: s03.b3d, a .b3d file") and run_note == b3d_note(scan_dataset(dataset))
     searches = []
     real = queue_module.scan_dataset
     monkeypatch.setattr(queue_module, "scan_dataset", lambda *a, **k: searches.append(a) or real(*a, **k))
