@@ -163,3 +163,9 @@ def listed(names: Sequence[str], limit: int) -> str:
     ``"a, b, c and 4 more"``."""
     more = len(names) - limit
     return ", ".join(names[:limit]) + (f" and {more} more" if more > 0 else "")
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` of ``noun`` for a message: "a .b3d file", "3 .b3d files" (``noun`` singular,
+    its plural made with an s)."""
+    return f"a {noun}" if n == 1 else f"{n} {noun}s"

@@ -35,7 +35,7 @@ from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import DatasetScan, b3d_note, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.runner import SUMMARY_NAME
-from solver.errors import listed
+from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
 
 #: Output folder of a dataset inside a writable dataset folder.
@@ -214,7 +214,7 @@ def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
         return None, None
     files = scan.b3d_files
     note = (
-        f"Not in the queue: {listed(files, 3)}, {'a .b3d file' if len(files) == 1 else f'{len(files)} .b3d files'} "
+        f"Not in the queue: {listed(files, 3)}, {counted(len(files), '.b3d file')} "
         "(no subject folder): `addb convert FILE.b3d --out SUBJECT_DIR` makes a subject folder of one, "
         "`addb view FOLDER` reviews a folder of them."
     )

@@ -35,7 +35,7 @@ def _refuse_dataset_folder(path: Path) -> None:
     which does not enter subject, output or hidden folders). The message names some of them and
     the ``.b3d`` files beside them, if any."""
     from solver.dataset.discover import is_subject_folder, scan_dataset
-    from solver.errors import SubjectFolderError, listed
+    from solver.errors import SubjectFolderError, counted, listed
 
     if not path.is_dir() or is_subject_folder(path):
         return
@@ -48,7 +48,7 @@ def _refuse_dataset_folder(path: Path) -> None:
         "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all"
     )
     if scan.b3d_files:
-        message += f"; it also holds {len(scan.b3d_files)} .b3d file(s) ({listed(scan.b3d_files, 3)}): addb info FILE.b3d summarizes one"
+        message += f"; it also holds {counted(len(scan.b3d_files), '.b3d file')} ({listed(scan.b3d_files, 3)}): addb info FILE.b3d summarizes one"
     raise SubjectFolderError(message, path=path)
 
 

@@ -25,7 +25,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from solver.errors import DatasetError, listed
+from solver.errors import DatasetError, counted, listed
 from solver.io.subject import SUBJECT_JSON
 
 #: Folder names never searched for subjects (addb's default output folder).
@@ -165,7 +165,7 @@ def subjects_below(root: str | Path, folder: str | Path) -> tuple[DatasetSubject
 
 def _b3d_note(b3d_files: tuple[str, ...]) -> str:
     return (
-        f"{len(b3d_files)} .b3d file(s) ({listed(b3d_files, 5)}), which a dataset run does not process: convert each into a subject "
+        f"{counted(len(b3d_files), '.b3d file')} ({listed(b3d_files, 5)}), which a dataset run does not process: convert each into a subject "
         "folder of the dataset with `addb convert FILE.b3d --out SUBJECT_DIR` (a folder holding one .b3d file can "
         "become that subject folder: --out that folder), or review a folder of .b3d files with `addb view FOLDER`"
     )

@@ -100,7 +100,7 @@ def test_b3d_files_outside_subject_folders_are_named_with_what_is_expected(tmp_p
     assert cli(["process", str(root), "--out", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
     assert f"DatasetError ({root.resolve()}): no subject folder (a folder holding _subject.json) below this folder; " in err
-    assert "1 .b3d file(s) (labC/p1/results.b3d), which a dataset run does not process" in err, err
+    assert "a .b3d file (labC/p1/results.b3d), which a dataset run does not process" in err, err
     assert "addb convert FILE.b3d --out SUBJECT_DIR" in err and not (tmp_path / "out").exists()
     # the advice holds: converted in its folder, the file's folder is a subject folder, and
     # a .b3d file inside a subject folder is an input of it, not named
@@ -122,7 +122,7 @@ def test_a_b3d_file_in_a_dataset_of_subject_folders_is_named_as_not_processed(da
     run = process_dataset(dataset, out, log=said.append)
     assert [s["rel"] for s in run.failed] == sorted(LINKED)
     [note] = [m for m in said if ".b3d" in m]
-    assert note.startswith("the dataset folder holds 1 .b3d file(s) (labC/p1/results.b3d), which a dataset run does not process")
+    assert note.startswith("the dataset folder holds a .b3d file (labC/p1/results.b3d), which a dataset run does not process")
     assert "addb convert FILE.b3d --out SUBJECT_DIR" in note
 
 

@@ -129,6 +129,6 @@ def test_a_damaged_file_in_a_folder_and_a_mixed_folder(capsys: pytest.CaptureFix
     err = capsys.readouterr().err
     assert (
         f"({folder}): is a dataset folder (1 subject folder: s1), not a subject folder; addb info SUBJECT_FOLDER "
-        "summarizes one subject, addb process FOLDER processes them all; it also holds 2 .b3d file(s) "
+        "summarizes one subject, addb process FOLDER processes them all; it also holds 2 .b3d files "
         "(a_good.b3d, b_cut.b3d): addb info FILE.b3d summarizes one"
     ) in err
