@@ -144,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
     Raises
     ------
     SubjectFolderError
-        The path is a file other than a .b3d file.
+        The path is a file other than a .b3d file, or an output folder of addb
+        (:func:`solver.io.subject.output_folder_note`).
     OutputFolderError
         ``--out`` of a subject is a folder its processing would refuse
         (:func:`solver.outputs.check_output_folder`: the subject folder or a folder above
@@ -156,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
     from solver.errors import SubjectFolderError
+    from solver.io.subject import output_folder_note
     from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
@@ -182,6 +184,9 @@ def run(args: argparse.Namespace) -> int:
     if not subject.is_dir():
         print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
         return 1
+    note = output_folder_note(subject)
+    if note is not None:  # refused here, on the terminal, not in a page that cannot load it
+        raise SubjectFolderError(note, path=subject)
     paths = ReviewPaths.for_subject(subject, args.out)
     # processing and Reprocess write the output folder through this check: refused here, on
     # the terminal, rather than in the page once the server runs

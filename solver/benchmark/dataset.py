@@ -330,7 +330,7 @@ def benchmark_trial(
     if len(feet) != 2:
         raise BenchmarkError(f"the benchmark needs exactly two feet, got {list(feet)}")
     if not trial.has_dynamics or trial.n_frames < 3:
-        return Skipped(trial.subject, trial.trial, "no dynamics (no force plates)")
+        return Skipped(trial.subject, trial.trial, "no dynamics (no force plates, or processed for kinematics only)")
     grf, grm, contact, foreign = foot_wrenches(trial, feet)
     finite_q = np.isfinite(np.asarray(trial.q, dtype=float)).all()
     if not finite_q:

@@ -191,7 +191,9 @@ def run_benchmark(
     if unknown:
         raise BenchmarkError(f"unknown method(s) {', '.join(unknown)} (use {', '.join(METHODS)})")
     if not dataset.trials:
-        raise BenchmarkError("no trial with force data to score (see the skipped trials)")
+        why = [f"{k.subject}/{k.trial}: {k.reason}" for k in dataset.skipped]  # as the report lists them
+        more = f" and {len(why) - 5} more" if len(why) > 5 else ""
+        raise BenchmarkError("no trial with force data to score" + (f"; skipped trials: {'; '.join(why[:5])}{more}" if why else ""))
     if train is not None:
         both = sorted(set(train.subjects) & set(dataset.subjects))
         if both:

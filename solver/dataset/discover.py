@@ -21,12 +21,16 @@ not processed and how to make them subject folders (``addb convert``).
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from solver.errors import DatasetError, counted, listed
-from solver.io.subject import SUBJECT_JSON
+from solver.io.subject import SUBJECT_JSON, output_folder_note
+
+#: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
+SUMMARY_NAME = "dataset_summary.json"
 
 #: Folder names never searched for subjects (addb's default output folder).
 SKIPPED_FOLDERS = frozenset({"addb_out", "__pycache__", "node_modules"})
@@ -85,14 +89,37 @@ class DatasetScan:
         ------
         DatasetError
             There is none below ``root``; the message names the ``.b3d`` files met instead,
-            which are not subject folders, and how to make them ones.
+            which are not subject folders, and how to make them ones, or says that ``root`` is
+            an output folder of addb (:func:`solver.io.subject.output_folder_note`) or a
+            dataset run's output tree.
         """
         if not self.subjects:
+            note = output_folder_note(root) or _output_tree_note(Path(root))
+            if note is not None:  # an output folder given as the dataset: say so, not "no subject folder"
+                raise DatasetError(note, path=Path(root).resolve())
             message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
             if self.b3d_files:
                 message += f"; it holds {_b3d_note(self.b3d_files)}"
             raise DatasetError(message, path=Path(root).resolve())
         return self.subjects
+
+
+def _output_tree_note(root: Path) -> str | None:
+    """What to tell a user who gave a dataset run's output tree (it holds
+    :data:`SUMMARY_NAME`) where the dataset folder was expected, naming the dataset folder
+    the summary records; None for any other folder."""
+    summary = root / SUMMARY_NAME
+    if not summary.is_file():
+        return None
+    try:
+        dataset = json.loads(summary.read_text(encoding="utf-8")).get("dataset")
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+        dataset = None  # a damaged summary: the folder is still an output tree
+    where = f": here probably {dataset}" if isinstance(dataset, str) and dataset else ""
+    return (
+        f"is the output tree of a dataset run (it holds {SUMMARY_NAME}), not a dataset folder; expected the "
+        f"folder of subject folders{where}, with this folder given as --out"
+    )
 
 
 def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.dataset.discover import (
+    SUMMARY_NAME,
     DatasetScan,
     DatasetSubject,
     b3d_note,
@@ -61,7 +62,6 @@ from solver.errors import DatasetError, OutputFolderError, listed
 from solver.outputs import check_output_folder, output_marker, write_json
 from solver.provenance import addb_version
 
-SUMMARY_NAME = "dataset_summary.json"
 REPORT_NAME = "dataset_report.html"
 
 Progress = Callable[[str, float], None]

@@ -28,6 +28,7 @@ from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
+from solver.outputs import output_marker
 
 SUBJECT_JSON = "_subject.json"
 MODEL_FILE = "unscaled_generic.osim"
@@ -131,6 +132,28 @@ def folder_is_writable(folder: str | Path) -> bool:
     return bool(mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH)) and os.access(folder, os.W_OK | os.X_OK)
 
 
+def output_folder_note(folder: str | Path) -> str | None:
+    """What to tell a user who gave an output folder of addb where a subject folder was
+    expected (its ``subject.json``, ``manifest.json`` or cache marks it,
+    :func:`solver.outputs.output_marker`), naming its subject folder when that is the folder
+    above it (``<subject>/addb_out``); None for any other folder.
+
+    The message reads "is an output folder of addb (it holds subject.json), not a subject
+    folder; expected the subject folder (the one with _subject.json) ...", to follow the
+    folder's path in an error."""
+    folder = Path(folder)
+    marker = output_marker(folder)
+    if marker is None or (folder / SUBJECT_JSON).is_file():
+        return None
+    parent = folder.resolve().parent
+    where = (
+        f": here probably {parent}, with this folder given as --out"
+        if (parent / SUBJECT_JSON).is_file()
+        else ", with this folder given as --out"
+    )
+    return f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder (the one with {SUBJECT_JSON}){where}"
+
+
 def load_subject(path: str | Path) -> Subject:
     """Read and check an AddBiomechanics subject folder (JSON, model, trial files).
 
@@ -139,7 +162,8 @@ def load_subject(path: str | Path) -> Subject:
     FileNotFoundError
         ``path`` does not exist.
     SubjectFolderError
-        ``path`` is not a folder; ``_subject.json`` missing, not valid JSON (with its
+        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`);
+        ``_subject.json`` missing, not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
         the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
         unit error); a malformed ``heightM``, ``footBodyNames`` (or an empty list) or ``disableDynamics``;
@@ -151,6 +175,9 @@ def load_subject(path: str | Path) -> Subject:
         raise FileNotFoundError(2, "No such file or folder", str(folder))
     if not folder.is_dir():
         raise SubjectFolderError("expected a subject folder, found a file", path=folder)
+    note = output_folder_note(folder)
+    if note is not None:
+        raise SubjectFolderError(note, path=folder)
     raw = _read_json(folder / SUBJECT_JSON)
     json_path = folder / SUBJECT_JSON
     mass = _number(raw, "massKg", json_path, required=True, most=MOST_KG)

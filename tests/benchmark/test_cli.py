@@ -80,3 +80,19 @@ def test_activity_durations_come_from_the_review_record(out_dirs, tmp_path) -> N
         store.add_activity("walk", 20, 30, "overground_running")
     secs = activity_seconds([(out_dirs[0], subject), (out_dirs[1], None)])
     assert secs == {"overground_walking": 0.2, "overground_running": 0.1}
+
+
+def test_an_output_without_dynamics_names_its_skipped_trials(tmp_path, capsys) -> None:
+    """``addb kinematics`` output of the walk (no dynamics on any trial): the error said "see
+    the skipped trials" without showing them, and called the walk's reason "no force plates"
+    although it has them. It now lists each skipped trial with its reason."""
+    from tests.conftest import SHARED_DATA
+
+    out = tmp_path / "walk_kin"
+    assert cli(["kinematics", str(SHARED_DATA / "subjects" / "rajagopal2016_walk"), "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert cli(["benchmark", str(out), "-o", str(tmp_path / "report")]) == 1
+    err = capsys.readouterr().err
+    reason = "no dynamics (no force plates, or processed for kinematics only)"
+    assert f"no trial with force data to score; skipped trials: rajagopal2016_walk/static: {reason}; rajagopal2016_walk/walk: {reason}" in err, err
+    assert not (tmp_path / "report").exists()

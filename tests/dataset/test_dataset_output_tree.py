@@ -126,6 +126,24 @@ def test_a_b3d_file_in_a_dataset_of_subject_folders_is_named_as_not_processed(da
     assert "addb convert FILE.b3d --out SUBJECT_DIR" in note
 
 
+def test_an_output_tree_given_as_the_dataset_is_named_as_one(dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``addb process OUT`` of a dataset run's output tree said "no subject folder below this
+    folder"; it now says what the folder is and names the dataset folder its summary records."""
+    out = tmp_path / "out"
+    for rel in LINKED:  # every subject fails alone (someone else's file in its folder): no cluster starts
+        (out / rel).mkdir(parents=True)
+        (out / rel / "notes.txt").write_text("keep")
+    process_dataset(dataset, out)
+    assert (out / "dataset_summary.json").is_file()
+    assert cli(["process", str(out), "--out", str(tmp_path / "out2")]) == 1
+    err = capsys.readouterr().err
+    assert (
+        f"addb process: DatasetError ({out}): is the output tree of a dataset run (it holds dataset_summary.json), not a "
+        f"dataset folder; expected the folder of subject folders: here probably {dataset.resolve()}, with this folder given as --out"
+    ) in err, err
+    assert not (tmp_path / "out2").exists()
+
+
 @pytest.mark.slow
 def test_a_run_counts_subjects_processed_up_to_date_and_failed_apart(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
