@@ -143,7 +143,7 @@ def b3d_to_subject(
     if (out / SUBJECT_JSON).exists() and not overwrite:
         raise SubjectFolderError(f"already holds a subject ({SUBJECT_JSON}); overwrite=True (addb convert --force) writes over it", path=out)
     if not h.passes or not (0 <= pass_index < len(h.passes)):
-        raise SubjectFolderError(f"the file has {len(h.passes)} processing passes, no pass {pass_index} to take the model from", path=b3d.path)
+        raise SubjectFolderError(f"the file has {_passes(len(h.passes))}, no pass {pass_index} to take the model from", path=b3d.path)
     if not any(t.n_frames for t in h.trials):
         raise SubjectFolderError("the file has no trial with frames", path=b3d.path)
     earlier = _converted_trials(out) if overwrite else ()
@@ -466,3 +466,11 @@ def processed_to_b3d(
     )
     write_b3d(path, header, blocks)
     return Path(path)
+
+
+def _passes(n: int) -> str:
+    """The processing passes of a file, for a message: "no processing pass", "one processing
+    pass (pass 0)", "3 processing passes (0 to 2)"."""
+    if n == 0:
+        return "no processing pass"
+    return "one processing pass (pass 0)" if n == 1 else f"{n} processing passes (0 to {n - 1})"

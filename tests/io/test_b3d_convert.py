@@ -155,3 +155,13 @@ def test_force_removes_the_trials_of_the_earlier_conversion_only(tmp_path: Path,
     assert sorted(p.name for p in (out / "trials").iterdir()) == sorted([first, "mine"])
     assert [t.name for t in load_subject(out).trials] == sorted([first, "mine"])
     assert np.array_equal(read_trc(mine / "markers.trc").positions, read_trc(out / "trials" / first / "markers.trc").positions, equal_nan=True)
+
+
+def test_a_pass_the_file_does_not_have_is_named_with_the_passes_it_has(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """results.b3d has one processing pass: ``--pass 7`` fails before anything is written,
+    naming the pass it has (the message read "1 processing passes")."""
+    assert len(open_b3d(B3D).header.passes) == 1
+    assert main(["convert", str(B3D), "--out", str(tmp_path / "s"), "--pass", "7"]) == 1
+    err = capsys.readouterr().err
+    assert f"SubjectFolderError ({B3D}): the file has one processing pass (pass 0), no pass 7 to take the model from" in err, err
+    assert not (tmp_path / "s").exists()
