@@ -140,6 +140,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         run_to_completion()
     try:
         return handler(args)
+    except KeyboardInterrupt:  # Ctrl-C: no traceback; outputs are put in place whole or not at all
+        print(f"addb {args.command}: interrupted", file=sys.stderr)
+        return 130
     except AddbError as exc:
         print(f"addb {args.command}: {exc}", file=sys.stderr)
         return 1

@@ -36,7 +36,7 @@ import json
 import os
 import time
 import uuid
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -169,8 +169,16 @@ TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
 
 
 def _local_cluster(options: DatasetOptions) -> Any:
-    """A LocalCluster of one-thread worker processes (see the module docstring)."""
+    """A LocalCluster of one-thread worker processes (see the module docstring).
+
+    The worker processes start with SIGINT ignored (inherited from this process, which
+    ignores it while they start): Ctrl-C in the terminal reaches every process of the
+    command, and the workers would each print a page of tracebacks; this process alone
+    stops the run (:func:`process_dataset`) and closes the cluster. A worker the nanny
+    starts again after a death (a retry) takes the handler this process has then."""
     import logging
+    import signal
+    import threading
 
     import dask
     from distributed import LocalCluster
@@ -178,15 +186,21 @@ def _local_cluster(options: DatasetOptions) -> Any:
     n = options.workers or os.cpu_count() or 1
     # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold)
     settings = {"distributed.scheduler.allowed-failures": 0, f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}": None}
-    with dask.config.set(settings):
-        return LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            memory_limit=options.memory_limit,
-            dashboard_address=":0",  # any free port: two runs on one machine do not collide
-            silence_logs=logging.ERROR,
-        )
+    main = threading.current_thread() is threading.main_thread()  # signal handlers: the main thread only
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        with dask.config.set(settings):
+            return LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                memory_limit=options.memory_limit,
+                dashboard_address=":0",  # any free port: two runs on one machine do not collide
+                silence_logs=logging.ERROR,
+            )
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
 
 
 def _malloc_trim_threshold() -> str | None:
@@ -368,14 +382,43 @@ def process_dataset(
     say(_progress_line(subject_counts(results.values()), None, len(jobs)), len(results) / total)
     dashboard = None
     if jobs:
-        dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
-            _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
+        try:
+            dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
+                _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
+        except KeyboardInterrupt:  # Ctrl-C: what finished is kept, and the summary says what did not
+            for job in jobs:  # a worker may have put a subject in place after the interrupt, before the cluster closed
+                stored = None if job.rel in results else current_manifest(job.out_dir, job.key)
+                if stored is not None:
+                    results[job.rel] = {**{k: v for k, v in stored.items() if k != "key"}, "rel": job.rel}
+            unfinished = [j.rel for j in jobs if j.rel not in results]
+            for rel in unfinished:
+                results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
+            _summarize(subjects, results, out, source, opts, t0, None)
+            done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
+            tell(
+                f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
+                "again for them (the finished subjects are up to date and skipped)."
+                if unfinished
+                else f"interrupted: {done}, and {SUMMARY_NAME} lists them."
+            )
+            raise
         remove_stale_work(out)  # work folders of attempts whose worker was killed
+    return _summarize(subjects, results, out, source, opts, t0, dashboard)
+
+
+def _summarize(
+    subjects: Sequence[DatasetSubject],
+    results: dict[str, dict[str, Any]],
+    out: Path,
+    source: Path,
+    opts: DatasetOptions,
+    t0: float,
+    dashboard: str | None,
+) -> DatasetRun:
+    """The run's outcome, in the subjects' order, written as the summary and the report."""
     ordered = tuple(results[s.rel] for s in subjects)
-    totals = dataset_totals(list(ordered))
-    seconds = time.perf_counter() - t0
-    run = DatasetRun(out, ordered, totals, seconds, dashboard)
-    write_summary(run, Path(dataset_dir).resolve(), opts)
+    run = DatasetRun(out, ordered, dataset_totals(list(ordered)), time.perf_counter() - t0, dashboard)
+    write_summary(run, source, opts)
     return run
 
 
@@ -409,6 +452,7 @@ def _run_jobs(
     dashboard = None
     run_over = threading.Event()
     watcher: threading.Thread | None = None
+    stop_event: Any = None
     try:
         info = client.scheduler_info()
         if info.get("services", {}).get("dashboard"):
@@ -436,11 +480,11 @@ def _run_jobs(
             return futures[-1]
 
         client.subscribe_topic(PROGRESS_TOPIC, lambda event: notify("progress", dict(event[1])))
-        if stop is not None:  # every task reads it: the tasks themselves give up their subject
-            from distributed import Event
+        # every task reads it: the tasks themselves give up their subject (``stop``, Ctrl-C)
+        from distributed import Event
 
-            stop_event = Event(f"addb-stop-{run_id}", client=client)
-            jobs = [replace(j, stop_event=stop_event.name) for j in jobs]
+        stop_event = Event(f"addb-stop-{run_id}", client=client)
+        jobs = [replace(j, stop_event=stop_event.name) for j in jobs]
         pending = as_completed([submit(j) for j in jobs])
         if stop is not None:  # ask the tasks to stop once asked to (while the run lasts)
             def watch() -> None:
@@ -480,6 +524,11 @@ def _run_jobs(
             notify("done", outcome)
             frames += sum(r["frames"] for r in outcome.get("trials") or [])
             step(frames)
+    except KeyboardInterrupt:  # the running subjects give up at their next progress message
+        if stop_event is not None:
+            with contextlib.suppress(Exception):
+                stop_event.set()
+        raise
     finally:
         with contextlib.suppress(Exception):  # the client may already be closing
             client.unsubscribe_topic(PROGRESS_TOPIC)

@@ -113,12 +113,20 @@ class _Log:
         self._f.flush()
 
     def check_stop(self) -> None:
-        """Raise :class:`Stopped` when the run's stop event is set (on a Dask worker)."""
+        """Raise :class:`Stopped` when the run's stop event is set (on a Dask worker), or when
+        the event can no longer be read: the scheduler is gone (the run was interrupted and
+        its cluster closed), so no one waits for this subject. Giving it up then leaves no
+        trace; recording the error as the subject's failure would keep the next run from
+        processing it (a failure with the same inputs is not run again)."""
         if self._worker is None or self.stop_event is None:
             return
         from distributed import Event
 
-        if Event(self.stop_event).is_set():
+        try:
+            stopped = Event(self.stop_event).is_set()
+        except Exception as exc:  # noqa: BLE001 - any failure to reach the scheduler
+            raise Stopped(f"subject {self.rel}: the run's scheduler cannot be reached ({type(exc).__name__})") from None
+        if stopped:
             raise Stopped(f"subject {self.rel}: the run was stopped")
 
     def close(self) -> None:

@@ -1,0 +1,70 @@
+"""Ctrl-C during ``addb process DATASET_DIR``: the terminal sends SIGINT to every process of
+the command (the CLI, the Dask nanny and worker processes). The run used to end in pages of
+tracebacks from each process; a subject given up at the interrupt could be recorded as
+failed (its worker could no longer reach the scheduler), and a failure with the same inputs
+is not run again. Now the command says what finished and what did not, its summary lists
+the unfinished subjects as cancelled, nothing is recorded as failed, and the same command
+processes only what was left.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from tests.dataset.dataset_tree import build_tree
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
+#: Processed one after the other on one worker, in this order (the walk takes about 1 s,
+#: the run about 2.5 s): the interrupt comes once the walk is done, while the run runs.
+TREE = {"labA/a_walk": "rajagopal2016_walk", "labA/b_run": "rajagopal2016_run"}
+
+
+def _process(root: Path, out: Path, interrupt_after: str | None) -> tuple[int, str]:
+    """``addb process root --out out --workers 1`` in its own process group; with
+    ``interrupt_after``, SIGINT to the whole group once a line of its output holds that text."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "addb_viewer.cli", "process", str(root), "--out", str(out), "--workers", "1"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True)
+    lines: list[str] = []
+    assert proc.stdout is not None
+    timer = threading.Timer(300, proc.kill)  # a hung run fails the test instead of hanging it
+    timer.start()
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if interrupt_after is not None and interrupt_after in line:
+                os.killpg(proc.pid, signal.SIGINT)
+                interrupt_after = None
+        return proc.wait(), "".join(lines)
+    finally:
+        timer.cancel()
+
+
+def test_ctrl_c_keeps_finished_subjects_and_the_same_command_resumes(tmp_path: Path) -> None:
+    root = build_tree(tmp_path / "ds", TREE)
+    out = tmp_path / "out"
+    code, text = _process(root, out, interrupt_after="1 processed, 0 failed")
+    assert code == 130, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    assert (
+        f"addb process: interrupted: 1 of 2 subjects to process finished and are kept in {out.resolve()}; "
+        "dataset_summary.json lists labA/b_run as cancelled. Run the same command again for them"
+    ) in text, text
+    assert text.rstrip().endswith("addb process: interrupted"), text
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    assert [(s["rel"], s["status"]) for s in summary["subjects"]] == [("labA/a_walk", "ok"), ("labA/b_run", "cancelled")]
+    assert not (out / "labA" / "b_run").exists()  # given up without a trace: no output, no failure record
+    assert not [p.name for p in (out / "labA").iterdir() if p.name.startswith(".")]  # no work folder left
+    code, text = _process(root, out, interrupt_after=None)
+    assert code == 0, text
+    assert "1 subjects: " not in text and "2 subjects: 1 processed, 1 up to date, 0 failed" in text, text
