@@ -3,3 +3,42 @@ parser and sets ``handler`` to its ``run(args) -> exit code``; heavy imports hap
 handler so that ``addb --help`` stays fast. A handler raises :class:`solver.errors.AddbError`
 or :class:`annotations.AnnotationError` for bad input (naming the file, line or frame):
 :func:`addb_viewer.cli.main` prints it and exits with 1."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+
+def whole_number(least: int) -> Callable[[str], int]:
+    """An argparse ``type`` for a whole number of at least ``least``: ``--workers -1`` is refused
+    at the command line ("expected a whole number of at least 1, got '-1'") instead of
+    reaching Dask, where no worker would ever start."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected a whole number of at least {least}, got {text!r}")
+        return value
+
+    return parse
+
+
+def memory_size(text: str) -> str:
+    """An argparse ``type`` for a worker's memory limit: ``auto``, or a size Dask reads
+    (``4GB``, ``500MiB``, ``2e9``); anything else is refused at the command line instead of
+    failing inside Dask's parser once the run has started."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    from dask.utils import parse_bytes
+
+    try:
+        value = parse_bytes(text)
+    except (ValueError, TypeError):
+        raise argparse.ArgumentTypeError(f"expected a size such as 4GB or 500MiB, or auto, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a size above zero, got {text!r}")
+    return text

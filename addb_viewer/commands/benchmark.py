@@ -17,6 +17,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from addb_viewer.commands import whole_number
+
 
 def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
     """(processed output folder, subject folder or None) of a command-line argument."""
@@ -160,7 +162,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the split and of the networks (default 0)")
     p.add_argument("--contact", action="append", choices=("measured", "kinematic"), help="analytical baseline's contact rule (repeatable; default measured)")
     p.add_argument("--inputs", choices=("kinematic", "processed"), default="kinematic", help="input coordinates: IK of the markers (default) or the dynamics-fitted ones")
-    p.add_argument("--epochs", type=int, default=10, help="training epochs of the networks (default 10, the paper's)")
+    p.add_argument("--epochs", type=whole_number(1), default=10, help="training epochs of the networks (default 10, the paper's)")
     p.add_argument("--filtering", action="store_true", help="also run the filtering study (error against low-pass cut-off)")
     p.add_argument("-o", "--output", default="addb_benchmark", help="folder for benchmark.json/.md (default ./addb_benchmark)")
     p.set_defaults(handler=run)

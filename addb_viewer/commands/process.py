@@ -11,6 +11,8 @@ import os
 import sys
 from pathlib import Path
 
+from addb_viewer.commands import memory_size, whole_number
+
 
 def run_dataset(args: argparse.Namespace) -> int:
     """A dataset folder: every subject on the Dask cluster, a table of them, the subjects
@@ -217,9 +219,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--annotations", help="an existing review record (the reviewer's unmeasured-force flags) or an AddBiomechanics review.json of a one-trial subject")
     d = p.add_argument_group("dataset folders")
-    d.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default: the cores)")
+    d.add_argument("--workers", type=whole_number(1), help="worker processes of the local Dask cluster (default: the cores)")
     d.add_argument("--scheduler", help="submit to a running Dask scheduler, tcp://HOST:PORT, instead")
-    d.add_argument("--retries", type=int, default=1, help="resubmissions of a subject whose worker died (default 1)")
+    d.add_argument("--retries", type=whole_number(0), default=1, help="resubmissions of a subject whose worker died (default 1)")
     d.add_argument("--force", action="store_true", help="reprocess subjects whose output is up to date")
-    d.add_argument("--memory-limit", default="auto", help="memory limit per local worker, e.g. 4GB (default: RAM / workers)")
+    d.add_argument("--memory-limit", type=memory_size, default="auto", help="memory limit per local worker, e.g. 4GB (default: RAM / workers)")
     p.set_defaults(handler=run)

@@ -23,6 +23,8 @@ import sys
 import threading
 from pathlib import Path
 
+from addb_viewer.commands import whole_number
+
 
 def default_reviewer() -> str:
     """``$ADDB_REVIEWER``, else the login name, else "reviewer"."""
@@ -258,7 +260,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=whole_number(0),
         help="dataset: worker processes that process the subjects without output in the background "
         "(default: the cores less one; 0: none)",
     )
