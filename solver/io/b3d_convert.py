@@ -404,7 +404,11 @@ def processed_to_b3d(
         if flagged.size < t:
             flagged = np.concatenate([flagged, np.zeros(t - flagged.size, bool)])
         reasons = tuple(
-            _missing_reason(bool(tr.unobserved[i]), bool(flagged[i]), tr.proposal_reasons[i] if i < len(tr.proposal_reasons) else "")
+            # no force data (no plates, or kinematics only): no frame's ground reaction force is
+            # measured, so none may pass as a measured zero (a reader would take the subject for
+            # airborne); AddBiomechanics' reason for a foot no plate measures
+            "notOverForcePlate" if not has_dyn
+            else _missing_reason(bool(tr.unobserved[i]), bool(flagged[i]), tr.proposal_reasons[i] if i < len(tr.proposal_reasons) else "")
             for i in range(t)
         )
         root = tr.body_names.index(model.joints[0].child.body) if model.joints and model.joints[0].child.body in tr.body_names else 0

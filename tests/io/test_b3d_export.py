@@ -163,3 +163,26 @@ def test_benchmark_needs_a_dynamics_pass(tmp_path: Path, capsys: pytest.CaptureF
     assert main(["benchmark", str(B3D), "-o", str(tmp_path / "bench")]) == 1
     err = capsys.readouterr().err
     assert "no dynamics pass" in err and str(B3D) in err
+
+
+def test_a_trial_without_force_data_exports_no_measured_frame(tmp_path: Path) -> None:
+    """The walk's static trial has no force plates. Its frames were exported as
+    ``notMissingGRF``: a reader took the standing subject for airborne (zero measured force),
+    and ``addb benchmark`` of the file scored its 287 frames as flight (435 frames, 66 % flight,
+    against the output folder's 148 frames of the walk alone). Every frame of a trial without
+    dynamics is now ``notOverForcePlate``, and the file scores the frames the folder scores."""
+    from solver.benchmark.dataset import load_dataset
+    from tests.conftest import SHARED_DATA
+
+    out = tmp_path / "out"
+    assert main(["process", str(SHARED_DATA / "subjects" / "rajagopal2016_walk"), "--out", str(out)]) == 0
+    exported = tmp_path / "walk.b3d"
+    assert main(["export", str(out), "--format", "b3d", "-o", str(exported)]) == 0
+    trials = {t.name: t for t in open_b3d(exported).header.trials}
+    assert trials["static"].n_force_plates == 0 and not load_processed(out, "static").has_dynamics
+    assert set(trials["static"].missing_grf) == {"notOverForcePlate"} and len(trials["static"].missing_grf) == trials["static"].n_frames
+    walk = load_processed(out, "walk")
+    np.testing.assert_array_equal([r != "notMissingGRF" for r in trials["walk"].missing_grf], walk.unobserved)
+    ours, theirs = load_dataset([out]), load_dataset([exported])
+    assert [t.trial for t in theirs.trials] == [t.trial for t in ours.trials] == ["walk"]
+    assert theirs.n_frames == ours.n_frames > 100
