@@ -158,11 +158,11 @@ class B3dFormatError(FileFormatError):
         return out
 
 
-def listed(names: Sequence[str], limit: int) -> str:
-    """The first ``limit`` of ``names`` for a message, and how many more there are:
-    ``"a, b, c and 4 more"``."""
+def listed(names: Sequence[str], limit: int, sep: str = ", ") -> str:
+    """The first ``limit`` of ``names`` for a message, joined with ``sep``, and how many more
+    there are: ``"a, b, c and 4 more"``."""
     more = len(names) - limit
-    return ", ".join(names[:limit]) + (f" and {more} more" if more > 0 else "")
+    return sep.join(names[:limit]) + (f" and {more} more" if more > 0 else "")
 
 
 def counted(n: int, noun: str) -> str:

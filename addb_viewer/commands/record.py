@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -28,7 +27,7 @@ def refuse_output_folder(subject: str | os.PathLike[str], out: str | os.PathLike
         (:func:`addb_viewer.locations.default_output_dir`).
     suggest
         The command line to suggest, as arguments, with ``SUBJECT_DIR`` where the subject
-        folder goes and without ``--out`` (added here, naming ``subject``).
+        folder goes and without ``--out`` (:func:`solver.io.subject.output_folder_note` adds it).
 
     Raises
     ------
@@ -37,26 +36,18 @@ def refuse_output_folder(subject: str | os.PathLike[str], out: str | os.PathLike
         the message names the subject folder when it is the output's parent
         (``<subject>/addb_out``).
     """
-    from addb_viewer.locations import OUTPUT_NAME, default_output_dir
+    from addb_viewer.locations import default_output_dir
     from solver.errors import SubjectFolderError
-    from solver.io.subject import SUBJECT_JSON
-    from solver.outputs import output_marker
+    from solver.io.subject import output_folder_note
     from solver.results import processed_trials
 
     folder = Path(subject)
-    if not folder.is_dir() or (folder / SUBJECT_JSON).is_file():
+    if not folder.is_dir():
         return
-    marker = output_marker(folder)
-    if marker is None or processed_trials(out if out is not None else default_output_dir(folder)):
+    note = output_folder_note(folder, suggest)
+    if note is None or processed_trials(out if out is not None else default_output_dir(folder)):
         return
-    parent = folder.resolve().parent
-    subject_dir = str(parent) if folder.resolve().name == OUTPUT_NAME and (parent / SUBJECT_JSON).is_file() else "SUBJECT_DIR"
-    command = shlex.join(["addb", *(subject_dir if a == "SUBJECT_DIR" else a for a in suggest), "--out", str(folder)])
-    raise SubjectFolderError(
-        f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder "
-        f"(the one with {SUBJECT_JSON}), with this output folder given as --out: {command}",
-        path=folder,
-    )
+    raise SubjectFolderError(note, path=folder)
 
 
 def run(args: argparse.Namespace) -> int:

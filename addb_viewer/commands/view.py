@@ -94,19 +94,12 @@ def b3d_dataset(folder: Path) -> Path:
 
 
 def is_b3d_folder(path: Path) -> bool:
-    """A folder holding .b3d files and no subject folder (neither its own ``_subject.json``
-    nor subject folders below it, :func:`addb_viewer.app.queue.is_dataset`).
+    """A folder holding .b3d files that is not itself a subject folder (no ``_subject.json``).
 
-    A folder holding both is a dataset folder, as ``addb process`` and ``addb info`` take it:
-    the workbench queues its subject folders and names the .b3d files it leaves out."""
-    from addb_viewer.app.queue import is_dataset
-
-    return (
-        path.is_dir()
-        and not (path / "_subject.json").is_file()
-        and any(p.is_file() for p in path.glob("*.b3d"))
-        and not is_dataset(path)
-    )
+    A folder that also holds subject folders is a dataset folder, as ``addb process`` and
+    ``addb info`` take it: :func:`run` asks :func:`addb_viewer.app.queue.is_dataset` first,
+    and the workbench queues the subject folders and names the .b3d files it leaves out."""
+    return path.is_dir() and not (path / "_subject.json").is_file() and any(p.is_file() for p in path.glob("*.b3d"))
 
 
 def open_dataset(args: argparse.Namespace, dataset: Path) -> tuple[object, object]:
@@ -163,9 +156,11 @@ def run(args: argparse.Namespace) -> int:
     from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
-    if subject is not None and is_b3d_folder(subject):
+    dataset = subject is not None and is_dataset(subject)  # one search of the folder
+    if subject is not None and not dataset and is_b3d_folder(subject):
         subject = b3d_dataset(subject)  # a folder of published subjects: reviewed as a dataset
-    if subject is not None and is_dataset(subject):
+        dataset = True
+    if dataset:
         from addb_viewer.geometry import mesh_search_path
 
         mesh_search_path(None, None, args.geometry, bundled=False)  # a wrong --geometry fails here

@@ -35,6 +35,7 @@ from solver.benchmark.evaluate import MethodResult, evaluate
 from solver.benchmark.hybrid import train_contact_split
 from solver.benchmark.metrics import FrameErrors, summarize
 from solver.benchmark.mlp import FeatureSpec, MlpOptions, train_mlp
+from solver.errors import listed
 
 Progress = Callable[[str, float], None]
 
@@ -192,8 +193,7 @@ def run_benchmark(
         raise BenchmarkError(f"unknown method(s) {', '.join(unknown)} (use {', '.join(METHODS)})")
     if not dataset.trials:
         why = [f"{k.subject}/{k.trial}: {k.reason}" for k in dataset.skipped]  # as the report lists them
-        more = f" and {len(why) - 5} more" if len(why) > 5 else ""
-        raise BenchmarkError("no trial with force data to score" + (f"; skipped trials: {'; '.join(why[:5])}{more}" if why else ""))
+        raise BenchmarkError("no trial with force data to score" + (f"; skipped trials: {listed(why, 5, '; ')}" if why else ""))
     if train is not None:
         both = sorted(set(train.subjects) & set(dataset.subjects))
         if both:

@@ -18,7 +18,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import shlex
 import stat
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -132,7 +134,7 @@ def folder_is_writable(folder: str | Path) -> bool:
     return bool(mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH)) and os.access(folder, os.W_OK | os.X_OK)
 
 
-def output_folder_note(folder: str | Path) -> str | None:
+def output_folder_note(folder: str | Path, command: Sequence[str] | None = None) -> str | None:
     """What to tell a user who gave an output folder of addb where a subject folder was
     expected (its ``subject.json``, ``manifest.json`` or cache marks it,
     :func:`solver.outputs.output_marker`), naming its subject folder when that is the folder
@@ -140,17 +142,32 @@ def output_folder_note(folder: str | Path) -> str | None:
 
     The message reads "is an output folder of addb (it holds subject.json), not a subject
     folder; expected the subject folder (the one with _subject.json) ...", to follow the
-    folder's path in an error."""
+    folder's path in an error.
+
+    Parameters
+    ----------
+    folder
+        The folder given where a subject folder goes.
+    command
+        The command line to suggest, as arguments after ``addb``, with ``SUBJECT_DIR`` where
+        the subject folder goes and without ``--out``: the message ends with it, the subject
+        folder filled in when known and ``--out FOLDER`` added. None: the message says only
+        "with this folder given as --out".
+    """
     folder = Path(folder)
     marker = output_marker(folder)
     if marker is None or (folder / SUBJECT_JSON).is_file():
         return None
     parent = folder.resolve().parent
-    where = (
-        f": here probably {parent}, with this folder given as --out"
-        if (parent / SUBJECT_JSON).is_file()
-        else ", with this folder given as --out"
-    )
+    known = (parent / SUBJECT_JSON).is_file()
+    if command is not None:
+        subject_dir = str(parent) if known else "SUBJECT_DIR"
+        line = shlex.join(["addb", *(subject_dir if a == "SUBJECT_DIR" else a for a in command), "--out", str(folder)])
+        where = f", with this folder given as --out: {line}"
+    elif known:
+        where = f": here probably {parent}, with this folder given as --out"
+    else:
+        where = ", with this folder given as --out"
     return f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder (the one with {SUBJECT_JSON}){where}"
 
 
