@@ -1,4 +1,4 @@
-"""``addb info [PATH]``: summarize a lab file, a model or a subject folder."""
+"""``addb info [PATH]``: summarize a lab file, a model, a subject folder or an output folder."""
 
 from __future__ import annotations
 
@@ -7,9 +7,11 @@ from pathlib import Path
 
 
 def run(args: argparse.Namespace) -> int:
-    """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder or
-    folder of .b3d files (default: the demo subject); a dataset folder is refused, naming its
-    subject folders.
+    """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder,
+    folder of .b3d files (default: the demo subject), or output folder: a subject's (given and
+    fitted mass, each trial's frames, marker RMS error, residual forces and Hicks verdicts, from
+    its JSON files) or a dataset run's (its totals, in the report's terms). A dataset folder is
+    refused, naming its subject folders.
 
     Returns
     -------
@@ -24,6 +26,13 @@ def run(args: argparse.Namespace) -> int:
         from addb_viewer.demo import DEMO_SUBJECT
 
         path = DEMO_SUBJECT
+    from solver.dataset.discover import SUMMARY_NAME
+
+    if (Path(path) / SUMMARY_NAME).is_file():  # a dataset run's output tree
+        from solver.dataset.report import run_text
+
+        print(run_text(path))
+        return 0
     _refuse_dataset_folder(Path(path))
     print(format_summary(summarize(path)))
     return 0
@@ -54,6 +63,13 @@ def _refuse_dataset_folder(path: Path) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
-    p = sub.add_parser("info", help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file, a subject folder or a folder of .b3d files")
-    p.add_argument("path", nargs="?", help="file, subject folder or folder of .b3d files (default: the bundled demo subject)")
+    p = sub.add_parser(
+        "info",
+        help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file, a subject folder, a folder of .b3d files "
+        "or an output folder of addb (a subject's or a dataset run's)",
+    )
+    p.add_argument(
+        "path", nargs="?",
+        help="file, subject folder, folder of .b3d files or output folder (default: the bundled demo subject)",
+    )
     p.set_defaults(handler=run)

@@ -31,6 +31,8 @@ from solver.io.subject import SUBJECT_JSON, output_folder_note
 
 #: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
 SUMMARY_NAME = "dataset_summary.json"
+#: Its HTML report, beside it (:mod:`solver.dataset.report`).
+REPORT_NAME = "dataset_report.html"
 
 #: Folder names never searched for subjects (addb's default output folder).
 SKIPPED_FOLDERS = frozenset({"addb_out", "__pycache__", "node_modules"})

@@ -10,9 +10,14 @@ table row per subject and trial.
 from __future__ import annotations
 
 import html
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME
+from solver.errors import FileFormatError
 
 _CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:24px;color:#222}
@@ -101,9 +106,14 @@ def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int |
     return f"<figure>{svg}<figcaption>{_esc(title)}</figcaption></figure>"
 
 
-def _totals_table(t: dict[str, Any]) -> str:
+def totals_rows(t: dict[str, Any]) -> list[tuple[str, str]]:
+    """The dataset's totals as (label, value) text rows, in the paper's terms: subjects by
+    status, trials and frames (with dynamics, with measured force), hours, the contact
+    classes' shares, the clinical-grade share (Hicks), the Hicks shares of trials and the
+    marker RMS error. ``t``: the ``totals`` of a dataset summary
+    (:func:`solver.dataset.summary.dataset_totals`). Shared by the HTML report and ``addb info``."""
     share = t.get("contact_share") or {}
-    rows = [
+    return [
         ("subjects", ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items())) + f" ({t['n_subjects']} in all)"),
         ("trials (with dynamics)", f"{t['trials']} ({t['dynamics_trials']})"),
         ("frames (with measured force)", f"{t['frames']} ({t['measured_frames']})"),
@@ -117,7 +127,39 @@ def _totals_table(t: dict[str, Any]) -> str:
         ("marker RMS per trial, mean / median (cm)",
          f"{_num(t['marker_rms_mean_m'], scale=100)} / {_num(t['marker_rms_median_m'], scale=100)}"),
     ]  # fmt: skip
-    body = "".join(f'<tr><th class="l">{_esc(k)}</th><td class="l">{_esc(v)}</td></tr>' for k, v in rows)
+
+
+def run_text(out_dir: str | Path) -> str:
+    """A dataset run's output tree as text (``addb info OUT``): the dataset folder, when the
+    run ended, its wall time and workers, the totals (:func:`totals_rows`) and the report.
+
+    Raises
+    ------
+    FileFormatError
+        ``dataset_summary.json`` is not valid JSON (with its line) or has no totals.
+    """
+    path = Path(out_dir) / SUMMARY_NAME
+    try:
+        summary = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    try:
+        rows = totals_rows(summary["totals"])
+    except (KeyError, TypeError):
+        raise FileFormatError("expected a dataset summary with its totals (written by addb process DATASET_DIR)", path=path) from None
+    when = f", finished {summary['finished']}" if summary.get("finished") else ""
+    took = f" in {summary['seconds']:.1f} s" if isinstance(summary.get("seconds"), (int, float)) else ""
+    n = summary.get("workers")
+    workers = f" on {n} worker{'s' if n != 1 else ''}" if isinstance(n, int) else ""
+    lines = [f"{Path(out_dir)}: dataset output", f"  dataset run of {summary.get('dataset')}{when}{took}{workers}"]
+    lines += [f"  {label}: {value}" for label, value in rows]
+    if (Path(out_dir) / REPORT_NAME).is_file():
+        lines.append(f"  report: {Path(out_dir) / REPORT_NAME}")
+    return "\n".join(lines)
+
+
+def _totals_table(t: dict[str, Any]) -> str:
+    body = "".join(f'<tr><th class="l">{_esc(k)}</th><td class="l">{_esc(v)}</td></tr>' for k, v in totals_rows(t))
     return f"<table>{body}</table>"
 
 

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.dataset.discover import (
+    REPORT_NAME,
     SUMMARY_NAME,
     DatasetScan,
     DatasetSubject,
@@ -61,8 +62,6 @@ from solver.dataset.task import (
 from solver.errors import DatasetError, OutputFolderError, listed
 from solver.outputs import check_output_folder, output_marker, write_json
 from solver.provenance import addb_version
-
-REPORT_NAME = "dataset_report.html"
 
 Progress = Callable[[str, float], None]
 

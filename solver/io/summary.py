@@ -30,13 +30,18 @@ from solver.io.subject import SUBJECT_JSON, load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.masks import true_runs
+from solver.outputs import output_marker
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
     """Summary of a TRC, MOT/STO, C3D, .osim, OpenSim XML, review JSON or .b3d file, a subject
     folder, or a folder of .b3d files (one without ``_subject.json``: each file's trials,
     frames, mass, height and processing passes, kind ``b3d_folder``; a file that cannot be
-    read is an entry with its ``error``, so that one damaged file does not hide the others).
+    read is an entry with its ``error``, so that one damaged file does not hide the others),
+    an output folder of addb (kind ``output``, from its JSON files: given and fitted mass,
+    per trial frames, measured frames, marker RMS error, residual forces, Hicks verdicts or the
+    dynamics error; a dataset run's subject folder adds its status). A dataset run's output
+    tree is summarized by :func:`solver.dataset.report.run_text`.
     A folder of subject folders is not summarized here: ``addb info`` names it as a dataset
     folder (:mod:`addb_viewer.commands.info`).
 
@@ -79,6 +84,8 @@ def _dispatch(p: Path) -> dict[str, Any]:
         b3d_files = sorted(f for f in p.iterdir() if f.suffix.lower() == ".b3d" and f.is_file())
         if b3d_files and not (p / SUBJECT_JSON).exists():
             return _b3d_folder(p, b3d_files)
+        if not (p / SUBJECT_JSON).exists() and output_marker(p) is not None:
+            return _output(p)
         return _subject(p)  # a folder without _subject.json: the reader's error names it
     readers: dict[str, Callable[[Path], dict[str, Any]]] = {
         ".trc": _trc,
@@ -308,6 +315,90 @@ def _subject(p: Path) -> dict[str, Any]:
     }
 
 
+#: Keys of a trial's results.json that the summary of an output folder shows.
+_OUTPUT_TRIAL_KEYS = (
+    "n_frames", "n_observed_frames", "marker_rms_m", "linear_residual_rms_N", "linear_residual_rms_BW",
+    "angular_residual_rms_Nm", "angular_residual_rms_BWh", "hicks_linear_ok", "hicks_angular_ok",
+)
+
+
+def _read_json_object(path: Path) -> dict[str, Any]:
+    try:
+        raw = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    if not isinstance(raw, dict):
+        raise FileFormatError("expected a JSON object", path=path)
+    return raw
+
+
+def _output(p: Path) -> dict[str, Any]:
+    """An output folder of addb (``addb process --out``, or a dataset run's subject folder):
+    the subject's given and fitted mass from ``subject.json``, the dataset run's status from
+    ``manifest.json`` and, per processed trial (``*/results.json``), its frames, measured
+    frames, marker RMS error, residual forces and Hicks verdicts, or its dynamics error."""
+    d: dict[str, Any] = {"kind": "output", "path": str(p), "trials": []}
+    if (p / "subject.json").is_file():
+        subject = _read_json_object(p / "subject.json")
+        d.update(
+            name=subject.get("subject"), mass_kg=subject.get("mass_kg"), height_m=subject.get("height_m"),
+            fitted_mass_kg=subject.get("fitted_mass_kg"),
+        )
+    if (p / "manifest.json").is_file():
+        manifest = _read_json_object(p / "manifest.json")
+        d["status"] = manifest.get("status")
+        error = manifest.get("error")
+        if isinstance(error, dict):
+            d["error"] = f"{error.get('type')}: {error.get('message')}"
+    for results in sorted(p.glob("*/results.json")):
+        metrics = _read_json_object(results)
+        trial: dict[str, Any] = {"name": results.parent.name, **{k: metrics[k] for k in _OUTPUT_TRIAL_KEYS if k in metrics}}
+        error = metrics.get("dynamics_error")
+        if isinstance(error, dict):
+            trial["dynamics_error"] = f"{error.get('type')}: {error.get('message')}"
+        d["trials"].append(trial)
+    return d
+
+
+def _output_lines(d: dict[str, Any]) -> list[str]:
+    lines = []
+    if d.get("name") is not None:
+        mass = f"{_fmt(d['mass_kg'])} kg" if d.get("mass_kg") is not None else "mass unknown"
+        fitted = f", fitted {_fmt(d['fitted_mass_kg'])} kg" if d.get("fitted_mass_kg") is not None else ""
+        height = f", {_fmt(d['height_m'])} m" if d.get("height_m") else ""
+        lines.append(f"  subject {d['name']}: {mass}{fitted}{height}")
+    if "status" in d:
+        lines.append(f"  dataset run: {d['status']}" + (f" ({d['error']})" if "error" in d else ""))
+    if not d["trials"]:
+        lines.append("  no processed trial")
+    for t in d["trials"]:
+        head = f"  trial {t['name']}:"
+        if "n_frames" in t:
+            measured = f" ({t['n_observed_frames']} with measured force)" if "n_observed_frames" in t else ""
+            head += f" {t['n_frames']} frames{measured}"
+        if t.get("marker_rms_m") is not None:
+            head += f", marker RMS {t['marker_rms_m'] * 100:.2f} cm"
+        if "dynamics_error" in t:
+            lines += [head, f"    dynamics failed: {t['dynamics_error']}"]
+            continue
+        if "n_observed_frames" not in t:
+            lines.append(head + " (kinematics only)")
+            continue
+        parts = []
+        if t.get("linear_residual_rms_N") is not None:
+            bw = f" ({t['linear_residual_rms_BW']:.3f} BW)" if t.get("linear_residual_rms_BW") is not None else ""
+            parts.append(f"residual force {t['linear_residual_rms_N']:.1f} N RMS{bw}")
+        if t.get("angular_residual_rms_Nm") is not None:
+            bwh = f" ({t['angular_residual_rms_BWh']:.3f} BW·h)" if t.get("angular_residual_rms_BWh") is not None else ""
+            parts.append(f"moment {t['angular_residual_rms_Nm']:.1f} N·m RMS{bwh}")
+        verdict = {True: "within", False: "over"}
+        if t.get("hicks_linear_ok") is not None:
+            angular = f", angular {verdict[t['hicks_angular_ok']]}" if t.get("hicks_angular_ok") is not None else ""
+            parts.append(f"Hicks: linear {verdict[t['hicks_linear_ok']]}{angular}")
+        lines += [head, "    " + "; ".join(parts)]
+    return lines
+
+
 # --------------------------------------------------------------------------- text
 
 
@@ -471,6 +562,8 @@ def format_summary(d: dict[str, Any]) -> str:
         lines = lines[:1] + _b3d_lines(d)
     if kind == "b3d_folder":
         lines = lines[:1] + _b3d_folder_lines(d)
+    if kind == "output":
+        lines += _output_lines(d)
     if kind == "review":
         lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
     if kind == "subject":

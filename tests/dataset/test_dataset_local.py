@@ -172,3 +172,37 @@ def test_local_workers_keep_glibcs_adaptive_mmap_threshold() -> None:
     with _local_cluster(DatasetOptions(workers=1)) as cluster, Client(cluster) as client:
         (env,) = client.run(_worker_environment).values()
     assert env == {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}
+
+
+def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_run, capsys: pytest.CaptureFixture[str]) -> None:
+    """``addb info OUT`` said "_subject.json is missing" of the output tree, and "is an output
+    folder of addb ... with this folder given as --out" of a subject's output folder (info has
+    no --out). The tree now reads as its summary's totals, each subject's folder as its trials'
+    metrics (from their results.json), a failed subject as its error."""
+    out, _, summary = first_run
+    capsys.readouterr()
+    assert cli(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    t = summary["totals"]
+    assert f"{out}: dataset output\n" in text
+    assert "subjects: 1 failed, 1 kinematics_only, 3 ok (5 in all)" in text
+    assert f"frames (with measured force): {t['frames']} ({t['measured_frames']})" in text
+    assert f"report: {out / 'dataset_report.html'}" in text
+    for rel in [*FULL_TREE, KINEMATICS_ONLY]:
+        assert cli(["info", str(out / rel)]) == 0
+        text = capsys.readouterr().out
+        assert "dataset run: " in text and "Traceback" not in text
+        trials = results(out / rel)
+        assert text.count("\n  trial ") == len(trials) > 0, text
+        for name, r in trials.items():
+            head = f"  trial {name}: {r['n_frames']} frames"
+            if "n_observed_frames" in r:
+                head += f" ({r['n_observed_frames']} with measured force)"
+            assert f"{head}, marker RMS {r['marker_rms_m'] * 100:.2f} cm" in text, (rel, name, text)
+            if "n_observed_frames" in r:
+                assert f"residual force {r['linear_residual_rms_N']:.1f} N RMS ({r['linear_residual_rms_BW']:.3f} BW)" in text
+            else:
+                assert f"{head}, marker RMS {r['marker_rms_m'] * 100:.2f} cm (kinematics only)" in text
+    assert cli(["info", str(out / BROKEN)]) == 0
+    text = capsys.readouterr().out
+    assert "dataset run: failed (TrcFormatError: " in text and "no processed trial" in text
