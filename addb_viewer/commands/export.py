@@ -108,14 +108,24 @@ def run(args: argparse.Namespace) -> int:
     -------
     The exit code: 0 when every file was written.
 
-    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
+    Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`); an output name
+    whose suffix is not .mcap, .rrd or .b3d (no suffix: MCAP), or that disagrees with
+    ``--format``, is refused before anything is processed.
     """
+    from addb_viewer.recording.jobs import FORMATS
+
+    by_suffix = {".b3d": "b3d", **{s: name for name, s in FORMATS.items()}}
+    suffix = Path(args.output).suffix.lower()
     fmt = args.format
     if fmt is None:
-        suffix = Path(args.output).suffix.lower()
-        from addb_viewer.recording.jobs import FORMATS
-
-        fmt = "b3d" if suffix == ".b3d" else next((name for name, s in FORMATS.items() if s == suffix), "mcap")
+        if suffix and suffix not in by_suffix:  # it wrote MCAP under that name
+            raise SystemExit(
+                f"addb export: cannot tell the format from -o {args.output} (a {suffix} file); "
+                f"name it {', '.join(by_suffix)} or give --format"
+            )
+        fmt = by_suffix.get(suffix, "mcap")
+    elif by_suffix.get(suffix, fmt) != fmt:  # it wrote the --format under the other format's suffix
+        raise SystemExit(f"addb export: --format {fmt}, but -o {args.output} names a {by_suffix[suffix]} file; give one that agrees")
     if fmt == "b3d":
         return export_b3d(args)
     if not args.trial:
@@ -159,7 +169,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--format",
         choices=("mcap", "rrd", "b3d"),
-        help="file format (default: from the output suffix, else mcap)",
+        help="file format (default: from the output suffix .mcap, .rrd or .b3d; mcap when it has none)",
     )
     p.add_argument("-o", "--output", required=True, help="the file to write (a folder for a dataset tree)")
     p.add_argument(

@@ -180,3 +180,24 @@ def test_an_output_folder_in_place_of_the_subject_folder_says_so(
     assert f"addb {command} {subject} {' '.join(args)} --out {subject / 'addb_out'}" in capsys.readouterr().err
     assert main([command, str(demo_out), *args, "--out", str(demo_out)]) == 0
     assert output.is_file()
+
+
+@pytest.mark.parametrize(
+    ("name", "fmt", "expected"),
+    [
+        ("walk.mp4", [], "cannot tell the format from -o {output} (a .mp4 file); name it .b3d, .mcap, .rrd or give --format"),
+        ("walk.rrd", ["--format", "mcap"], "--format mcap, but -o {output} names a rrd file"),
+        ("walk.mcap", ["--format", "b3d"], "--format b3d, but -o {output} names a mcap file"),
+    ],
+    ids=["unknown suffix", "mcap as .rrd", "b3d as .mcap"],
+)
+def test_an_output_name_that_does_not_tell_or_contradicts_the_format_is_refused(
+    name: str, fmt: list[str], expected: str, tmp_path: Path, demo_out: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``-o walk.mp4`` wrote an MCAP file under that name, and ``--format mcap -o walk.rrd`` an
+    MCAP file named .rrd that Rerun cannot open; both are refused before anything is written."""
+    output = tmp_path / name
+    with pytest.raises(SystemExit) as exc:
+        main(["export", str(DEMO_SUBJECT), "--trial", "walk", *fmt, "-o", str(output), "--out", str(demo_out)])
+    assert str(exc.value) == "addb export: " + expected.format(output=output) + ("" if "cannot" in expected else "; give one that agrees")
+    assert not output.exists()
