@@ -174,7 +174,9 @@ def _local_cluster(options: DatasetOptions) -> Any:
     ignores it while they start): Ctrl-C in the terminal reaches every process of the
     command, and the workers would each print a page of tracebacks; this process alone
     stops the run (:func:`process_dataset`) and closes the cluster. A worker the nanny
-    starts again after a death (a retry) takes the handler this process has then."""
+    starts again after a death (a retry) would take the handler this process has then:
+    :class:`solver.dataset.interrupt.IgnoreInterrupt`, registered on the cluster, ignores
+    SIGINT in every worker as it starts."""
     import logging
     import signal
     import threading
@@ -200,6 +202,19 @@ def _local_cluster(options: DatasetOptions) -> Any:
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)
+
+
+def local_client(cluster: Any) -> Any:
+    """A Dask client of the local cluster (:func:`_local_cluster`) whose workers ignore SIGINT,
+    those its nannies start again after a death included
+    (:class:`solver.dataset.interrupt.IgnoreInterrupt`)."""
+    from distributed import Client
+
+    from solver.dataset.interrupt import IgnoreInterrupt
+
+    client = Client(cluster)
+    client.register_plugin(IgnoreInterrupt())
+    return client
 
 
 def _malloc_trim_threshold() -> str | None:
@@ -443,7 +458,7 @@ def _run_jobs(
             client = Client(opts.scheduler, timeout="20s")
         else:
             cluster = _local_cluster(opts)
-            client = Client(cluster)
+            client = local_client(cluster)
     except OSError as exc:
         if cluster is not None:
             cluster.close()

@@ -68,3 +68,38 @@ def test_ctrl_c_keeps_finished_subjects_and_the_same_command_resumes(tmp_path: P
     code, text = _process(root, out, interrupt_after=None)
     assert code == 0, text
     assert "1 subjects: " not in text and "2 subjects: 1 processed, 1 up to date, 0 failed" in text, text
+
+
+def _sigint_ignored() -> bool:
+    return signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+def test_a_worker_started_again_after_a_death_ignores_sigint_too() -> None:
+    """The local cluster's workers start with SIGINT ignored, inherited from the command; one
+    that its nanny starts again after a death (the retry of a subject whose worker died)
+    inherited the command's handler instead, and printed its traceback at the next Ctrl-C."""
+    import time
+
+    from solver.dataset.runner import DatasetOptions, _local_cluster, local_client
+
+    cluster = _local_cluster(DatasetOptions(workers=1))
+    try:
+        client = local_client(cluster)
+        (first,) = client.run(os.getpid).values()
+        assert list(client.run(_sigint_ignored).values()) == [True]
+        os.kill(first, signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        pids: list[int] = []
+        while time.monotonic() < deadline:
+            try:
+                pids = list(client.run(os.getpid).values())
+            except Exception:  # noqa: BLE001 - the dead worker is still listed
+                pids = []
+            if pids and first not in pids:
+                break
+            time.sleep(0.2)
+        assert pids and first not in pids, "the nanny did not start the worker again"
+        assert list(client.run(_sigint_ignored).values()) == [True]
+        client.close()
+    finally:
+        cluster.close()
