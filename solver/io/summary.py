@@ -270,6 +270,8 @@ def _json(p: Path) -> dict[str, Any]:
         raw = json.loads(p.read_bytes().decode("utf-8", errors="replace"))
     except json.JSONDecodeError as exc:
         raise FileFormatError(f"not valid JSON: {exc.msg}", path=p, line=exc.lineno) from None
+    if isinstance(raw, dict) and "n_frames" in raw and "marker_rms_m" in raw:  # a trial's results.json
+        return {"kind": "trial_results", "path": str(p), "trials": [_trial_results(p.parent.name, raw)]}
     if isinstance(raw, dict) and REVIEW_KEY in raw:
         mask = read_review(p)
         return {
@@ -286,7 +288,7 @@ def _json(p: Path) -> dict[str, Any]:
             "height_m": raw.get("heightM"),
         }
     raise FileFormatError(
-        f"unknown JSON file; expected a review file with {REVIEW_KEY!r} or a subject JSON",
+        f"unknown JSON file; expected a review file with {REVIEW_KEY!r}, a subject JSON or a trial's results.json",
         path=p,
     )
 
@@ -350,14 +352,17 @@ def _output(p: Path) -> dict[str, Any]:
         error = manifest.get("error")
         if isinstance(error, dict):
             d["error"] = f"{error.get('type')}: {error.get('message')}"
-    for results in sorted(p.glob("*/results.json")):
-        metrics = _read_json_object(results)
-        trial: dict[str, Any] = {"name": results.parent.name, **{k: metrics[k] for k in _OUTPUT_TRIAL_KEYS if k in metrics}}
-        error = metrics.get("dynamics_error")
-        if isinstance(error, dict):
-            trial["dynamics_error"] = f"{error.get('type')}: {error.get('message')}"
-        d["trials"].append(trial)
+    d["trials"] = [_trial_results(f.parent.name, _read_json_object(f)) for f in sorted(p.glob("*/results.json"))]
     return d
+
+
+def _trial_results(name: str, metrics: dict[str, Any]) -> dict[str, Any]:
+    """The metrics of a trial's results.json that a summary shows, and its dynamics error."""
+    trial: dict[str, Any] = {"name": name, **{k: metrics[k] for k in _OUTPUT_TRIAL_KEYS if k in metrics}}
+    error = metrics.get("dynamics_error")
+    if isinstance(error, dict):
+        trial["dynamics_error"] = f"{error.get('type')}: {error.get('message')}"
+    return trial
 
 
 def _output_lines(d: dict[str, Any]) -> list[str]:
@@ -371,7 +376,13 @@ def _output_lines(d: dict[str, Any]) -> list[str]:
         lines.append(f"  dataset run: {d['status']}" + (f" ({d['error']})" if "error" in d else ""))
     if not d["trials"]:
         lines.append("  no processed trial")
-    for t in d["trials"]:
+    return lines + _trial_lines(d["trials"])
+
+
+def _trial_lines(trials: list[dict[str, Any]]) -> list[str]:
+    """Two lines per trial of :func:`_trial_results` (one without dynamics)."""
+    lines = []
+    for t in trials:
         head = f"  trial {t['name']}:"
         if "n_frames" in t:
             measured = f" ({t['n_observed_frames']} with measured force)" if "n_observed_frames" in t else ""
@@ -564,6 +575,8 @@ def format_summary(d: dict[str, Any]) -> str:
         lines = lines[:1] + _b3d_folder_lines(d)
     if kind == "output":
         lines += _output_lines(d)
+    if kind == "trial_results":
+        lines += _trial_lines(d["trials"])
     if kind == "review":
         lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
     if kind == "subject":

@@ -179,13 +179,15 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
     folder of addb ... with this folder given as --out" of a subject's output folder (info has
     no --out). The tree now reads as its summary's totals, each subject's folder as its trials'
     metrics (from their results.json), a failed subject as its error."""
-    out, _, summary = first_run
+    out = first_run[0]
     capsys.readouterr()
     assert cli(["info", str(out)]) == 0
     text = capsys.readouterr().out
-    t = summary["totals"]
+    t = json.loads((out / "dataset_summary.json").read_text())["totals"]  # the module's last run's
     assert f"{out}: dataset output\n" in text
-    assert "subjects: 1 failed, 1 kinematics_only, 3 ok (5 in all)" in text
+    (subjects,) = [line for line in text.splitlines() if line.startswith("  subjects: ")]
+    assert subjects.endswith(f" ({t['n_subjects']} in all)") and t["n_subjects"] == 5
+    assert all(f"{n} {status}" in subjects for status, n in t["subjects"].items()) and "failed" in subjects
     assert f"frames (with measured force): {t['frames']} ({t['measured_frames']})" in text
     assert f"report: {out / 'dataset_report.html'}" in text
     for rel in [*FULL_TREE, KINEMATICS_ONLY]:
@@ -203,6 +205,14 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
                 assert f"residual force {r['linear_residual_rms_N']:.1f} N RMS ({r['linear_residual_rms_BW']:.3f} BW)" in text
             else:
                 assert f"{head}, marker RMS {r['marker_rms_m'] * 100:.2f} cm (kinematics only)" in text
+    # one trial's results.json reads as its line of the folder's summary
+    rel = next(iter(FULL_TREE))
+    name = next(n for n, r in results(out / rel).items() if "n_observed_frames" in r)
+    assert cli(["info", str(out / rel)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    at = lines.index(next(x for x in lines if x.startswith(f"  trial {name}: ")))
+    assert cli(["info", str(out / rel / name / "results.json")]) == 0
+    assert capsys.readouterr().out.splitlines()[1:] == lines[at:at + 2]
     assert cli(["info", str(out / BROKEN)]) == 0
     text = capsys.readouterr().out
     assert "dataset run: failed (TrcFormatError: " in text and "no processed trial" in text
