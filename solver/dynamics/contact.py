@@ -93,6 +93,11 @@ class ContactResult:
         ``(T,)`` frames proposed as unmeasured.
     reasons
         ``(T,)`` why ("" when not proposed).
+    stance_height
+        ``(F,)`` median height (m) of each foot's lowest point above the centre of pressure
+        of the plate whose force is applied to it, on those frames; NaN for a foot never loaded. A few
+        centimetres for a foot; far more when ``feet`` name other bodies
+        (:func:`foot_height_note`).
     """
 
     plate_foot: NDArray[np.int64]
@@ -102,6 +107,7 @@ class ContactResult:
     ambiguous: NDArray[np.bool_]
     proposed: NDArray[np.bool_]
     reasons: tuple[str, ...]
+    stance_height: FloatArray
 
 
 def _foot_points(sk: Skeleton, q: FloatArray, foot: str, ext: float) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -217,8 +223,14 @@ def assign_contacts(
     levels = levels[np.isfinite(levels)]
     ground = float(np.median(levels)) if levels.size else np.nan  # no plate ever loaded: no kinematic contact
     contact = np.zeros((len(feet), t), dtype=bool)
+    stance_height = np.full(len(feet), np.nan)
     for k, (_, _, lowest) in enumerate(pts):
         height = lowest[:, 1] - ground
+        # above the surface of the plate that loads it (plates of a staircase lie at other levels)
+        above = [lowest[plate_foot[i] == k, 1] - p.cop[plate_foot[i] == k, 1] for i, p in enumerate(plates)]
+        above_all = np.concatenate(above) if above else np.zeros(0)
+        if np.isfinite(above_all).any():
+            stance_height[k] = np.nanmedian(above_all)
         stance_level = np.median(height[foot_loaded[k]]) if foot_loaded[k].any() else np.percentile(height, 5)
         velocity = np.gradient(lowest, dt, axis=0)
         speed = np.linalg.norm(velocity - _ground_velocity(velocity, foot_loaded[k], st.contact_speed), axis=1)
@@ -247,4 +259,5 @@ def assign_contacts(
         ambiguous=ambiguous,
         proposed=proposed,
         reasons=tuple(reasons),
+        stance_height=stance_height,
     )

@@ -339,6 +339,7 @@ def run_dynamics(
             q_contact = resample(kin.time, lowpass(np.asarray(proposal_q[name], dtype=float), rate_m, opts.cutoff_hz, opts.filter_order), time)
         com_acc = differentiate(sk.center_of_mass(q_contact), dt, opts.fit.derivative)[1]
         contact = assign_contacts(sk, q_contact, plates, foot_bodies, mass_kg, dt, com_acc, opts.contact)
+        _warn_raised_feet(name, foot_bodies, contact.stance_height)
         plates = tuple(
             replace(p, body=np.where(contact.plate_foot[i] >= 0, np.array([sk.body_index(f) for f in foot_bodies])[np.maximum(contact.plate_foot[i], 0)], -1))
             for i, p in enumerate(plates)
@@ -517,6 +518,32 @@ def _foot_wrenches(p: _Prepared, feet: Sequence[str], sk: Skeleton) -> tuple[Ext
 #: within 2.2 % of theirs; the diagnosis' hidden body-mass errors (2-10 kg,
 #: tests/diagnose/effects.py) reach up to about 16 % of a stated mass, which it warns about.
 MASS_WARNING = 0.15
+
+
+#: Height (m) above the centre of pressure of the plate that loads it at which a body named
+#: as a foot is taken for no foot (:func:`_warn_raised_feet`). Feet of the shared subjects and
+#: examples stand 0-7 cm above it (their lowest point, markers included); a pelvis 50 cm.
+RAISED_FOOT_M = 0.15
+
+
+def _warn_raised_feet(trial: str, feet: Sequence[str], stance_height: FloatArray) -> None:
+    """Warn when a body named in ``footBodyNames`` stands high above the plates while their
+    force is applied to it (:attr:`solver.dynamics.contact.ContactResult.stance_height`,
+    ``(F,)`` m): it is not the body on the ground. The plates are assigned by horizontal
+    distance, so a pelvis given as a foot took a walk's plate force and the fit came out
+    within the Hicks thresholds with no word."""
+    raised = [f"{foot} {100 * h:.0f} cm" for foot, h in zip(feet, stance_height) if h > RAISED_FOOT_M]
+    if not raised:
+        return
+    import warnings
+
+    warnings.warn(
+        f"trial {trial}: bodies named as feet stand high above the centre of pressure of the plate whose force they take "
+        f"({', '.join(raised)}, median over those frames; a foot's lowest point is a few cm above it): "
+        "footBodyNames in _subject.json should name the bodies that stand on the plates (e.g. calcn_r, calcn_l)",
+        UserWarning,
+        stacklevel=3,
+    )
 
 
 def _nothing_measured(prepared: Sequence[_Prepared], mass_kg: float, g: float) -> str:

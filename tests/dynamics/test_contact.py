@@ -102,3 +102,14 @@ def test_a_foot_on_a_treadmill_belt_is_in_contact() -> None:
         assert loaded.sum() > 100
         assert res.foot_in_contact[k, loaded].mean() > 0.3
         assert not (res.foot_in_contact[k] & ~loaded).any()
+
+
+def test_a_foot_stands_on_its_plate_and_a_pelvis_named_as_a_foot_far_above_it() -> None:
+    """``stance_height``: each foot's lowest point above the centre of pressure of the plate
+    that loads it, a few millimetres for the walk's heels; a pelvis and a torso named as feet
+    take force by horizontal distance, half a metre and a metre above it."""
+    skel, trial, plates = walk()
+    feet = assign_contacts(skel, trial.q, plates, FEET, 85.07, 0.01).stance_height
+    assert feet.shape == (2,) and np.all(np.abs(feet) < 0.02), feet
+    wrong = assign_contacts(skel, trial.q, plates, ("pelvis", "torso"), 85.07, 0.01).stance_height
+    assert wrong[0] > 0.4 and wrong[1] > 0.9, wrong

@@ -156,6 +156,19 @@ def test_the_shared_subjects_are_not_warned_about(tmp_path: Path) -> None:
         process_subject(WALK, tmp_path / "out")
 
 
+def test_foot_bodies_that_do_not_stand_on_the_plates_are_warned_about(walk: Path, tmp_path: Path) -> None:
+    """footBodyNames naming the pelvis took the plates' force by horizontal distance and came
+    out within the Hicks thresholds with no word; it is named with its height above the centre
+    of pressure (a foot named beside it, the left toes, stands on the plate and is not)."""
+    _set(walk, footBodyNames=["pelvis", "toes_l"])
+    with pytest.warns(UserWarning, match=r"bodies named as feet stand high above the centre of pressure") as rec:
+        process_subject(walk, tmp_path / "out")
+    (message,) = [str(w.message) for w in rec if "bodies named as feet" in str(w.message)]
+    named = message.split("take (", 1)[1].split(", median", 1)[0]
+    assert named.startswith("pelvis ") and int(named.split()[1]) >= 30 and "toes_l" not in named, message
+    assert message.startswith("trial walk: ") and "footBodyNames in _subject.json" in message
+
+
 def test_a_plate_without_centre_of_pressure_under_load_is_warned_about(walk: Path, tmp_path: Path) -> None:
     path = walk / "trials" / "walk" / "grf.mot"
     lines = path.read_text().splitlines()
