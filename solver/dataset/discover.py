@@ -12,7 +12,9 @@ The search does not descend into a subject folder (its ``trials/`` are not subje
 into hidden folders, into addb's own output folders (``addb_out``) or into the output
 folder of the run itself when it lies inside the dataset folder (:func:`scan_dataset`
 says which excluded folders it met, so that the run can refuse one holding subject
-folders: addb never writes ``_subject.json`` into an output).
+folders: addb never writes ``_subject.json`` into an output). It follows symbolic links
+(a dataset may link subjects in from elsewhere) except one leading back to a folder above
+it, a loop (:func:`links_back`, :attr:`DatasetScan.loops`).
 
 AddBiomechanics ``.b3d`` files are not subject folders: the search lists those it meets
 outside subject folders (:attr:`DatasetScan.b3d_files`) so that the run can say they are
@@ -78,11 +80,16 @@ class DatasetScan:
     b3d_files
         Relative paths (``/`` separators) of the ``.b3d`` files outside subject folders,
         which a dataset run does not process.
+    loops
+        Relative paths of the symbolic links the search did not follow because they lead
+        back to a folder above them (:func:`links_back`); following them searched the same
+        folders again and again, and the folders above the dataset.
     """
 
     subjects: tuple[DatasetSubject, ...]
     excluded: tuple[Path, ...]
     b3d_files: tuple[str, ...]
+    loops: tuple[str, ...] = ()
 
     def require_subjects(self, root: str | Path) -> tuple[DatasetSubject, ...]:
         """The subject folders of the scan of ``root``: at least one.
@@ -124,12 +131,24 @@ def _output_tree_note(root: Path) -> str | None:
     )
 
 
+def links_back(folder: str | Path, name: str) -> bool:
+    """True when the entry ``name`` of ``folder`` is a symbolic link to ``folder`` itself or
+    to a folder above it: a walk that follows links (``os.walk(followlinks=True)``) would
+    go round it until the path grew too long."""
+    entry = Path(folder) / name
+    if not entry.is_symlink():
+        return False
+    real, here = entry.resolve(), Path(folder).resolve()
+    return real == here or real in here.parents
+
+
 def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
     """The search of :func:`scan_dataset` from ``top`` (``base`` or a folder below it);
     relative paths are taken from ``base``."""
     found: list[DatasetSubject] = []
     excluded: list[Path] = []
     b3d: list[str] = []
+    loops: list[str] = []
     for folder, dirs, files in os.walk(top, followlinks=True):
         here = Path(folder)
         if SUBJECT_JSON in files and here != base:
@@ -144,9 +163,12 @@ def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
             if (here / d).resolve() in skip:
                 excluded.append(here / d)
                 continue
+            if links_back(here, d):
+                loops.append((here / d).relative_to(base).as_posix())
+                continue
             kept.append(d)
         dirs[:] = kept
-    return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded), tuple(sorted(b3d)))
+    return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded), tuple(sorted(b3d)), tuple(sorted(loops)))
 
 
 def scan_dataset(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> DatasetScan:
@@ -204,6 +226,14 @@ def b3d_note(scan: DatasetScan) -> str | None:
     """A message for the user naming the ``.b3d`` files of ``scan`` that a dataset run does not
     process and what it expects instead, or None when there are none."""
     return f"the dataset folder holds {_b3d_note(scan.b3d_files)}" if scan.b3d_files else None
+
+
+def loop_note(scan: DatasetScan) -> str | None:
+    """A message for the user naming the links of ``scan`` that lead back to a folder above
+    them (not followed), or None when there are none."""
+    if not scan.loops:
+        return None
+    return f"did not follow {counted(len(scan.loops), 'symbolic link')} leading back to a folder above it (a loop): {listed(list(scan.loops), 3)}"
 
 
 def find_subjects(root: str | Path, *, exclude: tuple[str | Path, ...] = ()) -> tuple[DatasetSubject, ...]:

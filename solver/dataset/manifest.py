@@ -29,6 +29,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from solver.dataset.discover import links_back
 from solver.provenance import addb_version, code_digest
 
 SCHEMA = 1
@@ -55,8 +56,11 @@ def input_files(subject_dir: str | Path) -> dict[str, Path]:
     base = Path(subject_dir).resolve()
     out: dict[str, Path] = {}
     for folder, dirs, files in os.walk(base, followlinks=True):
-        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d not in NOT_INPUTS and not d.endswith(".annotations"))
         here = Path(folder)
+        dirs[:] = sorted(
+            d for d in dirs
+            if not d.startswith(".") and d not in NOT_INPUTS and not d.endswith(".annotations") and not links_back(here, d)
+        )  # fmt: skip
         for name in sorted(files):
             if name.startswith(".") or (here == base and name in REVIEW_RECORDS):
                 continue

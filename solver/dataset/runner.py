@@ -47,6 +47,7 @@ from solver.dataset.discover import (
     DatasetScan,
     DatasetSubject,
     b3d_note,
+    loop_note,
     scan_dataset,
     subjects_below,
 )
@@ -359,6 +360,8 @@ def process_dataset(
     _refuse_output_among_subjects(scan, source, out)
     subjects = scan.require_subjects(dataset_dir)
     if (note := b3d_note(scan)) is not None:  # not processed: say so, and what is expected
+        tell(note)
+    if (note := loop_note(scan)) is not None:
         tell(note)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_work(out)

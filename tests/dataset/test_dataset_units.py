@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from solver.dataset.discover import find_subjects
+from solver.dataset.discover import find_subjects, loop_note, scan_dataset
 from solver.dataset.manifest import current_manifest, input_files, manifest_key, subject_status
 from solver.dataset.report import render_report
 from solver.dataset.summary import dataset_totals
@@ -36,6 +36,25 @@ def test_subjects_are_found_at_any_depth_and_the_output_tree_mirrors_them(tree: 
     assert [s.rel for s in found] == ["labA/s01", "labB/deeper/s02"]
     assert found[1].out_dir(tmp_path / "OUT") == (tmp_path / "OUT" / "labB" / "deeper" / "s02").resolve()
     assert found[0].path == (tree / "labA" / "s01").resolve()
+
+
+def test_links_back_to_a_folder_above_are_not_followed_and_are_named(tree: Path, tmp_path: Path) -> None:
+    """A link to a folder above it (``labA/up -> ../..``, here the folder holding the dataset,
+    and one inside a subject's trials) was followed: the search found the dataset again
+    inside itself until the path grew too long (a hundred-odd "subjects" from one), and the
+    manifest hashed the subject's files as often. Both are left out and named; a link to a
+    folder beside it (a lab's subject linked in) is still followed."""
+    (tree / "labA" / "up").symlink_to("../..", target_is_directory=True)
+    (tree / "labA" / "s01" / "trials" / "loop").symlink_to("..", target_is_directory=True)
+    (tree / "labC").mkdir()
+    (tree / "labC" / "linked").symlink_to(tree / "labB" / "deeper" / "s02", target_is_directory=True)
+    scan = scan_dataset(tree)
+    assert [s.rel for s in scan.subjects] == ["labA/s01", "labB/deeper/s02", "labC/linked"]
+    assert scan.loops == ("labA/up",)
+    assert loop_note(scan) == "did not follow a symbolic link leading back to a folder above it (a loop): labA/up"
+    files = input_files(tree / "labA" / "s01")
+    assert not [f for f in files if "loop" in f] and "trials/walk/markers.trc" in files
+    assert loop_note(scan_dataset(tree / "labB")) is None
 
 
 def test_a_folder_without_subjects_is_a_clear_error(tmp_path: Path) -> None:
