@@ -14,6 +14,7 @@ Modules, in the order a run uses them:
 * :mod:`solver.dataset.report`: the static HTML report (inline SVG, no server).
 * :mod:`solver.dataset.runner`: the Dask cluster (local or remote), submission, retries
   of subjects whose worker died, progress, and the summary files.
+* :mod:`solver.dataset.lock`: one run at a time per output tree.
 * :mod:`solver.dataset.interrupt`: the local cluster's workers ignore Ctrl-C (the command
   handles it), those started again after a death included.
 """

@@ -51,6 +51,7 @@ from solver.dataset.discover import (
     scan_dataset,
     subjects_below,
 )
+from solver.dataset.lock import output_tree_lock
 from solver.dataset.manifest import current_manifest, manifest_key
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
@@ -364,63 +365,64 @@ def process_dataset(
     if (note := loop_note(scan)) is not None:
         tell(note)
     out.mkdir(parents=True, exist_ok=True)
-    remove_stale_work(out)
-    settings = {"addb_process": "default", **opts.settings}
-    results: dict[str, dict[str, Any]] = {}
-    jobs: list[SubjectJob] = []
-    for entry in subjects:
-        target = entry.out_dir(out)
-        try:
-            check_output_folder(target, (entry.path,))
-        except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
-            results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
-            continue
-        try:
-            review = review_digest(str(entry.path), str(target)) if review_digest else None
-            key = manifest_key(entry.path, settings, review)
-        except OSError as exc:
-            results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
-            continue
-        except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
-            results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
-            continue
-        stored = None if opts.force else current_manifest(target, key)
-        if stored is not None:
-            stored.pop("key")
-            if stored["status"] == "failed":  # the same inputs failed before: not run again
-                results[entry.rel] = {**stored, "rel": entry.rel, "unchanged": True}
-            else:
-                results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
-            continue
-        jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
-    notify = events or (lambda kind, data: None)
-    notify("queued", {"rels": [j.rel for j in jobs]})
-    total = len(subjects)
-    say(_progress_line(subject_counts(results.values()), None, len(jobs)), len(results) / total)
-    dashboard = None
-    if jobs:
-        try:
-            dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
-                _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
-        except KeyboardInterrupt:  # Ctrl-C: what finished is kept, and the summary says what did not
-            for job in jobs:  # a worker may have put a subject in place after the interrupt, before the cluster closed
-                stored = None if job.rel in results else current_manifest(job.out_dir, job.key)
-                if stored is not None:
-                    results[job.rel] = {**{k: v for k, v in stored.items() if k != "key"}, "rel": job.rel}
-            unfinished = [j.rel for j in jobs if j.rel not in results]
-            for rel in unfinished:
-                results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
-            _summarize(subjects, results, out, source, opts, t0, None)
-            done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
-            tell(
-                f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
-                "again for them (the finished subjects are up to date and skipped)."
-                if unfinished
-                else f"interrupted: {done}, and {SUMMARY_NAME} lists them."
-            )
-            raise
-        remove_stale_work(out)  # work folders of attempts whose worker was killed
-    return _summarize(subjects, results, out, source, opts, t0, dashboard)
+    with output_tree_lock(out):  # one run per output tree: each removes the work folders it finds
+        remove_stale_work(out)
+        settings = {"addb_process": "default", **opts.settings}
+        results: dict[str, dict[str, Any]] = {}
+        jobs: list[SubjectJob] = []
+        for entry in subjects:
+            target = entry.out_dir(out)
+            try:
+                check_output_folder(target, (entry.path,))
+            except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
+                results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
+                continue
+            try:
+                review = review_digest(str(entry.path), str(target)) if review_digest else None
+                key = manifest_key(entry.path, settings, review)
+            except OSError as exc:
+                results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
+                continue
+            except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
+                results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
+                continue
+            stored = None if opts.force else current_manifest(target, key)
+            if stored is not None:
+                stored.pop("key")
+                if stored["status"] == "failed":  # the same inputs failed before: not run again
+                    results[entry.rel] = {**stored, "rel": entry.rel, "unchanged": True}
+                else:
+                    results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
+                continue
+            jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
+        notify = events or (lambda kind, data: None)
+        notify("queued", {"rels": [j.rel for j in jobs]})
+        total = len(subjects)
+        say(_progress_line(subject_counts(results.values()), None, len(jobs)), len(results) / total)
+        dashboard = None
+        if jobs:
+            try:
+                dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
+                    _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
+            except KeyboardInterrupt:  # Ctrl-C: what finished is kept, and the summary says what did not
+                for job in jobs:  # a worker may have put a subject in place after the interrupt, before the cluster closed
+                    stored = None if job.rel in results else current_manifest(job.out_dir, job.key)
+                    if stored is not None:
+                        results[job.rel] = {**{k: v for k, v in stored.items() if k != "key"}, "rel": job.rel}
+                unfinished = [j.rel for j in jobs if j.rel not in results]
+                for rel in unfinished:
+                    results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
+                _summarize(subjects, results, out, source, opts, t0, None)
+                done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
+                tell(
+                    f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
+                    "again for them (the finished subjects are up to date and skipped)."
+                    if unfinished
+                    else f"interrupted: {done}, and {SUMMARY_NAME} lists them."
+                )
+                raise
+            remove_stale_work(out)  # work folders of attempts whose worker was killed
+        return _summarize(subjects, results, out, source, opts, t0, dashboard)
 
 
 def _summarize(

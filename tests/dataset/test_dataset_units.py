@@ -166,3 +166,41 @@ def test_a_worker_killed_between_the_two_renames_loses_no_finished_output(tmp_pa
     assert remove_stale_work(out) == 2
     assert (out / "s-01" / "manifest.json").read_text() == '{"key": {}}'
     assert sorted(p.name for p in out.iterdir()) == ["s-01"]
+
+
+def test_a_second_run_on_one_output_tree_is_refused_while_the_first_holds_it(tree: Path, tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Two runs on one OUT each removed the other's work folders at start, failing its running
+    subjects (and a failure with unchanged inputs is not run again). The second now stops
+    before anything is written, naming the first; a holder that dies leaves no stale lock."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from addb_viewer.cli import main as cli
+    from solver.dataset.lock import LOCK_NAME, output_tree_lock
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with output_tree_lock(out):
+        assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+        err = capsys.readouterr().err
+        assert f"DatasetError ({out}): another addb run is writing this output tree (process {os.getpid()} on " in err, err
+        assert "wait for it to end (or stop it), or give another --out" in err and "Traceback" not in err
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]  # no subject, no summary
+    # a holder killed without a word: the system releases its lock
+    script = (
+        "import sys, time; from solver.dataset.lock import output_tree_lock\n"
+        "with output_tree_lock(sys.argv[1]):\n    print('held', flush=True); time.sleep(60)"
+    )
+    holder = subprocess.Popen(
+        [sys.executable, "-c", script, str(out)], stdout=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[2]
+    )
+    assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+    with pytest.raises(DatasetError, match="another addb run is writing this output tree"), output_tree_lock(out):
+        pass
+    os.kill(holder.pid, signal.SIGKILL)
+    holder.wait(timeout=30)
+    with output_tree_lock(out):
+        assert f"process {os.getpid()} on " in (out / LOCK_NAME).read_text()
