@@ -7,7 +7,8 @@ subject folder; a subject folder not processed yet is processed first into its d
 output folder (:mod:`addb_viewer.locations`: ``<subject>/addb_out``, or the user's cache
 for a read-only folder). An argument may also be an AddBiomechanics ``.b3d`` file (the
 published dataset's format): its dynamics pass's frames with measured force are the
-ground truth, its kinematics pass the input.
+ground truth, its kinematics pass the input. A folder of ``.b3d`` files or a dataset run's
+output tree stands for its subjects (:func:`dataset_entries`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,57 @@ import sys
 from pathlib import Path
 
 from addb_viewer.commands import whole_number
+
+
+def dataset_entries(path: str) -> list[tuple[str, str | None]]:
+    """The subjects one command-line argument stands for, each as (path, name or None).
+
+    A dataset run's output tree (``dataset_summary.json``) stands for every subject output
+    folder its summary lists with processed trials, named by their relative paths
+    (``labA/s01``: two labs' ``s01`` are two subjects); a folder of ``.b3d`` files (no
+    subject folder in it) for each file, named by its relative path without the suffix; any
+    other argument for itself, under its recorded name (None).
+
+    Raises
+    ------
+    SubjectFolderError
+        The argument is a dataset folder of subject folders (processed by ``addb process
+        DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no
+        processed subject.
+    """
+    import json
+
+    from solver.dataset.discover import SUMMARY_NAME, scan_dataset
+    from solver.errors import SubjectFolderError, counted, listed
+    from solver.results import processed_trials
+
+    p = Path(path)
+    if (p / SUMMARY_NAME).is_file():
+        try:
+            rels = [s["rel"] for s in json.loads((p / SUMMARY_NAME).read_text(encoding="utf-8"))["subjects"]]
+        except (ValueError, KeyError, TypeError):
+            raise SubjectFolderError(f"{SUMMARY_NAME} is not a dataset summary of addb", path=p) from None
+        entries: list[tuple[str, str | None]] = [(str(p / rel), rel) for rel in rels if processed_trials(p / rel)]
+        if not entries:
+            raise SubjectFolderError("a dataset output tree without a processed subject (every subject failed or was cancelled)", path=p)
+        if len(entries) < len(rels):
+            left = [rel for rel in rels if not processed_trials(p / rel)]
+            print(f"addb benchmark: {p}: left out {counted(len(left), 'subject')} without processed trials ({listed(left, 3)})", file=sys.stderr)
+        return entries
+    if not p.is_dir() or (p / "_subject.json").is_file() or processed_trials(p):
+        return [(path, None)]
+    scan = scan_dataset(p)
+    if scan.subjects:
+        out = p / "addb_out"
+        hint = f" (here probably {out}, where addb view DATASET_DIR writes)" if (out / SUMMARY_NAME).is_file() else ""
+        raise SubjectFolderError(
+            f"is a dataset folder ({counted(len(scan.subjects), 'subject folder')}); the benchmark reads processed subjects: "
+            f"process it with addb process DATASET_DIR --out OUT and give the output tree OUT{hint}",
+            path=p,
+        )
+    if scan.b3d_files:
+        return [(str(p / f), str(Path(f).with_suffix("").as_posix())) for f in scan.b3d_files]
+    return [(path, None)]
 
 
 def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
@@ -107,11 +159,13 @@ def run(args: argparse.Namespace) -> int:
 
     command = _command(args)
     bar = ProgressBar()
-    pairs = [resolve_output(s, bar) for s in args.subjects]
-    train_pairs = [resolve_output(s, bar) for s in (args.train or [])]
+    entries = [e for s in args.subjects for e in dataset_entries(s)]
+    train_entries = [e for s in (args.train or []) for e in dataset_entries(s)]
+    pairs = [resolve_output(s, bar) for s, _ in entries]
+    train_pairs = [resolve_output(s, bar) for s, _ in train_entries]
     print(f"loading {len(pairs)} subject(s) (inverse kinematics of the markers)" if args.inputs == "kinematic" else f"loading {len(pairs)} subject(s)", file=sys.stderr)
-    dataset = load_dataset([o for o, _ in pairs], inputs=args.inputs)
-    train = load_dataset([o for o, _ in train_pairs], inputs=args.inputs) if train_pairs else None
+    dataset = load_dataset([o for o, _ in pairs], inputs=args.inputs, names=[n for _, n in entries])
+    train = load_dataset([o for o, _ in train_pairs], inputs=args.inputs, names=[n for _, n in train_entries]) if train_pairs else None
     methods = tuple(dict.fromkeys(args.method or ["analytical"]))
     contacts = tuple(dict.fromkeys(args.contact or ["measured"]))
     result = run_benchmark(
@@ -155,7 +209,11 @@ def register(sub: argparse._SubParsersAction) -> None:
             "subjects; prints the table and writes benchmark.json and benchmark.md."
         ),
     )
-    p.add_argument("subjects", nargs="+", metavar="SUBJECT_DIR", help="subject folder, processed output folder, or AddBiomechanics .b3d file")
+    p.add_argument(
+        "subjects", nargs="+", metavar="SUBJECT_DIR",
+        help="subject folder, processed output folder, AddBiomechanics .b3d file or folder of them, or a dataset "
+        "run's output tree (each processed subject, named by its path in the tree)",
+    )
     p.add_argument("--method", action="append", choices=("analytical", "mlp", "hybrid"), help="method to score (repeatable; default analytical): the paper's analytical and MLP baselines, or the hybrid (analytical total force split between the feet by a network)")
     p.add_argument("--train", action="append", metavar="SUBJECT_DIR", help="train the networks (mlp, hybrid) on these subjects only (repeatable)")
     p.add_argument("--split", choices=("loso", "seeded"), default="loso", help="protocol without --train: leave-one-subject-out (default) or one seeded train/dev/test split")

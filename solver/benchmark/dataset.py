@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -412,11 +412,14 @@ def load_dataset(
     min_frames: int = MIN_TRIAL_FRAMES,
     inputs: str = "kinematic",
     margin_frames: int = MARGIN_FRAMES,
+    names: Sequence[str | None] | None = None,
 ) -> Dataset:
     """The benchmark dataset of every trial processed into the output folders ``out_dirs``
     (one per subject, as written by :func:`solver.pipeline.process_subject`); an entry may
     also be an AddBiomechanics ``.b3d`` file (one subject: its dynamics pass is the ground
-    truth, :mod:`solver.benchmark.b3d_trials`).
+    truth, :mod:`solver.benchmark.b3d_trials`). ``names``, one per entry of ``out_dirs``,
+    names the subjects in place of their recorded names where not None (a dataset's
+    relative paths, ``labA/s01``: two labs' ``s01`` are two subjects).
 
     Raises
     ------
@@ -427,23 +430,29 @@ def load_dataset(
         A .b3d file is damaged.
     """
 
+    folders = list(out_dirs)
+    given = list(names) if names is not None else [None] * len(folders)
+    if len(given) != len(folders):
+        raise ValueError(f"{len(given)} names for {len(folders)} subjects")
+
+    def trials_of(out: str | Path) -> Iterator[ProcessedTrial]:
+        if Path(out).suffix.lower() == ".b3d" and Path(out).is_file():
+            from solver.benchmark.b3d_trials import b3d_processed_trials
+
+            yield from b3d_processed_trials(out)
+            return
+        found = processed_trials(out)
+        if not found:
+            raise BenchmarkError("no processed trial in this folder", path=out)
+        for name in found:
+            yield load_processed(out, name)
+
     def load_all() -> Iterator[ProcessedTrial]:
         seen: dict[str, Path] = {}
-        for out in out_dirs:
-            if Path(out).suffix.lower() == ".b3d" and Path(out).is_file():
-                from solver.benchmark.b3d_trials import b3d_processed_trials
-
-                for trial in b3d_processed_trials(out):
-                    first = seen.setdefault(trial.subject, Path(out))
-                    if first != Path(out):
-                        raise BenchmarkError(f"subject {trial.subject!r} is also in {first}", path=out)
-                    yield trial
-                continue
-            names = processed_trials(out)
-            if not names:
-                raise BenchmarkError("no processed trial in this folder", path=out)
-            for name in names:
-                trial = load_processed(out, name)
+        for out, subject in zip(folders, given):
+            for trial in trials_of(out):
+                if subject is not None:
+                    trial = replace(trial, subject=subject)
                 first = seen.setdefault(trial.subject, Path(out))
                 if first != Path(out):
                     raise BenchmarkError(f"subject {trial.subject!r} is also in {first}", path=out)
