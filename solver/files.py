@@ -1,4 +1,5 @@
-"""Permissions of files and folders made through :mod:`tempfile`.
+"""File-system helpers: the permissions of files and folders made through :mod:`tempfile`,
+and symbolic links that lead back to a folder above them (:func:`links_back`).
 
 Outputs are written under a temporary name (``tempfile.mkstemp`` / ``mkdtemp``) and
 renamed into place, so that a crash never leaves a half-written file. ``tempfile`` makes
@@ -37,3 +38,14 @@ def as_created(path: str | Path) -> None:
     p = Path(path)
     base = 0o777 if stat.S_ISDIR(p.stat().st_mode) else 0o666
     os.chmod(p, base & ~_umask())
+
+
+def links_back(folder: str | Path, name: str) -> bool:
+    """True when the entry ``name`` of ``folder`` is a symbolic link to ``folder`` itself or
+    to a folder above it: a walk that follows links (``os.walk(followlinks=True)``) would
+    go round it until the path grew too long."""
+    entry = Path(folder) / name
+    if not entry.is_symlink():
+        return False
+    real, here = entry.resolve(), Path(folder).resolve()
+    return real == here or real in here.parents

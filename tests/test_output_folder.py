@@ -158,3 +158,28 @@ def test_an_output_folder_given_as_the_subject_is_named_as_one(
         f"folder (the one with _subject.json): here probably {subject}, with this folder given as --out"
     ) in err, err
     assert "Traceback" not in err and _tree(subject) == before and not (tmp_path / "other").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["kinematics", "--out", "{out}"], ["diagnose", "--trial", "walk"], ["record", "--trial", "walk", "-o", "{out}.rrd"],
+     ["export", "--trial", "walk", "-o", "{out}.mcap"]],
+    ids=["kinematics", "diagnose", "record", "export"],
+)
+def test_a_dataset_folder_given_as_the_subject_is_named_as_one(argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A user gives the dataset folder where one subject folder goes: the commands said
+    "_subject.json is missing"; each now names the subject folders below it (a link back to
+    the folder above is not followed) and what to give instead, and writes nothing."""
+    dataset = tmp_path / "dataset"
+    for rel in ("labA/s01", "labB/2024/s07"):
+        writable_copy(WALK, dataset / rel)
+    (dataset / "labA" / "up").symlink_to("../..", target_is_directory=True)
+    before = _tree(dataset)
+    out = tmp_path / "written"
+    assert cli([argv[0], str(dataset), *(a.format(out=out) for a in argv[1:])]) == 1
+    err = capsys.readouterr().err
+    assert (
+        f"SubjectFolderError ({dataset}): is a dataset folder, not a subject folder (_subject.json is in the folders "
+        "below it: labA/s01, labB/2024/s07); give one subject folder, or process them all with addb process DATASET_DIR --out OUT"
+    ) in err, err
+    assert "Traceback" not in err and _tree(dataset) == before and not list(tmp_path.glob("written*"))

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from solver.errors import DatasetError, counted, listed
+from solver.files import links_back
 from solver.io.subject import SUBJECT_JSON, output_folder_note
 
 #: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
@@ -129,17 +130,6 @@ def _output_tree_note(root: Path) -> str | None:
         f"is the output tree of a dataset run (it holds {SUMMARY_NAME}), not a dataset folder; expected the "
         f"folder of subject folders{where}, with this folder given as --out"
     )
-
-
-def links_back(folder: str | Path, name: str) -> bool:
-    """True when the entry ``name`` of ``folder`` is a symbolic link to ``folder`` itself or
-    to a folder above it: a walk that follows links (``os.walk(followlinks=True)``) would
-    go round it until the path grew too long."""
-    entry = Path(folder) / name
-    if not entry.is_symlink():
-        return False
-    real, here = entry.resolve(), Path(folder).resolve()
-    return real == here or real in here.parents
 
 
 def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:

@@ -29,7 +29,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.discover import links_back
+from solver.files import links_back
 from solver.provenance import addb_version, code_digest
 
 SCHEMA = 1

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from solver.errors import SubjectFolderError
+from solver.errors import SubjectFolderError, listed
+from solver.files import links_back
 from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
@@ -171,6 +172,33 @@ def output_folder_note(folder: str | Path, command: Sequence[str] | None = None)
     return f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder (the one with {SUBJECT_JSON}){where}"
 
 
+def dataset_folder_note(folder: str | Path, depth: int = 3) -> str | None:
+    """What to tell a user who gave a dataset folder (subject folders below it, found up to
+    ``depth`` levels down as the dataset search finds them: hidden and ``addb_out`` folders
+    and links back to a folder above left out) where one subject folder was expected; None
+    for a folder with its own ``_subject.json`` or none below it."""
+    base = Path(folder)
+    if (base / SUBJECT_JSON).is_file():
+        return None
+    found: list[str] = []
+    for here, dirs, files in os.walk(base, followlinks=True):
+        rel = Path(here).relative_to(base)
+        if SUBJECT_JSON in files and rel.parts:
+            found.append(rel.as_posix())
+            dirs[:] = []
+            continue
+        if len(rel.parts) >= depth:
+            dirs[:] = []
+            continue
+        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d != "addb_out" and not links_back(here, d))
+    if not found:
+        return None
+    return (
+        f"is a dataset folder, not a subject folder ({SUBJECT_JSON} is in the folders below it: {listed(sorted(found), 3)}); "
+        "give one subject folder, or process them all with addb process DATASET_DIR --out OUT"
+    )
+
+
 def load_subject(path: str | Path) -> Subject:
     """Read and check an AddBiomechanics subject folder (JSON, model, trial files).
 
@@ -179,7 +207,8 @@ def load_subject(path: str | Path) -> Subject:
     FileNotFoundError
         ``path`` does not exist.
     SubjectFolderError
-        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`);
+        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`)
+        or a dataset folder (:func:`dataset_folder_note`);
         ``_subject.json`` missing, not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
         the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
@@ -192,7 +221,7 @@ def load_subject(path: str | Path) -> Subject:
         raise FileNotFoundError(2, "No such file or folder", str(folder))
     if not folder.is_dir():
         raise SubjectFolderError("expected a subject folder, found a file", path=folder)
-    note = output_folder_note(folder)
+    note = output_folder_note(folder) or dataset_folder_note(folder)
     if note is not None:
         raise SubjectFolderError(note, path=folder)
     raw = _read_json(folder / SUBJECT_JSON)
