@@ -341,7 +341,8 @@ def process_dataset(
         is ``dataset_dir`` or a folder above it, or lies inside it and holds subject folders
         (the search leaves the output tree out, so they would be silently left out) or lies
         inside a subject folder, or is the output folder of one subject (checked before
-        anything is written). A subject whose output
+        anything is written), or another run holds it
+        (:func:`solver.dataset.lock.output_tree_lock`). A subject whose output
         folder holds what addb did not write (:func:`solver.outputs.check_output_folder`)
         fails alone, with that error, and the others run.
     """

@@ -265,11 +265,15 @@ def _xml(p: Path) -> dict[str, Any]:
     }
 
 
-def _json(p: Path) -> dict[str, Any]:
+def _read_json(path: Path) -> Any:
     try:
-        raw = json.loads(p.read_bytes().decode("utf-8", errors="replace"))
+        return json.loads(path.read_bytes().decode("utf-8", errors="replace"))
     except json.JSONDecodeError as exc:
-        raise FileFormatError(f"not valid JSON: {exc.msg}", path=p, line=exc.lineno) from None
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+
+
+def _json(p: Path) -> dict[str, Any]:
+    raw = _read_json(p)
     if isinstance(raw, dict) and "n_frames" in raw and "marker_rms_m" in raw:  # a trial's results.json
         return {"kind": "trial_results", "path": str(p), "trials": [_trial_results(p.parent.name, raw)]}
     if isinstance(raw, dict) and REVIEW_KEY in raw:
@@ -325,10 +329,7 @@ _OUTPUT_TRIAL_KEYS = (
 
 
 def _read_json_object(path: Path) -> dict[str, Any]:
-    try:
-        raw = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    raw = _read_json(path)
     if not isinstance(raw, dict):
         raise FileFormatError("expected a JSON object", path=path)
     return raw
