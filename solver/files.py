@@ -1,5 +1,6 @@
 """File-system helpers: the permissions of files and folders made through :mod:`tempfile`,
-and symbolic links that lead back to a folder above them (:func:`links_back`).
+symbolic links that lead back to a folder above them (:func:`links_back`), and which
+folders a search for subject folders enters (:func:`folders_to_search`).
 
 Outputs are written under a temporary name (``tempfile.mkstemp`` / ``mkdtemp``) and
 renamed into place, so that a crash never leaves a half-written file. ``tempfile`` makes
@@ -16,6 +17,10 @@ import threading
 from pathlib import Path
 
 _lock = threading.Lock()
+
+#: Folder names a search for subject folders never enters (addb's default output folder,
+#: Python's byte-code caches, npm's packages); hidden folders are not entered either.
+SKIPPED_FOLDERS = frozenset({"addb_out", "__pycache__", "node_modules"})
 
 
 def _umask() -> int:
@@ -49,3 +54,24 @@ def links_back(folder: str | Path, name: str) -> bool:
         return False
     real, here = entry.resolve(), Path(folder).resolve()
     return real == here or real in here.parents
+
+
+def folders_to_search(folder: str | Path, names: list[str]) -> tuple[list[str], list[str]]:
+    """Which of the sub-folders ``names`` of ``folder`` a search for subject folders enters:
+    not hidden ones, not :data:`SKIPPED_FOLDERS`, and not a symbolic link leading back to a
+    folder above (:func:`links_back`). The one rule of the dataset search
+    (:func:`solver.dataset.discover.scan_dataset`) and of the note on a dataset folder given
+    where one subject was expected (:func:`solver.io.subject.dataset_folder_note`).
+
+    Returns
+    -------
+    (entered, loops)
+        The names entered, sorted, and the names left out as links back (sorted).
+    """
+    entered: list[str] = []
+    loops: list[str] = []
+    for name in sorted(names):
+        if name.startswith(".") or name in SKIPPED_FOLDERS:
+            continue
+        (loops if links_back(folder, name) else entered).append(name)
+    return entered, loops

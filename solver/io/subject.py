@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.errors import SubjectFolderError, listed
-from solver.files import links_back
+from solver.files import folders_to_search
 from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
@@ -174,8 +174,8 @@ def output_folder_note(folder: str | Path, command: Sequence[str] | None = None)
 
 def dataset_folder_note(folder: str | Path, depth: int = 3) -> str | None:
     """What to tell a user who gave a dataset folder (subject folders below it, found up to
-    ``depth`` levels down as the dataset search finds them: hidden and ``addb_out`` folders
-    and links back to a folder above left out) where one subject folder was expected; None
+    ``depth`` levels down, entering the folders the dataset search enters:
+    :func:`solver.files.folders_to_search`) where one subject folder was expected; None
     for a folder with its own ``_subject.json`` or none below it."""
     base = Path(folder)
     if (base / SUBJECT_JSON).is_file():
@@ -190,7 +190,7 @@ def dataset_folder_note(folder: str | Path, depth: int = 3) -> str | None:
         if len(rel.parts) >= depth:
             dirs[:] = []
             continue
-        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d != "addb_out" and not links_back(here, d))
+        dirs[:] = folders_to_search(here, dirs)[0]
     if not found:
         return None
     return (

@@ -57,6 +57,26 @@ def test_links_back_to_a_folder_above_are_not_followed_and_are_named(tree: Path,
     assert loop_note(scan_dataset(tree / "labB")) is None
 
 
+def test_the_dataset_search_and_the_note_on_a_dataset_folder_enter_the_same_folders(tree: Path) -> None:
+    """``load_subject`` of a dataset folder names the subject folders below it
+    (:func:`solver.io.subject.dataset_folder_note`) with its own walk; it skipped hidden and
+    ``addb_out`` folders but not ``__pycache__`` or ``node_modules``, which the dataset search
+    skips, so it named "subjects" a dataset run would not process. Both walks now enter the
+    folders of one rule (:func:`solver.files.folders_to_search`)."""
+    from solver.files import folders_to_search
+    from solver.io.subject import dataset_folder_note
+
+    for skipped in ("__pycache__", "node_modules"):
+        (tree / "labB" / skipped / "p9").mkdir(parents=True)
+        (tree / "labB" / skipped / "p9" / "_subject.json").write_text("{}")
+    (tree / "labA" / "up").symlink_to("..", target_is_directory=True)
+    assert [s.rel for s in scan_dataset(tree).subjects] == ["labA/s01", "labB/deeper/s02"]
+    note = dataset_folder_note(tree)
+    assert "below it: labA/s01, labB/deeper/s02)" in note and "p9" not in note and "up" not in note, note
+    names = ["up", "s01", ".git", "addb_out", "__pycache__", "node_modules", "copy"]
+    assert folders_to_search(tree / "labA", names) == (["copy", "s01"], ["up"])
+
+
 def test_a_folder_without_subjects_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="no subject folder") as info:
         find_subjects(tmp_path)
