@@ -32,9 +32,15 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
-from solver.dataset.discover import DatasetScan, b3d_note, scan_dataset
+from solver.dataset.discover import (
+    SUMMARY_NAME,
+    DatasetScan,
+    b3d_note,
+    loop_note,
+    read_summary,
+    scan_dataset,
+)
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
-from solver.dataset.runner import SUMMARY_NAME
 from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
 
@@ -155,9 +161,9 @@ class OpenedDataset:
     dataset_dir: Path
     out_dir: Path
     subjects: tuple[QueueSubject, ...]
-    #: The short note on what the queue leaves out, and the dataset run's message about the
-    #: same files (:func:`_notes`).
-    notes: tuple[str | None, str | None]
+    #: The short note on what the queue leaves out, and the dataset run's messages about the
+    #: same files and links (:func:`_notes`).
+    notes: tuple[str | None, tuple[str, ...]]
 
 
 def open_dataset(path: str | Path, out_dir: str | Path | None = None) -> OpenedDataset:
@@ -168,10 +174,12 @@ def open_dataset(path: str | Path, out_dir: str | Path | None = None) -> OpenedD
     ------
     DatasetError
         A tree without any subject folder.
+    FileFormatError
+        An output tree whose summary is damaged (:func:`solver.dataset.discover.read_summary`).
     """
     p = Path(path).resolve()
     if (p / SUMMARY_NAME).is_file():
-        summary = json.loads((p / SUMMARY_NAME).read_text())
+        summary = read_summary(p)
         dataset = Path(summary["dataset"])
         rels = [s["rel"] for s in summary["subjects"]]
         subjects = tuple(QueueSubject(r, dataset.joinpath(*PurePosixPath(r).parts), p.joinpath(*PurePosixPath(r).parts)) for r in rels)
@@ -195,30 +203,40 @@ def dataset_subjects(path: str | Path, out_dir: str | Path | None = None) -> tup
     return opened.dataset_dir, opened.out_dir, opened.subjects
 
 
-def _notes(scan: DatasetScan | None) -> tuple[str | None, str | None]:
+def _notes(scan: DatasetScan | None) -> tuple[str | None, tuple[str, ...]]:
     """What below the dataset folder the queue leaves out, for the reviewer, from the search
     of the dataset folder (None: the folder is gone, an output tree moved without it).
 
     The ``.b3d`` files outside subject folders are not subject folders: the dataset run
-    does not process them and the queue does not list them.
+    does not process them and the queue does not list them. Symbolic links leading back to a
+    folder above them (a loop) are not followed: a subject folder reached only through one
+    is not in the queue.
 
     Returns
     -------
-    note, run_note
-        A short note naming them and the commands that take them (``addb convert``, ``addb
-        view FOLDER``), and the message the dataset run gives its user about the same files
-        (:func:`solver.dataset.discover.b3d_note`, so that a page showing both shows it
-        once); both None when there are none or no search.
+    note, run_notes
+        A short note naming them (and the commands that take the files: ``addb convert``,
+        ``addb view FOLDER``), None when there are none or no search; and the messages the
+        dataset run gives its user about the same files and links
+        (:func:`solver.dataset.discover.b3d_note`, :func:`~solver.dataset.discover.loop_note`),
+        so that a page showing both shows each once.
     """
-    if scan is None or not scan.b3d_files:
-        return None, None
-    files = scan.b3d_files
-    note = (
-        f"Not in the queue: {listed(files, 3)}, {counted(len(files), '.b3d file')} "
-        "(no subject folder): `addb convert FILE.b3d --out SUBJECT_DIR` makes a subject folder of one, "
-        "`addb view FOLDER` reviews a folder of them."
-    )
-    return note, b3d_note(scan)
+    if scan is None:
+        return None, ()
+    parts = []
+    if files := scan.b3d_files:
+        parts.append(
+            f"Not in the queue: {listed(files, 3)}, {counted(len(files), '.b3d file')} "
+            "(no subject folder): `addb convert FILE.b3d --out SUBJECT_DIR` makes a subject folder of one, "
+            "`addb view FOLDER` reviews a folder of them."
+        )
+    if scan.loops:
+        parts.append(
+            f"Not searched: {listed(list(scan.loops), 3)}, {counted(len(scan.loops), 'symbolic link')} leading back "
+            "to a folder above (a loop)."
+        )
+    run_notes = tuple(n for n in (b3d_note(scan), loop_note(scan)) if n is not None)
+    return (" ".join(parts) or None), run_notes
 
 
 def _review_state(snapshot: Any | None) -> tuple[str, str | None]:

@@ -14,7 +14,8 @@ shows them as "processing" and refreshes as each one finishes. The queue is also
 again every few seconds, so reviews saved from another page or machine show up.
 
 Below the run's status line the window names the ``.b3d`` files of the dataset, which are
-not subject folders and so are neither processed nor listed (the notes of
+not subject folders and so are neither processed nor listed, and the symbolic links the
+search did not follow because they lead back to a folder above them (the notes of
 :func:`addb_viewer.app.queue.open_dataset`, found in the same search of the dataset folder
 as the subjects), and, while a background run goes on, what it tells its user (its Dask
 dashboard, a subject retried after its worker died).
@@ -135,7 +136,7 @@ class Workbench:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
-        self._dataset_note: tuple[str | None, str | None] = (None, None)  # the .b3d files left out (OpenedDataset.notes)
+        self._dataset_note: tuple[str | None, tuple[str, ...]] = (None, ())  # the .b3d files and loops left out (OpenedDataset.notes)
         self._run_notes: list[str] = []  # what the running background run told its user
         gui = app.server.gui
         # a window of its own floating over the top of the 3D view (the subject is framed
@@ -231,9 +232,9 @@ class Workbench:
     def _draw_notes(self) -> None:
         """Show the dataset's note and the running background run's notes, each once."""
         with self._lock:
-            note, run_note = self._dataset_note
+            note, run_notes = self._dataset_note
             shown = [note] if note else []
-            shown += [n for n in dict.fromkeys(self._run_notes) if n != run_note]  # the files named once
+            shown += [n for n in dict.fromkeys(self._run_notes) if n not in run_notes]  # the files named once
             self.notes.content = "\n\n".join(_md(n) for n in shown)
 
     def _run_note(self, message: str) -> None:

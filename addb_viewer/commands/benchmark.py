@@ -32,28 +32,26 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
 
     Raises
     ------
+    FileFormatError
+        The output tree's summary is damaged (:func:`solver.dataset.discover.read_summary`).
     SubjectFolderError
         The argument is a dataset folder of subject folders (processed by ``addb process
         DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no
         processed subject.
     """
-    import json
-
-    from solver.dataset.discover import SUMMARY_NAME, scan_dataset
+    from solver.dataset.discover import SUMMARY_NAME, read_summary, scan_dataset
     from solver.errors import SubjectFolderError, counted, listed
     from solver.results import processed_trials
 
     p = Path(path)
     if (p / SUMMARY_NAME).is_file():
-        try:
-            rels = [s["rel"] for s in json.loads((p / SUMMARY_NAME).read_text(encoding="utf-8"))["subjects"]]
-        except (ValueError, KeyError, TypeError):
-            raise SubjectFolderError(f"{SUMMARY_NAME} is not a dataset summary of addb", path=p) from None
-        entries: list[tuple[str, str | None]] = [(str(p / rel), rel) for rel in rels if processed_trials(p / rel)]
+        rels = [s["rel"] for s in read_summary(p)["subjects"]]
+        processed = {rel: bool(processed_trials(p / rel)) for rel in rels}
+        entries: list[tuple[str, str | None]] = [(str(p / rel), rel) for rel in rels if processed[rel]]
         if not entries:
             raise SubjectFolderError("a dataset output tree without a processed subject (every subject failed or was cancelled)", path=p)
         if len(entries) < len(rels):
-            left = [rel for rel in rels if not processed_trials(p / rel)]
+            left = [rel for rel in rels if not processed[rel]]
             print(f"addb benchmark: {p}: left out {counted(len(left), 'subject')} without processed trials ({listed(left, 3)})", file=sys.stderr)
         return entries
     if not p.is_dir() or (p / "_subject.json").is_file() or processed_trials(p):

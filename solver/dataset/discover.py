@@ -9,12 +9,14 @@ example one folder per lab::
     DATASET/labB/p7/_subject.json   ->  OUT/labB/p7/
 
 The search does not descend into a subject folder (its ``trials/`` are not subjects),
-into hidden folders, into addb's own output folders (``addb_out``) or into the output
-folder of the run itself when it lies inside the dataset folder (:func:`scan_dataset`
-says which excluded folders it met, so that the run can refuse one holding subject
-folders: addb never writes ``_subject.json`` into an output). It follows symbolic links
-(a dataset may link subjects in from elsewhere) except one leading back to a folder above
-it, a loop (:func:`links_back`, :attr:`DatasetScan.loops`).
+into hidden folders, into addb's own output folders (``addb_out``), Python's or npm's
+(``__pycache__``, ``node_modules``), or into the output folder of the run itself when it
+lies inside the dataset folder (:func:`scan_dataset` says which excluded folders it met,
+so that the run can refuse one holding subject folders: addb never writes
+``_subject.json`` into an output). It follows symbolic links (a dataset may link subjects
+in from elsewhere) except one leading back to a folder above it, a loop
+(:attr:`DatasetScan.loops`). The rule of which folders it enters is
+:func:`solver.files.folders_to_search`.
 
 AddBiomechanics ``.b3d`` files are not subject folders: the search lists those it meets
 outside subject folders (:attr:`DatasetScan.b3d_files`) so that the run can say they are
@@ -28,18 +30,14 @@ import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from solver.errors import DatasetError, counted, listed
-from solver.files import links_back
+from solver.errors import DatasetError, FileFormatError, counted, listed
+from solver.files import folders_to_search
 from solver.io.subject import SUBJECT_JSON, output_folder_note
 
 #: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
 SUMMARY_NAME = "dataset_summary.json"
 #: Its HTML report, beside it (:mod:`solver.dataset.report`).
 REPORT_NAME = "dataset_report.html"
-
-#: Folder names never searched for subjects (addb's default output folder).
-SKIPPED_FOLDERS = frozenset({"addb_out", "__pycache__", "node_modules"})
-
 
 @dataclass(frozen=True)
 class DatasetSubject:
@@ -83,7 +81,7 @@ class DatasetScan:
         which a dataset run does not process.
     loops
         Relative paths of the symbolic links the search did not follow because they lead
-        back to a folder above them (:func:`links_back`); following them searched the same
+        back to a folder above them (:func:`solver.files.links_back`); following them searched the same
         folders again and again, and the folders above the dataset.
     """
 
@@ -114,18 +112,52 @@ class DatasetScan:
         return self.subjects
 
 
+def read_summary(out_dir: str | Path) -> dict:
+    """The summary a dataset run wrote at the top of its output tree ``out_dir``
+    (:data:`SUMMARY_NAME`, :func:`solver.dataset.runner.process_dataset`), read once for every
+    reader (``addb info``, ``addb benchmark``, the workbench's queue).
+
+    Returns
+    -------
+    dict
+        The summary as written: ``dataset`` (the dataset folder, str), ``subjects`` (a list of
+        dicts, each with its ``rel`` path below the tree, ``status`` and ``trials``),
+        ``totals`` and the run's time and workers.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``out_dir`` holds no summary.
+    FileFormatError
+        The summary is not valid JSON (with its line) or not a dataset summary of addb (no
+        ``subjects`` list of objects each with its ``rel`` path, no ``dataset`` folder).
+    """
+    path = Path(out_dir) / SUMMARY_NAME
+    try:
+        summary = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    subjects = summary.get("subjects") if isinstance(summary, dict) else None
+    if (
+        not isinstance(subjects, list)
+        or not all(isinstance(s, dict) and isinstance(s.get("rel"), str) for s in subjects)
+        or not isinstance(summary.get("dataset"), str)
+    ):
+        raise FileFormatError("expected a dataset summary of addb (its dataset folder and subjects, written by addb process DATASET_DIR)", path=path)
+    return summary
+
+
 def _output_tree_note(root: Path) -> str | None:
     """What to tell a user who gave a dataset run's output tree (it holds
     :data:`SUMMARY_NAME`) where the dataset folder was expected, naming the dataset folder
     the summary records; None for any other folder."""
-    summary = root / SUMMARY_NAME
-    if not summary.is_file():
+    if not (root / SUMMARY_NAME).is_file():
         return None
     try:
-        dataset = json.loads(summary.read_text(encoding="utf-8")).get("dataset")
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+        dataset = read_summary(root)["dataset"]
+    except (OSError, FileFormatError):
         dataset = None  # a damaged summary: the folder is still an output tree
-    where = f": here probably {dataset}" if isinstance(dataset, str) and dataset else ""
+    where = f": here probably {dataset}" if dataset else ""
     return (
         f"is the output tree of a dataset run (it holds {SUMMARY_NAME}), not a dataset folder; expected the "
         f"folder of subject folders{where}, with this folder given as --out"
@@ -146,18 +178,10 @@ def _walk(base: Path, top: Path, skip: set[Path]) -> DatasetScan:
             dirs[:] = []  # a subject's trials are not subjects
             continue
         b3d += [(here / f).relative_to(base).as_posix() for f in sorted(files) if f.lower().endswith(".b3d") and not f.startswith(".")]
-        kept = []
-        for d in sorted(dirs):
-            if d.startswith(".") or d in SKIPPED_FOLDERS:
-                continue
-            if (here / d).resolve() in skip:
-                excluded.append(here / d)
-                continue
-            if links_back(here, d):
-                loops.append((here / d).relative_to(base).as_posix())
-                continue
-            kept.append(d)
-        dirs[:] = kept
+        entered, back = folders_to_search(here, dirs)
+        loops += [(here / d).relative_to(base).as_posix() for d in back]
+        excluded += [here / d for d in entered if (here / d).resolve() in skip]
+        dirs[:] = [d for d in entered if (here / d).resolve() not in skip]
     return DatasetScan(tuple(sorted(found, key=lambda s: s.rel)), tuple(excluded), tuple(sorted(b3d)), tuple(sorted(loops)))
 
 

@@ -10,13 +10,12 @@ table row per subject and trial.
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME
+from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME, read_summary
 from solver.errors import FileFormatError
 
 _CSS = """
@@ -136,17 +135,13 @@ def run_text(out_dir: str | Path) -> str:
     Raises
     ------
     FileFormatError
-        ``dataset_summary.json`` is not valid JSON (with its line) or has no totals.
+        ``dataset_summary.json`` is not a dataset summary (:func:`solver.dataset.discover.read_summary`) or has no totals.
     """
-    path = Path(out_dir) / SUMMARY_NAME
-    try:
-        summary = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    summary = read_summary(out_dir)
     try:
         rows = totals_rows(summary["totals"])
     except (KeyError, TypeError):
-        raise FileFormatError("expected a dataset summary with its totals (written by addb process DATASET_DIR)", path=path) from None
+        raise FileFormatError("expected a dataset summary with its totals (written by addb process DATASET_DIR)", path=Path(out_dir) / SUMMARY_NAME) from None
     when = f", finished {summary['finished']}" if summary.get("finished") else ""
     took = f" in {summary['seconds']:.1f} s" if isinstance(summary.get("seconds"), (int, float)) else ""
     n = summary.get("workers")

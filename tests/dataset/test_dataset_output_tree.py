@@ -169,3 +169,41 @@ def test_a_run_counts_subjects_processed_up_to_date_and_failed_apart(tmp_path: P
     printed = capsys.readouterr()
     assert "s 2 up to date, 1 failed, 0 to process" in printed.err, printed.err
     assert "3 subjects: 0 processed, 2 up to date, 1 failed in " in printed.out, printed.out
+
+
+def test_a_damaged_summary_is_named_by_every_reader(dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``dataset_summary.json`` is read by ``addb info``, ``addb benchmark``, the workbench's
+    queue and the check of ``addb process OUT``; one reader
+    (:func:`solver.dataset.discover.read_summary`) serves them all. Cut short or rewritten by
+    hand, it is named with its line (the workbench gave a traceback from the JSON parser) and
+    the tree is still named as an output tree."""
+    from addb_viewer.app.queue import open_dataset
+    from solver.dataset.discover import read_summary
+    from solver.errors import FileFormatError
+
+    out = tmp_path / "out"
+    for rel in LINKED:  # every subject fails alone: no cluster starts
+        (out / rel).mkdir(parents=True)
+        (out / rel / "notes.txt").write_text("keep")
+    process_dataset(dataset, out)
+    summary = out / "dataset_summary.json"
+    whole = summary.read_text()
+    assert read_summary(out)["dataset"] == str(dataset.resolve())
+    summary.write_text(whole[: len(whole) // 2])  # cut short
+    lines = whole[: len(whole) // 2].count("\n") + 1
+    with pytest.raises(FileFormatError, match="not valid JSON") as err:
+        read_summary(out)
+    assert err.value.path == str(summary) and err.value.line == lines
+    with pytest.raises(FileFormatError, match="not valid JSON"):
+        open_dataset(out)
+    for command in (["info", str(out)], ["benchmark", str(out)]):
+        assert cli(command) == 1
+        printed = capsys.readouterr().err
+        assert f"FileFormatError ({summary}:{lines}): not valid JSON" in printed and "Traceback" not in printed, printed
+    assert cli(["process", str(out), "--out", str(tmp_path / "out2")]) == 1
+    assert "is the output tree of a dataset run (it holds dataset_summary.json)" in capsys.readouterr().err
+    summary.write_text(json.dumps({"dataset": str(dataset), "subjects": [{"status": "failed"}]}))  # no relative paths
+    with pytest.raises(FileFormatError, match="expected a dataset summary of addb"):
+        open_dataset(out)
+    assert cli(["benchmark", str(out)]) == 1
+    assert "expected a dataset summary of addb" in capsys.readouterr().err

@@ -220,6 +220,35 @@ def test_the_window_names_the_b3d_files_the_queue_leaves_out(dataset: Path, make
     assert bench.notes.content == ""
 
 
+def test_the_window_names_a_symbolic_link_loop_it_did_not_search(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
+    """A link leading back to a folder above it (``labX/up -> ../..``) is not followed by the
+    dataset search (a loop); the dataset run names it on its terminal, and the workbench's
+    window names it too, beside the .b3d files, and drops it once the link is gone."""
+    from addb_viewer.app.queue import open_dataset
+    from solver.dataset.discover import loop_note, scan_dataset
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, _, subjects = dataset_subjects(dataset)
+    app = make_app(ReviewPaths.for_subject(subjects[0].subject_dir, subjects[0].out_dir), process_missing=False)
+    bench = Workbench(app, dataset, workers=0)
+    (dataset / "labX").mkdir()
+    (dataset / "labX" / "up").symlink_to("../..", target_is_directory=True)
+    shutil.copyfile(B3D, dataset / "s03.b3d")
+    bench.rediscover()
+    assert {r.subject.rel for r in bench.refresh()} == set(SUBJECTS)
+    assert bench.notes.content.startswith("Not in the queue: s03.b3d")
+    assert "Not searched: labX/up, a symbolic link leading back to a folder above (a loop)." in bench.notes.content
+    run_notes = open_dataset(dataset).notes[1]
+    assert run_notes[1] == loop_note(scan_dataset(dataset)) and "labX/up" in run_notes[1]
+    bench._run_note(run_notes[1])  # the background run's message about the same link: shown once
+    assert bench.notes.content.count("labX/up") == 1
+    bench._run_notes = []  # that run ended
+    (dataset / "labX" / "up").unlink()
+    (dataset / "s03.b3d").unlink()
+    bench.rediscover()
+    assert bench.notes.content == ""
+
+
 def test_the_workbench_searches_the_dataset_folder_once(dataset: Path, make_app, tmp_path: Path, monkeypatch) -> None:
     """Opening the workbench and reading the dataset again each searched the dataset folder
     twice (once for the subjects, once for the .b3d files the queue leaves out); one search
@@ -232,8 +261,8 @@ def test_the_workbench_searches_the_dataset_folder_once(dataset: Path, make_app,
     shutil.copyfile(B3D, dataset / "s03.b3d")
     opened = open_dataset(dataset)
     assert (opened.dataset_dir, opened.out_dir, opened.subjects) == dataset_subjects(dataset)
-    note, run_note = opened.notes
-    assert note.startswith("Not in the queue: s03.b3d, a .b3d file") and run_note == b3d_note(scan_dataset(dataset))
+    note, run_notes = opened.notes
+    assert note.startswith("Not in the queue: s03.b3d, a .b3d file") and run_notes == (b3d_note(scan_dataset(dataset)),)
     searches = []
     real = queue_module.scan_dataset
     monkeypatch.setattr(queue_module, "scan_dataset", lambda *a, **k: searches.append(a) or real(*a, **k))
