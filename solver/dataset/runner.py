@@ -368,34 +368,7 @@ def process_dataset(
     out.mkdir(parents=True, exist_ok=True)
     with output_tree_lock(out):  # one run per output tree: each removes the work folders it finds
         remove_stale_work(out)
-        settings = {"addb_process": "default", **opts.settings}
-        results: dict[str, dict[str, Any]] = {}
-        jobs: list[SubjectJob] = []
-        for entry in subjects:
-            target = entry.out_dir(out)
-            try:
-                check_output_folder(target, (entry.path,))
-            except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
-                results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
-                continue
-            try:
-                review = review_digest(str(entry.path), str(target)) if review_digest else None
-                key = manifest_key(entry.path, settings, review)
-            except OSError as exc:
-                results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
-                continue
-            except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
-                results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
-                continue
-            stored = None if opts.force else current_manifest(target, key)
-            if stored is not None:
-                stored.pop("key")
-                if stored["status"] == "failed":  # the same inputs failed before: not run again
-                    results[entry.rel] = {**stored, "rel": entry.rel, "unchanged": True}
-                else:
-                    results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
-                continue
-            jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
+        results, jobs = _plan(subjects, out, opts, masks, review_digest)
         notify = events or (lambda kind, data: None)
         notify("queued", {"rels": [j.rel for j in jobs]})
         total = len(subjects)
@@ -406,24 +379,81 @@ def process_dataset(
                 dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
                     _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
             except KeyboardInterrupt:  # Ctrl-C: what finished is kept, and the summary says what did not
-                for job in jobs:  # a worker may have put a subject in place after the interrupt, before the cluster closed
-                    stored = None if job.rel in results else current_manifest(job.out_dir, job.key)
-                    if stored is not None:
-                        results[job.rel] = {**{k: v for k, v in stored.items() if k != "key"}, "rel": job.rel}
-                unfinished = [j.rel for j in jobs if j.rel not in results]
-                for rel in unfinished:
-                    results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
-                _summarize(subjects, results, out, source, opts, t0, None)
-                done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
-                tell(
-                    f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
-                    "again for them (the finished subjects are up to date and skipped)."
-                    if unfinished
-                    else f"interrupted: {done}, and {SUMMARY_NAME} lists them."
-                )
+                tell(_keep_interrupted(jobs, subjects, results, out, source, opts, t0))
                 raise
             remove_stale_work(out)  # work folders of attempts whose worker was killed
         return _summarize(subjects, results, out, source, opts, t0, dashboard)
+
+
+def _plan(
+    subjects: Sequence[DatasetSubject],
+    out: Path,
+    opts: DatasetOptions,
+    masks: MaskLoader | None,
+    review_digest: Callable[[str, str], str | None] | None,
+) -> tuple[dict[str, dict[str, Any]], list[SubjectJob]]:
+    """What each subject needs: (outcomes known without running, keyed by relative path, and
+    the jobs to run). A subject whose output folder holds another's files, or whose files or
+    review record cannot be read, has failed; one whose manifest matches its inputs now is
+    skipped (or, if it failed with the same inputs, not run again) unless ``opts.force``."""
+    settings = {"addb_process": "default", **opts.settings}
+    results: dict[str, dict[str, Any]] = {}
+    jobs: list[SubjectJob] = []
+    for entry in subjects:
+        target = entry.out_dir(out)
+        try:
+            check_output_folder(target, (entry.path,))
+        except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
+            results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
+            continue
+        try:
+            review = review_digest(str(entry.path), str(target)) if review_digest else None
+            key = manifest_key(entry.path, settings, review)
+        except OSError as exc:
+            results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
+            continue
+        except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
+            results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
+            continue
+        stored = None if opts.force else current_manifest(target, key)
+        if stored is not None:
+            stored.pop("key")
+            if stored["status"] == "failed":  # the same inputs failed before: not run again
+                results[entry.rel] = {**stored, "rel": entry.rel, "unchanged": True}
+            else:
+                results[entry.rel] = {**stored, "rel": entry.rel, "status": "skipped", "result_status": stored["status"]}
+            continue
+        jobs.append(SubjectJob(entry.rel, str(entry.path), str(target), key, masks))
+    return results, jobs
+
+
+def _keep_interrupted(
+    jobs: list[SubjectJob],
+    subjects: Sequence[DatasetSubject],
+    results: dict[str, dict[str, Any]],
+    out: Path,
+    source: Path,
+    opts: DatasetOptions,
+    t0: float,
+) -> str:
+    """After Ctrl-C: keep what finished (a worker may have put a subject in place after the
+    interrupt, before the cluster closed), list the rest as cancelled in the summary, and
+    return the message for the user."""
+    for job in jobs:
+        stored = None if job.rel in results else current_manifest(job.out_dir, job.key)
+        if stored is not None:
+            results[job.rel] = {**{k: v for k, v in stored.items() if k != "key"}, "rel": job.rel}
+    unfinished = [j.rel for j in jobs if j.rel not in results]
+    for rel in unfinished:
+        results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
+    _summarize(subjects, results, out, source, opts, t0, None)
+    done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
+    if unfinished:
+        return (
+            f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
+            "again for them (the finished subjects are up to date and skipped)."
+        )
+    return f"interrupted: {done}, and {SUMMARY_NAME} lists them."
 
 
 def _summarize(
