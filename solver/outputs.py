@@ -36,11 +36,18 @@ from solver.files import as_created
 CACHE_DIR = ".addb_cache"
 """Folder of the output folder holding caches of the stages (not a trial)."""
 
-#: Entries of which one marks a folder as an output of addb: ``subject.json`` (every
-#: subject output, kinematics only included), ``manifest.json`` (a dataset run's subject
+#: The subject's summary at the top of its output folder (scales, marker offsets, fit RMS,
+#: the settings of each stage), written by :func:`solver.pipeline.write_subject_summary`.
+SUBJECT_RECORD = "subject.json"
+
+#: A dataset run's record of one subject's inputs and outcome (:mod:`solver.dataset.manifest`).
+MANIFEST_NAME = "manifest.json"
+
+#: Entries of which one marks a folder as an output of addb: :data:`SUBJECT_RECORD` (every
+#: subject output, kinematics only included), :data:`MANIFEST_NAME` (a dataset run's subject
 #: folder, also when the subject failed) or :data:`CACHE_DIR` (a folder the diagnosis'
 #: judged fit reprocesses from the kinematics cache alone).
-OUTPUT_MARKERS = ("subject.json", "manifest.json", CACHE_DIR)
+OUTPUT_MARKERS = (SUBJECT_RECORD, MANIFEST_NAME, CACHE_DIR)
 
 
 def output_marker(folder: str | Path) -> str | None:

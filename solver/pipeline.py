@@ -42,7 +42,7 @@ from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
-from solver.outputs import CACHE_DIR, check_output_folder, staged_output, write_json
+from solver.outputs import CACHE_DIR, SUBJECT_RECORD, check_output_folder, staged_output, write_json
 from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 from solver.sampling import frame_rate
@@ -213,7 +213,7 @@ def write_subject_summary(folder: Path, sk: SubjectKinematics, extra: dict[str, 
     """Write ``subject.json``: scales, marker offsets, fit RMS and timings."""
     kin = sk.kinematics
     write_json(
-        folder / "subject.json",
+        folder / SUBJECT_RECORD,
         {
             "subject": sk.subject.name,
             "mass_kg": sk.subject.mass_kg,
@@ -566,7 +566,7 @@ def recorded_dynamics_options(out_dir: str | Path) -> DynamicsOptions:
     from solver.dynamics.stage import DynamicsOptions
 
     try:
-        record = json.loads((Path(out_dir) / "subject.json").read_text())["dynamics_settings"]["fit"]
+        record = json.loads((Path(out_dir) / SUBJECT_RECORD).read_text())["dynamics_settings"]["fit"]
         known = {k: v for k, v in record.items() if k in FitSettings.__dataclass_fields__}
         return DynamicsOptions(fit=FitSettings(**known))
     except (OSError, ValueError, KeyError, TypeError):

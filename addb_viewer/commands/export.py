@@ -58,14 +58,16 @@ def _record_beside(out_dir: Path) -> tuple[Path | None, Path | None]:
 
 def export_b3d(args: argparse.Namespace) -> int:
     """``--format b3d``: a processed output folder, a subject folder, or a dataset output tree."""
+    from solver.dataset.discover import SUMMARY_NAME
     from solver.errors import SubjectFolderError
     from solver.io.b3d_convert import processed_to_b3d
+    from solver.outputs import SUBJECT_RECORD
     from solver.results import processed_trials
 
     src = Path(args.subject)
     output = Path(args.output)
-    if (src / "dataset_summary.json").is_file():
-        found = (p.parent for p in src.rglob("subject.json"))
+    if (src / SUMMARY_NAME).is_file():
+        found = (p.parent for p in src.rglob(SUBJECT_RECORD))
         # hidden folders hold caches (OUT/.addb_cache: the diagnosis' judged fit) and a
         # running batch's work folders, not subjects of the tree
         outs = sorted(d for d in found if not any(part.startswith(".") for part in d.relative_to(src).parts) and processed_trials(d))
@@ -84,7 +86,7 @@ def export_b3d(args: argparse.Namespace) -> int:
         from solver.errors import OutputFolderError
 
         raise OutputFolderError(f"is a folder; expected the name of the .b3d file to write (e.g. {output / (src.name + '.b3d')})", path=output)
-    if (src / "subject.json").is_file() and processed_trials(src):
+    if (src / SUBJECT_RECORD).is_file() and processed_trials(src):
         out_dir = src
         subject_dir, record = _record_beside(out_dir)
     else:

@@ -30,10 +30,10 @@ from pathlib import Path
 from typing import Any
 
 from solver.files import links_back
+from solver.outputs import MANIFEST_NAME
 from solver.provenance import addb_version, code_digest
 
 SCHEMA = 1
-MANIFEST_NAME = "manifest.json"
 
 #: Folder names inside a subject folder that are not inputs of the solution.
 NOT_INPUTS = frozenset({"addb_out", "Geometry", "__pycache__"})

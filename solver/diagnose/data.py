@@ -37,6 +37,7 @@ from solver.io.types import ForcePlate, ForceRecording
 from solver.model.mass_groups import BODY_GROUPS, body_group, group_masses  # noqa: F401 (re-exported)
 from solver.model.osim import Body, OsimModel, read_osim
 from solver.model.skeleton import Skeleton
+from solver.outputs import SUBJECT_RECORD
 from solver.results import ProcessedTrial
 from solver.sampling import frame_interval
 
@@ -476,7 +477,7 @@ def wxyz_to_matrix(q: FloatArray) -> FloatArray:
 
 def _subject_summary(out_dir: str | Path) -> dict[str, Any]:
     """``OUT/subject.json`` (the kinematics stage's summary), or {} when there is none."""
-    path = Path(out_dir) / "subject.json"
+    path = Path(out_dir) / SUBJECT_RECORD
     return json.loads(path.read_text()) if path.is_file() else {}
 
 

@@ -31,6 +31,7 @@ from solver.io.mot import write_forces
 from solver.io.subject import MODEL_FILE, SUBJECT_JSON
 from solver.io.trc import write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
+from solver.outputs import SUBJECT_RECORD
 from solver.sampling import frame_interval
 
 #: The name of the file in a converted subject folder that says where it came from.
@@ -372,7 +373,7 @@ def processed_to_b3d(
     for tr in trials:
         marker_names += [m for m in tr.marker_names if m not in marker_names]
     header_trials, blocks = [], []
-    subject_json = out / "subject.json"
+    subject_json = out / SUBJECT_RECORD
     summary = json.loads(subject_json.read_text()) if subject_json.exists() else {}
     for k, tr in enumerate(trials):
         t = tr.n_frames

@@ -30,7 +30,7 @@ from solver.io.subject import SUBJECT_JSON, load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.masks import true_runs
-from solver.outputs import output_marker
+from solver.outputs import MANIFEST_NAME, SUBJECT_RECORD, output_marker
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
@@ -341,14 +341,14 @@ def _output(p: Path) -> dict[str, Any]:
     ``manifest.json`` and, per processed trial (``*/results.json``), its frames, measured
     frames, marker RMS error, residual forces and Hicks verdicts, or its dynamics error."""
     d: dict[str, Any] = {"kind": "output", "path": str(p), "trials": []}
-    if (p / "subject.json").is_file():
-        subject = _read_json_object(p / "subject.json")
+    if (p / SUBJECT_RECORD).is_file():
+        subject = _read_json_object(p / SUBJECT_RECORD)
         d.update(
             name=subject.get("subject"), mass_kg=subject.get("mass_kg"), height_m=subject.get("height_m"),
             fitted_mass_kg=subject.get("fitted_mass_kg"),
         )
-    if (p / "manifest.json").is_file():
-        manifest = _read_json_object(p / "manifest.json")
+    if (p / MANIFEST_NAME).is_file():
+        manifest = _read_json_object(p / MANIFEST_NAME)
         d["status"] = manifest.get("status")
         error = manifest.get("error")
         if isinstance(error, dict):
