@@ -97,7 +97,7 @@ class ContactResult:
         ``(F,)`` median height (m) of each foot's lowest point above the centre of pressure
         of the plate whose force is applied to it, on those frames; NaN for a foot never loaded. A few
         centimetres for a foot; far more when ``feet`` name other bodies
-        (:func:`foot_height_note`).
+        (warned about by :func:`solver.dynamics.stage._warn_raised_feet`).
     """
 
     plate_foot: NDArray[np.int64]
@@ -227,7 +227,7 @@ def assign_contacts(
     for k, (_, _, lowest) in enumerate(pts):
         height = lowest[:, 1] - ground
         # above the surface of the plate that loads it (plates of a staircase lie at other levels)
-        above = [lowest[plate_foot[i] == k, 1] - p.cop[plate_foot[i] == k, 1] for i, p in enumerate(plates)]
+        above = [lowest[on, 1] - p.cop[on, 1] for i, p in enumerate(plates) if (on := plate_foot[i] == k).any()]
         above_all = np.concatenate(above) if above else np.zeros(0)
         if np.isfinite(above_all).any():
             stance_height[k] = np.nanmedian(above_all)
