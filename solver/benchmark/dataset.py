@@ -424,8 +424,9 @@ def load_dataset(
     Raises
     ------
     BenchmarkError
-        An output folder holds no processed trial, two folders hold the same subject, or a
-        .b3d file has no dynamics pass.
+        An output folder holds no processed trial, one folder is given twice (under two
+        paths or names), two folders hold the same subject, or a .b3d file has no dynamics
+        pass.
     B3dFormatError
         A .b3d file is damaged.
     """
@@ -434,6 +435,11 @@ def load_dataset(
     given = list(names) if names is not None else [None] * len(folders)
     if len(given) != len(folders):
         raise ValueError(f"{len(given)} names for {len(folders)} subjects")
+    first_given: dict[Path, int] = {}
+    for k, out in enumerate(folders):  # one folder under two paths or names (OUT and OUT/labA/s01) would be scored twice
+        first = first_given.setdefault(Path(out).resolve(), k)
+        if first != k:
+            raise BenchmarkError(f"given twice (also as {folders[first]}): each subject is scored once", path=out)
 
     def trials_of(out: str | Path) -> Iterator[ProcessedTrial]:
         if Path(out).suffix.lower() == ".b3d" and Path(out).is_file():

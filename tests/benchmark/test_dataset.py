@@ -179,14 +179,15 @@ def test_names_tell_two_labs_subjects_of_one_name_apart(tmp_path) -> None:
     assert {t.subject for t in ds.trials} == {"labA/s01", "labB/s01"}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known gap (2026-11-29): duplicates are found by subject name only, so one folder given twice "
-    "under two names (addb benchmark OUT OUT/labA/s01) is scored twice; checking the resolved folder too would catch it",
-)
 def test_one_folder_given_twice_under_two_names_is_refused(tmp_path) -> None:
     t = processed_trial(20, subject="s01")
     save_processed(tmp_path / "labA" / "s01" / t.trial / "trial.npz", t)
     folder = tmp_path / "labA" / "s01"
-    with pytest.raises(BenchmarkError, match="also in"):
+    with pytest.raises(BenchmarkError, match="given twice") as err:
         load_dataset([folder, folder], inputs="processed", names=["labA/s01", None])
+    assert err.value.path == str(folder)
+    # the same folder through another path (a symbolic link, a path with "..") is the same folder
+    (tmp_path / "link").symlink_to(folder, target_is_directory=True)
+    with pytest.raises(BenchmarkError, match="given twice"):
+        load_dataset([tmp_path / "labA" / ".." / "labA" / "s01", tmp_path / "link"], inputs="processed")
+    assert load_dataset([folder], inputs="processed", names=["labA/s01"]).subjects == ["labA/s01"]
