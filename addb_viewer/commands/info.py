@@ -1,4 +1,4 @@
-"""``addb info [PATH]``: summarize a lab file, a model, a subject folder or an output folder."""
+"""``addb info [PATH]``: summarize a lab file, a model, a subject folder, a dataset folder or an output folder."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ def run(args: argparse.Namespace) -> int:
     """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder,
     folder of .b3d files (default: the demo subject), or output folder: a subject's (given and
     fitted mass, each trial's frames, marker RMS error, residual forces and Hicks verdicts, from
-    its JSON files) or a dataset run's (its totals, in the report's terms). A dataset folder is
-    refused, naming its subject folders.
+    its JSON files) or a dataset run's (its totals, in the report's terms), or a dataset folder
+    (its subjects, trials, frames and hours, what the search leaves out and the state of its
+    output tree at ``addb view``'s default place: :mod:`solver.dataset.inventory`).
 
     Returns
     -------
@@ -33,32 +34,28 @@ def run(args: argparse.Namespace) -> int:
 
         print(run_text(path))
         return 0
-    _refuse_dataset_folder(Path(path))
+    scan = _dataset_scan(Path(path))
+    if scan is not None:
+        from addb_viewer.app.queue import dataset_output_dir
+        from solver.dataset.inventory import dataset_inventory, inventory_text
+
+        inventory = dataset_inventory(path, dataset_output_dir(path), scan=scan)
+        print(inventory_text(inventory, "addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)"))
+        return 0
     print(format_summary(summarize(path)))
     return 0
 
 
-def _refuse_dataset_folder(path: Path) -> None:
-    """Raise SubjectFolderError when ``path`` is a dataset folder: a folder without
+def _dataset_scan(path: Path):
+    """The dataset search of ``path`` when it is a dataset folder: a folder without
     ``_subject.json`` with subject folders below it (:func:`solver.dataset.discover.scan_dataset`,
-    which does not enter subject, output or hidden folders). The message names some of them and
-    the ``.b3d`` files beside them, if any."""
+    which does not enter subject, output or hidden folders); else None."""
     from solver.dataset.discover import is_subject_folder, scan_dataset
-    from solver.errors import SubjectFolderError, counted, listed
 
     if not path.is_dir() or is_subject_folder(path):
-        return
+        return None
     scan = scan_dataset(path)
-    if not scan.subjects:
-        return
-    rels = [s.rel for s in scan.subjects]
-    message = (
-        f"is a dataset folder ({len(rels)} subject folder{'s' if len(rels) != 1 else ''}: {listed(rels, 3)}), not a subject folder; "
-        "addb info SUBJECT_FOLDER summarizes one subject, addb process FOLDER processes them all"
-    )
-    if scan.b3d_files:
-        message += f"; it also holds {counted(len(scan.b3d_files), '.b3d file')} ({listed(scan.b3d_files, 3)}): addb info FILE.b3d summarizes one"
-    raise SubjectFolderError(message, path=path)
+    return scan if scan.subjects else None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,10 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "info",
         help="summarize a TRC/MOT/STO/C3D/.osim/ExternalLoads .xml/.b3d file, a subject folder, a folder of .b3d files "
-        "or an output folder of addb (a subject's or a dataset run's)",
+        "a dataset folder or an output folder of addb (a subject's or a dataset run's)",
     )
     p.add_argument(
         "path", nargs="?",
-        help="file, subject folder, folder of .b3d files or output folder (default: the bundled demo subject)",
+        help="file, subject folder, folder of .b3d files, dataset folder or output folder (default: the bundled demo subject)",
     )
     p.set_defaults(handler=run)

@@ -218,6 +218,52 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
     assert "dataset run: failed (TrcFormatError: " in text and "no processed trial" in text
 
 
+def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
+    first_run, tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``addb info DATASET_DIR`` was refused ("is a dataset folder ..."). It now lists every
+    subject the dataset search finds as ``addb info SUBJECT_DIR`` reads it (mass, height,
+    trials, frames), the broken one with its file and line, the totals in the paper's terms,
+    and the state of an output tree: each subject by what its folder holds (a subject skipped
+    as up to date counts by the output it kept), and a subject added since the run."""
+    import shutil
+
+    from solver.dataset.inventory import dataset_inventory, inventory_text
+    from solver.io.summary import summarize
+
+    out = first_run[0]
+    capsys.readouterr()
+    assert cli(["info", str(tree)]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith(f"{tree}: dataset folder\n")
+    frames = seconds = 0.0
+    for rel in [*FULL_TREE, KINEMATICS_ONLY]:
+        one = summarize(tree / rel)  # what addb info SUBJECT_DIR reads
+        n = sum(t["frames"] for t in one["trials"])
+        frames += n
+        seconds += sum(t["frames"] / t["rate_hz"] for t in one["trials"])
+        line = f"  {rel}: {one['mass_kg']:.4g} kg, {one['height_m']:.4g} m; {len(one['trials'])} trials ("
+        assert line in text and f"{n:,} frames" in text.split(line)[1].split("\n")[0], (rel, text)
+    assert f"  {KINEMATICS_ONLY}: " in text and "(dynamics disabled)" in text.split(f"  {KINEMATICS_ONLY}: ")[1].split("\n")[0]
+    assert f"  {BROKEN}: cannot be read: TrcFormatError ({tree / BROKEN / 'trials' / 'walk' / 'markers.trc'}:{BROKEN_LINE})" in text
+    assert "  5 subjects, 1 of them unreadable; " in text and f", {int(frames):,} frames, {seconds / 3600:.4f} hours (" in text
+    assert "output tree: none found; addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)" in text
+    # with the module's output tree, and a subject added since its run
+    added = tree / "labC" / "new"
+    added.mkdir(parents=True)
+    try:
+        (added / "_subject.json").write_text('{"massKg": 70}')
+        d = dataset_inventory(tree, out)
+        assert d["totals"]["subjects"] == 6 and d["totals"]["unreadable"] == 2 and d["totals"]["frames"] == int(frames)
+        assert d["output"]["counts"] == {"processed": 3, "kinematics only": 1, "failed": 1, "cancelled": 0}
+        assert d["output"]["new"] == ["labC/new"]
+        text = inventory_text(d)
+        assert f"  output tree: {out} (a run finished " in text and ": 3 processed, 1 kinematics only, 1 failed; addb info" in text
+        assert "    not in that run: labC/new (added since; a new run processes them)" in text
+    finally:
+        shutil.rmtree(tree / "labC")
+
+
 def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_path(
     first_run, tree: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -68,7 +68,8 @@ def test_each_trial_is_named_once(capsys: pytest.CaptureFixture[str], tmp_path: 
 def test_unknown_age_and_a_folder_of_b3d_files(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """The format's unknown age (-1, as ``addb export`` writes for a subject without one) read
     "age -1"; a folder of .b3d files failed as a subject folder without ``_subject.json``, and a
-    dataset folder the same way. The folder of files is listed, the dataset folder named."""
+    dataset folder the same way. The folder of files is listed, the dataset folder listed as one
+    (its subjects: here two without a model, each named with its error)."""
     import dataclasses
     import shutil
 
@@ -97,16 +98,18 @@ def test_unknown_age_and_a_folder_of_b3d_files(capsys: pytest.CaptureFixture[str
     for rel in ("labA/s1", "labB/s2"):
         (dataset / rel).mkdir(parents=True)
         (dataset / rel / "_subject.json").write_text('{"massKg": 70, "heightM": 1.7}')
-    assert main(["info", str(dataset)]) == 1
-    err = capsys.readouterr().err
-    assert f"SubjectFolderError ({dataset}): is a dataset folder (2 subject folders: labA/s1, labB/s2), not a subject folder" in err
+    assert main(["info", str(dataset)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{dataset}: dataset folder\n  2 subjects, 2 of them unreadable; 0 trials")
+    for rel in ("labA/s1", "labB/s2"):
+        assert f"  {rel}: cannot be read: SubjectFolderError ({dataset / rel / 'unscaled_generic.osim'}): the model" in out
 
 
 def test_a_damaged_file_in_a_folder_and_a_mixed_folder(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """A folder with one cut .b3d file listed the others' headers only up to that file's error;
     now the damaged file is a line naming its error and the others are listed. A folder holding
     both .b3d files and subject folders was listed as a folder of .b3d files; it is a dataset
-    folder, and the error names both."""
+    folder, listed as one with the .b3d files it leaves out."""
     import shutil
 
     folder = tmp_path / "published"
@@ -125,10 +128,7 @@ def test_a_damaged_file_in_a_folder_and_a_mixed_folder(capsys: pytest.CaptureFix
     for rel in ("s1", "addb_out/s1"):
         (folder / rel).mkdir(parents=True)
         (folder / rel / "_subject.json").write_text('{"massKg": 70, "heightM": 1.7}')
-    assert main(["info", str(folder)]) == 1
-    err = capsys.readouterr().err
-    assert (
-        f"({folder}): is a dataset folder (1 subject folder: s1), not a subject folder; addb info SUBJECT_FOLDER "
-        "summarizes one subject, addb process FOLDER processes them all; it also holds 2 .b3d files "
-        "(a_good.b3d, b_cut.b3d): addb info FILE.b3d summarizes one"
-    ) in err
+    assert main(["info", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{folder}: dataset folder\n  1 subject, 1 of them unreadable;") and "addb_out" not in out
+    assert "  left out: the dataset folder holds 2 .b3d files (a_good.b3d, b_cut.b3d), which a dataset run does not process" in out

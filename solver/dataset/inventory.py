@@ -1,0 +1,181 @@
+"""A dataset folder before (or beside) its processing: ``addb info DATASET_DIR``.
+
+What a dataset builder checks before a run of hours: how many subjects the dataset search
+finds (:func:`solver.dataset.discover.scan_dataset`, the same search ``addb process`` makes),
+their trials, frames and hours in the terms of the AddBiomechanics Dataset paper (Werling et
+al.: subjects, trials, hours, hours with force plates), each subject's mass and height, the
+subjects that cannot be read (named with their error, the others still listed), what the
+search leaves out (``.b3d`` files, symbolic-link loops), and the state of the dataset's
+output tree when it has one.
+
+Frames with *measured* force are known only after the dynamics stage (its choice of frames);
+before it, the measure of force data is the trials recorded with force plates.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from solver.dataset.discover import (
+    SUMMARY_NAME,
+    DatasetScan,
+    b3d_note,
+    loop_note,
+    read_summary,
+    scan_dataset,
+)
+from solver.errors import AddbError, listed
+from solver.io.summary import summarize
+
+
+def _seconds(trial: dict[str, Any]) -> float:
+    """A trial's recorded time (s): its frames over its rate (the paper counts frames x
+    interval), else the span of its time column."""
+    rate = trial.get("rate_hz")
+    return trial["frames"] / rate if rate else float(trial.get("duration_s") or 0.0)
+
+
+#: What an output tree's subject folders hold, by the status its summary records (a subject
+#: skipped as up to date counts by the status of the output it kept).
+OUTPUT_STATES = {"ok": "processed", "kinematics_only": "kinematics only", "failed": "failed", "cancelled": "cancelled"}
+
+
+def _output_states(entries: list[dict[str, Any]]) -> dict[str, int]:
+    counts = dict.fromkeys(OUTPUT_STATES.values(), 0)
+    for e in entries:
+        status = e.get("result_status") if e.get("status") == "skipped" else e.get("status")
+        counts[OUTPUT_STATES.get(status, "failed")] += 1
+    return counts
+
+
+def _subject_entry(rel: str, path: Path) -> dict[str, Any]:
+    """One subject of the inventory: its figures, or its error (a subject that cannot be read
+    does not hide the others)."""
+    try:
+        d = summarize(path)
+    except (AddbError, OSError) as exc:
+        return {"rel": rel, "error": str(exc)}
+    trials = d["trials"]
+    force = [t for t in trials if not t.get("kinematics_only")]
+    return {
+        "rel": rel,
+        "name": d["name"],
+        "mass_kg": d["mass_kg"],
+        "height_m": d["height_m"],
+        "disable_dynamics": d["disable_dynamics"],
+        "trials": len(trials),
+        "trials_with_force": len(force),
+        "frames": sum(int(t["frames"]) for t in trials),
+        "seconds": sum(_seconds(t) for t in trials),
+        "seconds_with_force": sum(_seconds(t) for t in force),
+        "notes": d.get("notes", []),
+    }
+
+
+def dataset_inventory(root: str | Path, output_tree: str | Path | None = None, *, scan: DatasetScan | None = None) -> dict[str, Any]:
+    """The inventory of the dataset folder ``root``: every subject folder the dataset search
+    finds, read as ``addb info SUBJECT_DIR`` reads it (:func:`solver.io.summary.summarize`:
+    every trial file is read), and the totals.
+
+    Parameters
+    ----------
+    root
+        The dataset folder (subject folders at any depth).
+    output_tree
+        Its output tree, if one may exist (``addb view``'s default place, or ``--out`` of an
+        earlier run); summarized when it holds a dataset run's summary.
+    scan
+        The search of ``root`` when the caller made it already (:func:`scan_dataset`).
+
+    Returns
+    -------
+    dict
+        ``kind`` ``"dataset"``, ``path``; ``subjects``: one dict each, sorted by relative path
+        (``rel``), with ``error`` (str) for a subject that cannot be read, else ``name``,
+        ``mass_kg`` (kg), ``height_m`` (m, or None), ``disable_dynamics``, ``trials``,
+        ``trials_with_force`` (trials with a force recording), ``frames``, ``seconds`` and
+        ``seconds_with_force`` (s, frames over rate), ``notes`` (the readers' warnings);
+        ``totals`` (``subjects``, ``unreadable``, ``trials``, ``trials_with_force``,
+        ``frames``, ``hours``, ``hours_with_force``, over the readable subjects);
+        ``left_out`` (the dataset run's messages on ``.b3d`` files and link loops);
+        ``output`` (None, or the output tree's ``path``, ``finished``, subject ``counts`` by
+        what their folders hold, :data:`OUTPUT_STATES`, and ``new``: subjects found now that the run did not list).
+
+    Raises
+    ------
+    DatasetError
+        ``root`` is not a folder or holds no subject folder (the message says what it is
+        instead: an output folder, a folder of ``.b3d`` files).
+    FileFormatError
+        The output tree's summary is damaged (:func:`solver.dataset.discover.read_summary`).
+    """
+    scan = scan_dataset(root) if scan is None else scan
+    subjects = [_subject_entry(s.rel, s.path) for s in scan.require_subjects(root)]
+    readable = [s for s in subjects if "error" not in s]
+    totals = {
+        "subjects": len(subjects),
+        "unreadable": len(subjects) - len(readable),
+        "trials": sum(s["trials"] for s in readable),
+        "trials_with_force": sum(s["trials_with_force"] for s in readable),
+        "frames": sum(s["frames"] for s in readable),
+        "hours": sum(s["seconds"] for s in readable) / 3600.0,
+        "hours_with_force": sum(s["seconds_with_force"] for s in readable) / 3600.0,
+    }
+    output = None
+    if output_tree is not None and (Path(output_tree) / SUMMARY_NAME).is_file():
+        summary = read_summary(output_tree)
+        listed_rels = {s["rel"] for s in summary["subjects"]}
+        output = {
+            "path": str(output_tree),
+            "finished": summary.get("finished"),
+            "counts": _output_states(summary["subjects"]),
+            "new": [s["rel"] for s in subjects if s["rel"] not in listed_rels],
+        }
+    left_out = [n for n in (b3d_note(scan), loop_note(scan)) if n is not None]
+    return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": output}
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n:,} {noun}{'' if n == 1 else 's'}"
+
+
+def _subject_line(s: dict[str, Any]) -> list[str]:
+    if "error" in s:
+        return [f"  {s['rel']}: cannot be read: {s['error']}"]
+    height = f"{s['height_m']:.4g} m" if s["height_m"] else "unknown height"
+    force = f"{s['trials_with_force']} with force plates" if not s["disable_dynamics"] else "dynamics disabled"
+    line = (
+        f"  {s['rel']}: {s['mass_kg']:.4g} kg, {height}; {_count(s['trials'], 'trial')} ({force}), "
+        f"{s['frames']:,} frames, {s['seconds']:.1f} s"
+    )
+    return [line] + [f"    note: {n}" for n in s["notes"]]
+
+
+def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_DIR --out OUT") -> str:
+    """The inventory of :func:`dataset_inventory` as text: the totals, one line per subject
+    (with the readers' notes below it), what the search left out and the output tree's state
+    (or, without one, ``command_hint``: the command that makes it)."""
+    t = d["totals"]
+    unreadable = f", {t['unreadable']} of them unreadable" if t["unreadable"] else ""
+    lines = [
+        f"{d['path']}: dataset folder",
+        (
+            f"  {_count(t['subjects'], 'subject')}{unreadable}; {_count(t['trials'], 'trial')} "
+            f"({t['trials_with_force']} with force plates), {t['frames']:,} frames, "
+            f"{t['hours']:.4f} hours ({t['hours_with_force']:.4f} with force plates)"
+        ),
+    ]
+    for s in d["subjects"]:
+        lines += _subject_line(s)
+    lines += [f"  left out: {n}" for n in d["left_out"]]
+    out = d["output"]
+    if out is None:
+        lines.append(f"  output tree: none found; {command_hint} processes every subject")
+    else:
+        counts = ", ".join(f"{n} {status}" for status, n in out["counts"].items() if n)
+        when = f" finished {out['finished']}" if out["finished"] else ""
+        lines.append(f"  output tree: {out['path']} (a run{when}: {counts or 'no subject'}; addb info OUTPUT_TREE for its totals)")
+        if out["new"]:
+            lines.append(f"    not in that run: {listed(out['new'], 3)} (added since; a new run processes them)")
+    return "\n".join(lines)
