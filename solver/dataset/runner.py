@@ -368,6 +368,7 @@ def process_dataset(
     out.mkdir(parents=True, exist_ok=True)
     with output_tree_lock(out):  # one run per output tree: each removes the work folders it finds
         remove_stale_work(out)
+        context = _Run(subjects, out, source, opts, t0)
         results, jobs = _plan(subjects, out, opts, masks, review_digest)
         notify = events or (lambda kind, data: None)
         notify("queued", {"rels": [j.rel for j in jobs]})
@@ -379,10 +380,10 @@ def process_dataset(
                 dashboard = _run_jobs(jobs, opts, results, lambda frames: say(
                     _progress_line(subject_counts(results.values()), frames), len(results) / total), tell, notify, stop)
             except KeyboardInterrupt:  # Ctrl-C: what finished is kept, and the summary says what did not
-                tell(_keep_interrupted(jobs, subjects, results, out, source, opts, t0))
+                tell(_keep_interrupted(context, jobs, results))
                 raise
             remove_stale_work(out)  # work folders of attempts whose worker was killed
-        return _summarize(subjects, results, out, source, opts, t0, dashboard)
+        return _summarize(context, results, dashboard)
 
 
 def _plan(
@@ -427,15 +428,20 @@ def _plan(
     return results, jobs
 
 
-def _keep_interrupted(
-    jobs: list[SubjectJob],
-    subjects: Sequence[DatasetSubject],
-    results: dict[str, dict[str, Any]],
-    out: Path,
-    source: Path,
-    opts: DatasetOptions,
-    t0: float,
-) -> str:
+@dataclass(frozen=True)
+class _Run:
+    """What a run's summary is written from, besides the subjects' outcomes: the subjects in
+    their order, the output tree, the dataset folder, the options and the start time
+    (``time.perf_counter()``)."""
+
+    subjects: Sequence[DatasetSubject]
+    out: Path
+    source: Path
+    opts: DatasetOptions
+    t0: float
+
+
+def _keep_interrupted(run: _Run, jobs: list[SubjectJob], results: dict[str, dict[str, Any]]) -> str:
     """After Ctrl-C: keep what finished (a worker may have put a subject in place after the
     interrupt, before the cluster closed), list the rest as cancelled in the summary, and
     return the message for the user."""
@@ -446,8 +452,8 @@ def _keep_interrupted(
     unfinished = [j.rel for j in jobs if j.rel not in results]
     for rel in unfinished:
         results[rel] = {"rel": rel, "status": "cancelled", "trials": []}
-    _summarize(subjects, results, out, source, opts, t0, None)
-    done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {out}"
+    _summarize(run, results, None)
+    done = f"{len(jobs) - len(unfinished)} of {len(jobs)} subjects to process finished and are kept in {run.out}"
     if unfinished:
         return (
             f"interrupted: {done}; {SUMMARY_NAME} lists {listed(unfinished, 3)} as cancelled. Run the same command "
@@ -456,20 +462,12 @@ def _keep_interrupted(
     return f"interrupted: {done}, and {SUMMARY_NAME} lists them."
 
 
-def _summarize(
-    subjects: Sequence[DatasetSubject],
-    results: dict[str, dict[str, Any]],
-    out: Path,
-    source: Path,
-    opts: DatasetOptions,
-    t0: float,
-    dashboard: str | None,
-) -> DatasetRun:
+def _summarize(run: _Run, results: dict[str, dict[str, Any]], dashboard: str | None) -> DatasetRun:
     """The run's outcome, in the subjects' order, written as the summary and the report."""
-    ordered = tuple(results[s.rel] for s in subjects)
-    run = DatasetRun(out, ordered, dataset_totals(list(ordered)), time.perf_counter() - t0, dashboard)
-    write_summary(run, source, opts)
-    return run
+    ordered = tuple(results[s.rel] for s in run.subjects)
+    outcome = DatasetRun(run.out, ordered, dataset_totals(list(ordered)), time.perf_counter() - run.t0, dashboard)
+    write_summary(outcome, run.source, run.opts)
+    return outcome
 
 
 def _run_jobs(
