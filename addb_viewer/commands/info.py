@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -37,9 +38,11 @@ def run(args: argparse.Namespace) -> int:
     scan = _dataset_scan(Path(path))
     if scan is not None:
         from addb_viewer.app.queue import dataset_output_dir
+        from addb_viewer.progress import ProgressBar
         from solver.dataset.inventory import dataset_inventory, inventory_text
 
-        inventory = dataset_inventory(path, dataset_output_dir(path), scan=scan)
+        bar = ProgressBar() if sys.stderr.isatty() else None  # every trial file is read: a while on a large dataset
+        inventory = dataset_inventory(path, dataset_output_dir(path), scan=scan, progress=bar)
         print(inventory_text(inventory, "addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)"))
         return 0
     print(format_summary(summarize(path)))

@@ -14,6 +14,7 @@ before it, the measure of force data is the trials recorded with force plates.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -73,7 +74,13 @@ def _subject_entry(rel: str, path: Path) -> dict[str, Any]:
     }
 
 
-def dataset_inventory(root: str | Path, output_tree: str | Path | None = None, *, scan: DatasetScan | None = None) -> dict[str, Any]:
+def dataset_inventory(
+    root: str | Path,
+    output_tree: str | Path | None = None,
+    *,
+    scan: DatasetScan | None = None,
+    progress: Callable[[str, float], None] | None = None,
+) -> dict[str, Any]:
     """The inventory of the dataset folder ``root``: every subject folder the dataset search
     finds, read as ``addb info SUBJECT_DIR`` reads it (:func:`solver.io.summary.summarize`:
     every trial file is read), and the totals.
@@ -87,6 +94,9 @@ def dataset_inventory(root: str | Path, output_tree: str | Path | None = None, *
         earlier run); summarized when it holds a dataset run's summary.
     scan
         The search of ``root`` when the caller made it already (:func:`scan_dataset`).
+    progress
+        Called with (message, fraction of subjects read) before each subject and at the end:
+        every trial file is read, which takes a while on a large dataset.
 
     Returns
     -------
@@ -111,7 +121,13 @@ def dataset_inventory(root: str | Path, output_tree: str | Path | None = None, *
         The output tree's summary is damaged (:func:`solver.dataset.discover.read_summary`).
     """
     scan = scan_dataset(root) if scan is None else scan
-    subjects = [_subject_entry(s.rel, s.path) for s in scan.require_subjects(root)]
+    found = scan.require_subjects(root)
+    say = progress or (lambda message, fraction: None)
+    subjects = []
+    for k, s in enumerate(found):
+        say(f"reading {s.rel}", k / len(found))
+        subjects.append(_subject_entry(s.rel, s.path))
+    say(f"read {len(found)} subjects", 1.0)
     readable = [s for s in subjects if "error" not in s]
     totals = {
         "subjects": len(subjects),

@@ -253,7 +253,10 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
     added.mkdir(parents=True)
     try:
         (added / "_subject.json").write_text('{"massKg": 70}')
-        d = dataset_inventory(tree, out)
+        seen: list[tuple[str, float]] = []
+        d = dataset_inventory(tree, out, progress=lambda m, f: seen.append((m, f)))
+        assert [m for m, _ in seen] == [f"reading {s['rel']}" for s in d["subjects"]] + ["read 6 subjects"]
+        assert [f for _, f in seen] == [k / 6 for k in range(6)] + [1.0]
         assert d["totals"]["subjects"] == 6 and d["totals"]["unreadable"] == 2 and d["totals"]["frames"] == int(frames)
         assert d["output"]["counts"] == {"processed": 3, "kinematics only": 1, "failed": 1, "cancelled": 0}
         assert d["output"]["new"] == ["labC/new"]
