@@ -42,8 +42,8 @@ def summarize(path: str | Path) -> dict[str, Any]:
     per trial frames, measured frames, marker RMS error, residual forces, Hicks verdicts or the
     dynamics error; a dataset run's subject folder adds its status). A dataset run's output
     tree is summarized by :func:`solver.dataset.report.run_text`.
-    A folder of subject folders is not summarized here: ``addb info`` names it as a dataset
-    folder (:mod:`addb_viewer.commands.info`).
+    A folder of subject folders (a dataset folder) is summarized by
+    :func:`solver.dataset.inventory.dataset_inventory`, which calls this for each subject.
 
     Returns
     -------
