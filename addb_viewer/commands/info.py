@@ -11,7 +11,8 @@ def run(args: argparse.Namespace) -> int:
     """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder,
     folder of .b3d files (default: the demo subject), or output folder: a subject's (given and
     fitted mass, each trial's frames, marker RMS error, residual forces and Hicks verdicts, from
-    its JSON files) or a dataset run's (its totals, in the report's terms), or a dataset folder
+    its JSON files), a dataset run's (its totals, in the report's terms) or a folder inside one
+    (the totals of the subjects below it), a trial's output folder (its results.json), or a dataset folder
     (its subjects, trials, frames and hours, what the search leaves out and the state of its
     output tree at ``addb view``'s default place: :mod:`solver.dataset.inventory`).
 
@@ -35,6 +36,10 @@ def run(args: argparse.Namespace) -> int:
 
         print(run_text(path))
         return 0
+    part = _output_tree_part(Path(path))
+    if part is not None:
+        print(part)
+        return 0
     scan = _dataset_scan(Path(path))
     if scan is not None:
         from addb_viewer.app.queue import dataset_output_dir
@@ -47,6 +52,23 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_summary(summarize(path)))
     return 0
+
+
+def _output_tree_part(path: Path) -> str | None:
+    """The text of a folder inside a dataset run's output tree that is neither the tree nor a
+    subject's output folder (``OUT/labA``: :func:`solver.dataset.report.part_text`); None for
+    any other path."""
+    from solver.dataset.discover import is_subject_folder, output_tree_above
+    from solver.outputs import output_marker
+
+    if not path.is_dir() or is_subject_folder(path) or output_marker(path) is not None or (path / "results.json").is_file():
+        return None
+    tree = output_tree_above(path)
+    if tree is None:
+        return None
+    from solver.dataset.report import part_text
+
+    return part_text(tree, path.resolve().relative_to(tree).as_posix())
 
 
 def _dataset_scan(path: Path):

@@ -147,6 +147,15 @@ def read_summary(out_dir: str | Path) -> dict:
     return summary
 
 
+def output_tree_above(folder: str | Path) -> Path | None:
+    """The dataset run's output tree that ``folder`` lies inside (the nearest folder above it
+    holding :data:`SUMMARY_NAME`), or None."""
+    for parent in Path(folder).resolve().parents:
+        if (parent / SUMMARY_NAME).is_file():
+            return parent
+    return None
+
+
 def _output_tree_note(root: Path) -> str | None:
     """What to tell a user who gave a dataset run's output tree (it holds
     :data:`SUMMARY_NAME`) where the dataset folder was expected, naming the dataset folder

@@ -109,8 +109,10 @@ def dataset_inventory(
         ``totals`` (``subjects``, ``unreadable``, ``trials``, ``trials_with_force``,
         ``frames``, ``hours``, ``hours_with_force``, over the readable subjects);
         ``left_out`` (the dataset run's messages on ``.b3d`` files and link loops);
-        ``output`` (None, or the output tree's ``path``, ``finished``, subject ``counts`` by
-        what their folders hold, :data:`OUTPUT_STATES`, and ``new``: subjects found now that the run did not list).
+        ``output`` (None without ``output_tree``, else its ``path``, ``found`` (it holds a
+        dataset run's summary) and, when found, ``finished``, subject ``counts`` by what their
+        folders hold (:data:`OUTPUT_STATES`) and ``new``: subjects found now that the run did
+        not list).
 
     Raises
     ------
@@ -139,15 +141,16 @@ def dataset_inventory(
         "hours_with_force": sum(s["seconds_with_force"] for s in readable) / 3600.0,
     }
     output = None
-    if output_tree is not None and (Path(output_tree) / SUMMARY_NAME).is_file():
+    if output_tree is not None:
+        output = {"path": str(output_tree), "found": (Path(output_tree) / SUMMARY_NAME).is_file()}
+    if output is not None and output["found"]:
         summary = read_summary(output_tree)
         listed_rels = {s["rel"] for s in summary["subjects"]}
-        output = {
-            "path": str(output_tree),
-            "finished": summary.get("finished"),
-            "counts": _output_states(summary["subjects"]),
-            "new": [s["rel"] for s in subjects if s["rel"] not in listed_rels],
-        }
+        output.update(
+            finished=summary.get("finished"),
+            counts=_output_states(summary["subjects"]),
+            new=[s["rel"] for s in subjects if s["rel"] not in listed_rels],
+        )
     left_out = [n for n in (b3d_note(scan), loop_note(scan)) if n is not None]
     return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": output}
 
@@ -171,7 +174,7 @@ def _subject_line(s: dict[str, Any]) -> list[str]:
 def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_DIR --out OUT") -> str:
     """The inventory of :func:`dataset_inventory` as text: the totals, one line per subject
     (with the readers' notes below it), what the search left out and the output tree's state
-    (or, without one, ``command_hint``: the command that makes it)."""
+    (or, where none was found, ``command_hint``: the command that makes one)."""
     t = d["totals"]
     unreadable = f", {t['unreadable']} of them unreadable" if t["unreadable"] else ""
     lines = [
@@ -186,8 +189,11 @@ def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_
         lines += _subject_line(s)
     lines += [f"  left out: {n}" for n in d["left_out"]]
     out = d["output"]
-    if out is None:
-        lines.append(f"  output tree: none found; {command_hint} processes every subject")
+    if out is None or not out["found"]:
+        where = f"none at {out['path']}" if out is not None else "none given"
+        lines.append(
+            f"  output tree: {where}; {command_hint} processes every subject (addb info OUT summarizes a run's output tree)"
+        )
     else:
         counts = ", ".join(f"{n} {status}" for status, n in out["counts"].items() if n)
         when = f" finished {out['finished']}" if out["finished"] else ""

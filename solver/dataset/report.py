@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME, read_summary
-from solver.errors import FileFormatError
+from solver.dataset.summary import dataset_totals
+from solver.errors import FileFormatError, listed
 
 _CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:24px;color:#222}
@@ -150,6 +151,42 @@ def run_text(out_dir: str | Path) -> str:
     lines += [f"  {label}: {value}" for label, value in rows]
     if (Path(out_dir) / REPORT_NAME).is_file():
         lines.append(f"  report: {Path(out_dir) / REPORT_NAME}")
+    return "\n".join(lines)
+
+
+def part_text(tree: str | Path, part: str) -> str | None:
+    """A folder inside a dataset run's output tree as text (``addb info OUT/labA``): the totals
+    (:func:`totals_rows`) of the subjects the run listed below it, and the commands for the
+    whole run and for one subject; None when the run listed none there.
+
+    Parameters
+    ----------
+    tree
+        The output tree (it holds ``dataset_summary.json``).
+    part
+        The folder's path relative to ``tree``, with ``/`` separators (``labA``).
+
+    Raises
+    ------
+    FileFormatError
+        ``dataset_summary.json`` is not a dataset summary (:func:`solver.dataset.discover.read_summary`).
+    """
+    summary = read_summary(tree)
+    below = [s for s in summary["subjects"] if s["rel"] == part or s["rel"].startswith(f"{part}/")]
+    if not below:
+        return None
+    try:
+        rows = totals_rows(dataset_totals(below))
+    except (KeyError, TypeError):
+        raise FileFormatError("expected a dataset summary with each subject's trials (written by addb process DATASET_DIR)", path=Path(tree) / SUMMARY_NAME) from None
+    rels = [s["rel"] for s in below]
+    lines = [
+        f"{Path(tree) / part}: part of the dataset output tree {tree}",
+        f"  {len(below)} of the run's {len(summary['subjects'])} subjects: {listed(rels, 5)}",
+    ]
+    lines += [f"  {label}: {value}" for label, value in rows]
+    one = next((s["rel"] for s in below if s["status"] != "failed"), rels[0])
+    lines.append(f"  addb info {tree} summarizes the whole run, addb info {Path(tree) / one} one subject")
     return "\n".join(lines)
 
 

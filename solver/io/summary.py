@@ -40,8 +40,10 @@ def summarize(path: str | Path) -> dict[str, Any]:
     read is an entry with its ``error``, so that one damaged file does not hide the others),
     an output folder of addb (kind ``output``, from its JSON files: given and fitted mass,
     per trial frames, measured frames, marker RMS error, residual forces, Hicks verdicts or the
-    dynamics error; a dataset run's subject folder adds its status). A dataset run's output
-    tree is summarized by :func:`solver.dataset.report.run_text`.
+    dynamics error; a dataset run's subject folder adds its status), a trial's output folder
+    (its ``results.json``: kind ``trial_results``). A dataset run's output tree is summarized
+    by :func:`solver.dataset.report.run_text`, a folder inside it by
+    :func:`~solver.dataset.report.part_text`.
     A folder of subject folders (a dataset folder) is summarized by
     :func:`solver.dataset.inventory.dataset_inventory`, which calls this for each subject.
 
@@ -86,6 +88,8 @@ def _dispatch(p: Path) -> dict[str, Any]:
             return _b3d_folder(p, b3d_files)
         if not (p / SUBJECT_JSON).exists() and output_marker(p) is not None:
             return _output(p)
+        if not (p / SUBJECT_JSON).exists() and (p / "results.json").is_file():
+            return _json(p / "results.json")  # a trial's output folder: its results
         return _subject(p)  # a folder without _subject.json: the reader's error names it
     readers: dict[str, Callable[[Path], dict[str, Any]]] = {
         ".trc": _trc,

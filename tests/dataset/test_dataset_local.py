@@ -216,6 +216,18 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
     assert cli(["info", str(out / BROKEN)]) == 0
     text = capsys.readouterr().out
     assert "dataset run: failed (TrcFormatError: " in text and "no processed trial" in text
+    # a trial's output folder reads as its results.json; a lab's folder as its subjects' totals
+    # (both said "_subject.json is missing")
+    assert cli(["info", str(out / rel / name)]) == 0
+    assert capsys.readouterr().out.splitlines()[1:] == lines[at:at + 2]
+    assert cli(["info", str(out / "labB")]) == 0
+    text = capsys.readouterr().out
+    below = sorted(r for r in [*FULL_TREE, BROKEN, KINEMATICS_ONLY] if r.startswith("labB/"))
+    assert text.startswith(f"{out / 'labB'}: part of the dataset output tree {out}\n  {len(below)} of the run's 5 subjects: ")
+    rows = [r for rel_ in below if rel_ != BROKEN for r in results(out / rel_).values()]
+    measured = sum(r.get("n_observed_frames", 0) for r in rows)
+    assert f"  frames (with measured force): {sum(r['n_frames'] for r in rows)} ({measured})" in text, text
+    assert "1 failed" in text and f"addb info {out} summarizes the whole run" in text
 
 
 def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
@@ -247,7 +259,7 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
     assert f"  {KINEMATICS_ONLY}: " in text and "(dynamics disabled)" in text.split(f"  {KINEMATICS_ONLY}: ")[1].split("\n")[0]
     assert f"  {BROKEN}: cannot be read: TrcFormatError ({tree / BROKEN / 'trials' / 'walk' / 'markers.trc'}:{BROKEN_LINE})" in text
     assert "  5 subjects, 1 of them unreadable; " in text and f", {int(frames):,} frames, {seconds / 3600:.4f} hours (" in text
-    assert "output tree: none found; addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)" in text
+    assert f"output tree: none at {tree / 'addb_out'}; addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)" in text
     # with the module's output tree, and a subject added since its run
     added = tree / "labC" / "new"
     added.mkdir(parents=True)
