@@ -26,7 +26,8 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
 
     A dataset run's output tree (``dataset_summary.json``) stands for every subject output
     folder its summary lists with processed trials, named by their relative paths
-    (``labA/s01``: two labs' ``s01`` are two subjects); a folder of ``.b3d`` files (no
+    (``labA/s01``: two labs' ``s01`` are two subjects), a folder inside it (``OUT/labA``) for
+    those below that folder; a folder of ``.b3d`` files (no
     subject folder in it) for each file, named by its relative path without the suffix; any
     other argument for itself, under its recorded name (None).
 
@@ -39,17 +40,25 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
         DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no
         processed subject.
     """
-    from solver.dataset.discover import SUMMARY_NAME, read_summary, scan_dataset
+    from solver.dataset.discover import SUMMARY_NAME, output_tree_above, read_summary, scan_dataset
     from solver.errors import SubjectFolderError, counted, listed
+    from solver.outputs import output_marker
     from solver.results import processed_trials
 
     p = Path(path)
-    if (p / SUMMARY_NAME).is_file():
-        rels = [s["rel"] for s in read_summary(p)["subjects"]]
-        processed = {rel: bool(processed_trials(p / rel)) for rel in rels}
-        entries: list[tuple[str, str | None]] = [(str(p / rel), rel) for rel in rels if processed[rel]]
+    tree, part = p, None
+    if not (p / SUMMARY_NAME).is_file() and p.is_dir() and not processed_trials(p) and output_marker(p) is None:
+        above = output_tree_above(p)  # a folder inside an output tree (OUT/labA): the subjects below it
+        if above is not None:
+            tree, part = above, p.resolve().relative_to(above).as_posix()
+    if (tree / SUMMARY_NAME).is_file():
+        rels = [s["rel"] for s in read_summary(tree)["subjects"] if part is None or s["rel"].startswith(f"{part}/")]
+        processed = {rel: bool(processed_trials(tree / rel)) for rel in rels}
+        entries: list[tuple[str, str | None]] = [(str(tree / rel), rel) for rel in rels if processed[rel]]
         if not entries:
-            raise SubjectFolderError("a dataset output tree without a processed subject (every subject failed or was cancelled)", path=p)
+            raise SubjectFolderError(
+                f"a {'folder of a ' if part else ''}dataset output tree without a processed subject "
+                "(every subject failed or was cancelled, or none is below it)", path=p)
         if len(entries) < len(rels):
             left = [rel for rel in rels if not processed[rel]]
             print(f"addb benchmark: {p}: left out {counted(len(left), 'subject')} without processed trials ({listed(left, 3)})", file=sys.stderr)

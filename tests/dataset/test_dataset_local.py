@@ -299,6 +299,12 @@ def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_pa
                for key, e in one["rows"][0]["per_trial"].items() if key.startswith(f"{name}/")}  # fmt: skip
     assert whole["rows"][0]["per_trial"] == renamed and len(renamed) >= 3
     assert whole["rows"][0]["frames"] == one["rows"][0]["frames"]
+    # a lab's folder inside the tree stands for the subjects below it (it was refused)
+    capsys.readouterr()
+    assert cli(["benchmark", str(out / "labA"), "-o", str(tmp_path / "labA")]) == 0
+    lab = json.loads((tmp_path / "labA" / "benchmark.json").read_text())
+    assert sorted(lab["test_subjects"]) == sorted(r for r in FULL_TREE if r.startswith("labA/"))
+    assert lab["rows"][0]["per_trial"] == {k: e for k, e in renamed.items() if k.startswith("labA/")}
     # the dataset folder itself is named as such, with the command that makes its output tree
     capsys.readouterr()
     assert cli(["benchmark", str(tree), "-o", str(tmp_path / "x")]) == 1
