@@ -43,6 +43,9 @@ SUBJECT_RECORD = "subject.json"
 #: A dataset run's record of one subject's inputs and outcome (:mod:`solver.dataset.manifest`).
 MANIFEST_NAME = "manifest.json"
 
+#: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
+SUMMARY_NAME = "dataset_summary.json"
+
 #: Entries of which one marks a folder as an output of addb: :data:`SUBJECT_RECORD` (every
 #: subject output, kinematics only included), :data:`MANIFEST_NAME` (a dataset run's subject
 #: folder, also when the subject failed) or :data:`CACHE_DIR` (a folder the diagnosis'
@@ -58,6 +61,15 @@ def output_marker(folder: str | Path) -> str | None:
     if not folder.is_dir():
         return None
     return next((m for m in OUTPUT_MARKERS if (folder / m).exists()), None)
+
+
+def output_tree_above(folder: str | Path) -> Path | None:
+    """The dataset run's output tree that ``folder`` lies inside: the nearest folder above it
+    holding :data:`SUMMARY_NAME` (not ``folder`` itself), or None."""
+    for parent in Path(folder).resolve().parents:
+        if (parent / SUMMARY_NAME).is_file():
+            return parent
+    return None
 
 
 def _clean(value: Any) -> Any:

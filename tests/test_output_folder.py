@@ -183,3 +183,39 @@ def test_a_dataset_folder_given_as_the_subject_is_named_as_one(argv: list[str], 
         "below it: labA/s01, labB/2024/s07); give one subject folder, or process them all with addb process DATASET_DIR --out OUT"
     ) in err, err
     assert "Traceback" not in err and _tree(dataset) == before and not list(tmp_path.glob("written*"))
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["kinematics", "--out", "{out}"], ["process", "--out", "{out}"], ["diagnose", "--trial", "walk"],
+     ["record", "--trial", "walk", "-o", "{out}.rrd"], ["export", "--trial", "walk", "-o", "{out}.mcap"], ["view", "--port", "0"]],
+    ids=["kinematics", "process", "diagnose", "record", "export", "view"],
+)  # fmt: skip
+def test_a_folder_inside_a_dataset_output_tree_given_as_the_subject_is_named_as_one(
+    argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A lab's folder of a dataset run's output tree (``OUT/labA``: no ``_subject.json``, no
+    output marker) given where a subject folder goes: the commands said "_subject.json is
+    missing" (``addb view`` started a page showing it, ``addb process`` "no subject folder below
+    this folder"); each now names the output tree and what to give instead, and writes nothing."""
+    import addb_viewer.app.server
+
+    dataset, out_tree = tmp_path / "dataset", tmp_path / "tree"
+    writable_copy(WALK, dataset / "labA" / "s01")
+    for rel in ("labA/s01", "labB/s02"):  # both fail alone (another's file in the folder): no cluster starts
+        (out_tree / rel).mkdir(parents=True)
+        (out_tree / rel / "notes.txt").write_text("keep")
+    writable_copy(WALK, dataset / "labB" / "s02")
+    process_dataset(dataset, out_tree)
+    lab = out_tree / "labA"
+    before = _tree(out_tree)
+    monkeypatch.setattr(addb_viewer.app.server, "ReviewApp", lambda *a, **k: pytest.fail("addb view started the review app"))
+    capsys.readouterr()
+    written = tmp_path / "written"
+    assert cli([argv[0], str(lab), *(a.format(out=written) for a in argv[1:])]) == 1
+    err = capsys.readouterr().err
+    assert (
+        f"Error ({lab}): is a folder inside the dataset output tree {out_tree}, not a subject folder; expected a subject "
+        f"folder of the dataset (addb info {out_tree} names the dataset folder), or addb view {out_tree} to review its subjects"
+    ) in err, err
+    assert "Traceback" not in err and _tree(out_tree) == before and not list(tmp_path.glob("written*"))

@@ -40,9 +40,9 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
         DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no
         processed subject.
     """
-    from solver.dataset.discover import SUMMARY_NAME, output_tree_above, read_summary, scan_dataset
+    from solver.dataset.discover import SUMMARY_NAME, read_summary, scan_dataset
     from solver.errors import SubjectFolderError, counted, listed
-    from solver.outputs import output_marker
+    from solver.outputs import output_marker, output_tree_above
     from solver.results import processed_trials
 
     p = Path(path)

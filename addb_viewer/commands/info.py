@@ -58,8 +58,8 @@ def _output_tree_part(path: Path) -> str | None:
     """The text of a folder inside a dataset run's output tree that is neither the tree nor a
     subject's output folder (``OUT/labA``: :func:`solver.dataset.report.part_text`); None for
     any other path."""
-    from solver.dataset.discover import is_subject_folder, output_tree_above
-    from solver.outputs import output_marker
+    from solver.dataset.discover import is_subject_folder
+    from solver.outputs import output_marker, output_tree_above
 
     if not path.is_dir() or is_subject_folder(path) or output_marker(path) is not None or (path / "results.json").is_file():
         return None

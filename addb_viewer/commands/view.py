@@ -139,8 +139,10 @@ def run(args: argparse.Namespace) -> int:
     Raises
     ------
     SubjectFolderError
-        The path is a file other than a .b3d file, or an output folder of addb
-        (:func:`solver.io.subject.output_folder_note`).
+        The path is a file other than a .b3d file, an output folder of addb
+        (:func:`solver.io.subject.output_folder_note`), or a folder without ``_subject.json``
+        (:func:`solver.io.subject.load_subject`'s message: a folder inside a dataset output
+        tree, or no subject folder at all), before the server starts.
     OutputFolderError
         ``--out`` of a subject is a folder its processing would refuse
         (:func:`solver.outputs.check_output_folder`: the subject folder or a folder above
@@ -152,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
     from solver.errors import SubjectFolderError
-    from solver.io.subject import output_folder_note
+    from solver.io.subject import SUBJECT_JSON, load_subject, output_folder_note
     from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
@@ -184,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
     note = output_folder_note(subject)
     if note is not None:  # refused here, on the terminal, not in a page that cannot load it
         raise SubjectFolderError(note, path=subject)
+    if not (subject / SUBJECT_JSON).is_file():  # nothing to review: the reader's message (a folder
+        load_subject(subject)  # inside an output tree, a dataset folder deeper than the search, none)
     paths = ReviewPaths.for_subject(subject, args.out)
     # processing and Reprocess write the output folder through this check: refused here, on
     # the terminal, rather than in the page once the server runs

@@ -32,10 +32,9 @@ from pathlib import Path, PurePosixPath
 
 from solver.errors import DatasetError, FileFormatError, counted, listed
 from solver.files import folders_to_search
-from solver.io.subject import SUBJECT_JSON, output_folder_note
+from solver.io.subject import SUBJECT_JSON, output_folder_note, output_tree_part_note
+from solver.outputs import SUMMARY_NAME
 
-#: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
-SUMMARY_NAME = "dataset_summary.json"
 #: Its HTML report, beside it (:mod:`solver.dataset.report`).
 REPORT_NAME = "dataset_report.html"
 
@@ -98,11 +97,12 @@ class DatasetScan:
         DatasetError
             There is none below ``root``; the message names the ``.b3d`` files met instead,
             which are not subject folders, and how to make them ones, or says that ``root`` is
-            an output folder of addb (:func:`solver.io.subject.output_folder_note`) or a
-            dataset run's output tree.
+            an output folder of addb (:func:`solver.io.subject.output_folder_note`), a
+            dataset run's output tree or a folder inside one
+            (:func:`~solver.io.subject.output_tree_part_note`).
         """
         if not self.subjects:
-            note = output_folder_note(root) or _output_tree_note(Path(root))
+            note = output_folder_note(root) or _output_tree_note(Path(root)) or output_tree_part_note(root)
             if note is not None:  # an output folder given as the dataset: say so, not "no subject folder"
                 raise DatasetError(note, path=Path(root).resolve())
             message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
@@ -145,15 +145,6 @@ def read_summary(out_dir: str | Path) -> dict:
     ):
         raise FileFormatError("expected a dataset summary of addb (its dataset folder and subjects, written by addb process DATASET_DIR)", path=path)
     return summary
-
-
-def output_tree_above(folder: str | Path) -> Path | None:
-    """The dataset run's output tree that ``folder`` lies inside (the nearest folder above it
-    holding :data:`SUMMARY_NAME`), or None."""
-    for parent in Path(folder).resolve().parents:
-        if (parent / SUMMARY_NAME).is_file():
-            return parent
-    return None
 
 
 def _output_tree_note(root: Path) -> str | None:

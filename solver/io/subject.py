@@ -31,7 +31,7 @@ from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
-from solver.outputs import output_marker
+from solver.outputs import output_marker, output_tree_above
 
 SUBJECT_JSON = "_subject.json"
 MODEL_FILE = "unscaled_generic.osim"
@@ -172,6 +172,23 @@ def output_folder_note(folder: str | Path, command: Sequence[str] | None = None)
     return f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder (the one with {SUBJECT_JSON}){where}"
 
 
+def output_tree_part_note(folder: str | Path) -> str | None:
+    """What to tell a user who gave a folder inside a dataset run's output tree (``OUT/labA``,
+    not itself a subject's output folder: :func:`output_folder_note` names those) where a
+    subject folder was expected; None for a folder with its own ``_subject.json`` or outside
+    any output tree (:func:`solver.outputs.output_tree_above`)."""
+    folder = Path(folder)
+    if (folder / SUBJECT_JSON).is_file() or output_marker(folder) is not None:
+        return None
+    tree = output_tree_above(folder)
+    if tree is None:
+        return None
+    return (
+        f"is a folder inside the dataset output tree {tree}, not a subject folder; expected a subject folder of the "
+        f"dataset (addb info {tree} names the dataset folder), or addb view {tree} to review its subjects"
+    )
+
+
 def dataset_folder_note(folder: str | Path, depth: int = 3) -> str | None:
     """What to tell a user who gave a dataset folder (subject folders below it, found up to
     ``depth`` levels down, entering the folders the dataset search enters:
@@ -207,8 +224,9 @@ def load_subject(path: str | Path) -> Subject:
     FileNotFoundError
         ``path`` does not exist.
     SubjectFolderError
-        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`)
-        or a dataset folder (:func:`dataset_folder_note`);
+        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`),
+        a folder inside a dataset output tree (:func:`output_tree_part_note`) or a dataset
+        folder (:func:`dataset_folder_note`);
         ``_subject.json`` missing, not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
         the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
@@ -221,7 +239,7 @@ def load_subject(path: str | Path) -> Subject:
         raise FileNotFoundError(2, "No such file or folder", str(folder))
     if not folder.is_dir():
         raise SubjectFolderError("expected a subject folder, found a file", path=folder)
-    note = output_folder_note(folder) or dataset_folder_note(folder)
+    note = output_folder_note(folder) or output_tree_part_note(folder) or dataset_folder_note(folder)
     if note is not None:
         raise SubjectFolderError(note, path=folder)
     raw = _read_json(folder / SUBJECT_JSON)

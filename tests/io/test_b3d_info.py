@@ -130,5 +130,6 @@ def test_a_damaged_file_in_a_folder_and_a_mixed_folder(capsys: pytest.CaptureFix
         (folder / rel / "_subject.json").write_text('{"massKg": 70, "heightM": 1.7}')
     assert main(["info", str(folder)]) == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"{folder}: dataset folder\n  1 subject, 1 of them unreadable;") and "addb_out" not in out
+    assert out.startswith(f"{folder}: dataset folder\n  1 subject, 1 of them unreadable;") and "\n  s1: cannot be read" in out
+    assert "addb_out/s1" not in out  # the default output folder is not searched
     assert "  left out: the dataset folder holds 2 .b3d files (a_good.b3d, b_cut.b3d), which a dataset run does not process" in out
