@@ -40,29 +40,21 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
         DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no
         processed subject.
     """
-    from solver.dataset.discover import SUMMARY_NAME, read_summary, scan_dataset
+    from solver.dataset.discover import SUMMARY_NAME, scan_dataset, tree_subjects
     from solver.errors import SubjectFolderError, counted, listed
-    from solver.outputs import output_marker, output_tree_above
     from solver.results import processed_trials
 
     p = Path(path)
-    tree, part = p, None
-    if not (p / SUMMARY_NAME).is_file() and p.is_dir() and not processed_trials(p) and output_marker(p) is None:
-        above = output_tree_above(p)  # a folder inside an output tree (OUT/labA): the subjects below it
-        if above is not None:
-            tree, part = above, p.resolve().relative_to(above).as_posix()
-    if (tree / SUMMARY_NAME).is_file():
-        rels = [s["rel"] for s in read_summary(tree)["subjects"] if part is None or s["rel"].startswith(f"{part}/")]
-        processed = {rel: bool(processed_trials(tree / rel)) for rel in rels}
-        entries: list[tuple[str, str | None]] = [(str(tree / rel), rel) for rel in rels if processed[rel]]
-        if not entries:
+    found = tree_subjects(p)
+    if found is not None:
+        if not found.processed:
             raise SubjectFolderError(
-                f"a {'folder of a ' if part else ''}dataset output tree without a processed subject "
-                "(every subject failed or was cancelled, or none is below it)", path=p)
-        if len(entries) < len(rels):
-            left = [rel for rel in rels if not processed[rel]]
-            print(f"addb benchmark: {p}: left out {counted(len(left), 'subject')} without processed trials ({listed(left, 3)})", file=sys.stderr)
-        return entries
+                "a dataset output tree (or a folder of one) without a processed subject (every subject failed or "
+                "was cancelled, or none is below it)", path=p)
+        if found.left_out:
+            print(f"addb benchmark: {p}: left out {counted(len(found.left_out), 'subject')} without processed trials "
+                  f"({listed(list(found.left_out), 3)})", file=sys.stderr)  # fmt: skip
+        return [(str(found.tree / rel), rel) for rel in found.processed]
     if not p.is_dir() or (p / "_subject.json").is_file() or processed_trials(p):
         return [(path, None)]
     scan = scan_dataset(p)

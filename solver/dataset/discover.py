@@ -147,6 +147,60 @@ def read_summary(out_dir: str | Path) -> dict:
     return summary
 
 
+@dataclass(frozen=True)
+class TreeSubjects:
+    """The subjects a dataset run's output tree, or a folder inside it, stands for
+    (:func:`tree_subjects`).
+
+    Attributes
+    ----------
+    tree
+        The output tree (it holds :data:`SUMMARY_NAME`).
+    processed
+        Relative paths (``labA/s01``) of the subjects its summary lists below the folder whose
+        output folder holds processed trials, in the summary's order.
+    left_out
+        Those listed there without processed trials (failed or cancelled).
+    part
+        The folder's path relative to ``tree`` (``labA``), None for the tree itself.
+    """
+
+    tree: Path
+    processed: tuple[str, ...]
+    left_out: tuple[str, ...]
+    part: str | None = None
+
+    def below_folder(self, rel: str) -> str:
+        """``rel`` relative to the folder given (``labA/s01`` -> ``s01`` for ``OUT/labA``)."""
+        return rel if self.part is None else rel[len(self.part) + 1 :]
+
+
+def tree_subjects(folder: str | Path) -> TreeSubjects | None:
+    """The subjects of ``folder`` when it is a dataset run's output tree (``OUT``: every subject
+    its summary lists) or a folder inside one that is not a subject's output folder
+    (``OUT/labA``: those below it); None for any other folder. ``addb benchmark`` and ``addb
+    export --format b3d`` take these.
+
+    Raises
+    ------
+    FileFormatError
+        The tree's summary is damaged (:func:`read_summary`).
+    """
+    from solver.outputs import output_marker, output_tree_above
+    from solver.results import processed_trials
+
+    p = Path(folder)
+    if (p / SUMMARY_NAME).is_file():
+        tree, part = p, None
+    elif p.is_dir() and output_marker(p) is None and not processed_trials(p) and (above := output_tree_above(p)) is not None:
+        tree, part = above, p.resolve().relative_to(above).as_posix()
+    else:
+        return None
+    rels = [s["rel"] for s in read_summary(tree)["subjects"] if part is None or s["rel"].startswith(f"{part}/")]
+    done = {rel: bool(processed_trials(tree / rel)) for rel in rels}
+    return TreeSubjects(tree, tuple(r for r in rels if done[r]), tuple(r for r in rels if not done[r]), part)
+
+
 def _output_tree_note(root: Path) -> str | None:
     """What to tell a user who gave a dataset run's output tree (it holds
     :data:`SUMMARY_NAME`) where the dataset folder was expected, naming the dataset folder

@@ -113,20 +113,32 @@ def test_reviewer_flags_become_manual_review(processed: Path, tmp_path: Path) ->
     assert "manualReview" not in reasons[:60] + reasons[64:]
 
 
-def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path) -> None:
+def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dataset output tree: one file per subject its summary lists with processed trials, in
+    the tree's layout; a failed subject is named as left out (it was left out silently); a
+    folder inside the tree (``OUT/lab_a``) stands for the subjects below it, laid out below it
+    (it was refused: "_subject.json is missing")."""
     tree = tmp_path / "tree"
     (tree / "lab_a").mkdir(parents=True)
     shutil.copytree(processed, tree / "lab_a" / "s01")
     shutil.copytree(processed, tree / "s02")
+    (tree / "lab_a" / "s03").mkdir()  # failed: no processed trial
     # a processed output inside a hidden cache (the diagnosis' judged fit) is not a subject
     shutil.copytree(processed, tree / "s02" / ".addb_cache" / "judged_fit" / "walk" / "out")
-    (tree / "dataset_summary.json").write_text(json.dumps({"subjects": 2}))
+    listed = [{"rel": "lab_a/s01", "status": "ok"}, {"rel": "lab_a/s03", "status": "failed"}, {"rel": "s02", "status": "ok"}]
+    (tree / "dataset_summary.json").write_text(json.dumps({"dataset": str(tmp_path / "dataset"), "subjects": listed}))
     dest = tmp_path / "b3d_out"
+    capsys.readouterr()
     assert main(["export", str(tree), "--format", "b3d", "-o", str(dest)]) == 0
+    assert f"addb export: {tree}: left out a subject without processed trials (lab_a/s03)" in capsys.readouterr().err
     written = sorted(str(p.relative_to(dest)) for p in dest.rglob("*.b3d"))
     assert written == ["lab_a/s01.b3d", "s02.b3d"]
     for p in dest.rglob("*.b3d"):
         assert len(open_b3d(p).header.trials) == 2
+    lab = tmp_path / "lab_out"
+    assert main(["export", str(tree / "lab_a"), "--format", "b3d", "-o", str(lab)]) == 0
+    assert sorted(str(p.relative_to(lab)) for p in lab.rglob("*.b3d")) == ["s01.b3d"]
+    assert (lab / "s01.b3d").read_bytes() == (dest / "lab_a" / "s01.b3d").read_bytes()
 
 
 def test_benchmark_reads_b3d_like_our_output(processed: Path, tmp_path: Path) -> None:
