@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME, read_summary
-from solver.dataset.summary import dataset_totals
+from solver.dataset.summary import dataset_totals, totals_by_source
 from solver.errors import FileFormatError, listed
 
 _CSS = """
@@ -131,7 +131,8 @@ def totals_rows(t: dict[str, Any]) -> list[tuple[str, str]]:
 
 def run_text(out_dir: str | Path) -> str:
     """A dataset run's output tree as text (``addb info OUT``): the dataset folder, when the
-    run ended, its wall time and workers, the totals (:func:`totals_rows`) and the report.
+    run ended, its wall time and workers, the totals (:func:`totals_rows`), one line per
+    source when there are several (:func:`source_rows`) and the report.
 
     Raises
     ------
@@ -149,6 +150,13 @@ def run_text(out_dir: str | Path) -> str:
     workers = f" on {n} worker{'s' if n != 1 else ''}" if isinstance(n, int) else ""
     lines = [f"{Path(out_dir)}: dataset output", f"  dataset run of {summary.get('dataset')}{when}{took}{workers}"]
     lines += [f"  {label}: {value}" for label, value in rows]
+    try:
+        by_source = source_rows(summary["subjects"])
+    except (KeyError, TypeError):
+        raise FileFormatError("expected a dataset summary with each subject's trials (written by addb process DATASET_DIR)", path=Path(out_dir) / SUMMARY_NAME) from None
+    if by_source:
+        lines.append(f"  by source ({'; '.join(SOURCE_HEAD[1:])}):")
+        lines += [f"    {r[0]}: {'; '.join(r[1:])}" for r in by_source]
     if (Path(out_dir) / REPORT_NAME).is_file():
         lines.append(f"  report: {Path(out_dir) / REPORT_NAME}")
     return "\n".join(lines)
@@ -188,6 +196,36 @@ def part_text(tree: str | Path, part: str) -> str | None:
     one = next((s["rel"] for s in below if s["status"] != "failed"), rels[0])
     lines.append(f"  addb info {tree} summarizes the whole run, addb info {Path(tree) / one} one subject")
     return "\n".join(lines)
+
+
+def source_rows(subjects: list[dict[str, Any]]) -> list[tuple[str, ...]]:
+    """One text row per source of the dataset (:func:`solver.dataset.summary.totals_by_source`):
+    source, subjects by status, trials (with dynamics), frames (with measured force), hours,
+    hours with measured force, clinical-grade share, median marker RMS (cm); none when every
+    subject comes from one source. Shared by the HTML report and ``addb info OUT``."""
+    by_source = totals_by_source(subjects)
+    if len(by_source) < 2:
+        return []
+    return [
+        (name, ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items())), f"{t['trials']} ({t['dynamics_trials']})",
+         f"{t['frames']} ({t['measured_frames']})", _num(t["hours"], "{:.4f}"), _num(t["hours_with_measured_force"], "{:.4f}"),
+         _num(t["clinical_grade_share"], "{:.1%}"), _num(t["marker_rms_median_m"], scale=100))
+        for name, t in by_source.items()
+    ]  # fmt: skip
+
+
+#: Column heads of :func:`source_rows`.
+SOURCE_HEAD = ("source", "subjects", "trials (with dynamics)", "frames (with measured force)", "hours",
+               "hours with measured force", "clinical-grade frames", "marker RMS median (cm)")  # fmt: skip
+
+
+def _sources_table(subjects: list[dict[str, Any]]) -> str:
+    rows = source_rows(subjects)
+    if not rows:
+        return ""
+    head = "".join(f'<th class="l">{_esc(h)}</th>' for h in SOURCE_HEAD)
+    body = "".join("<tr>" + f'<td class="l">{_esc(r[0])}</td>' + "".join(f"<td>{_esc(v)}</td>" for v in r[1:]) + "</tr>" for r in rows)
+    return f"<h2>By source (the first folder of each subject's path)</h2><table><tr>{head}</tr>{body}</table>"
 
 
 def _totals_table(t: dict[str, Any]) -> str:
@@ -274,7 +312,8 @@ def render_report(summary: dict[str, Any]) -> str:
         f"<h1>Dataset report</h1><p>{_esc(summary['dataset'])} &rarr; {_esc(summary['out'])}<br>"
         f"addb {_esc(summary['addb_version'])}, finished {_esc(summary['finished'])} "
         f"in {summary['seconds']:.1f} s</p>"
-        f"<h2>Totals</h2>{_totals_table(summary['totals'])}{_failures(summary['subjects'])}{_warnings(summary['subjects'])}"
+        f"<h2>Totals</h2>{_totals_table(summary['totals'])}{_sources_table(summary['subjects'])}"
+        f"{_failures(summary['subjects'])}{_warnings(summary['subjects'])}"
         f"<h2>Distributions</h2>{_figures(summary)}"
         f"<h2>Subjects and trials</h2>{_subject_table(summary['subjects'])}"
         "</body></html>\n"

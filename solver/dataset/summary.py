@@ -16,6 +16,9 @@ the dynamics fit trusts):
 * residual distributions: per-frame |residual force| / BW and |residual moment| / (BW·h)
   counted in the fixed bins :data:`RESIDUAL_BINS_BW` / :data:`RESIDUAL_BINS_BWH` (twenty bins
   up to the Hicks threshold, then one bin for every frame above it), so that subjects add up without keeping frames.
+* source: the first folder of a subject's path in the dataset (``labA`` of ``labA/s01``), the
+  lab or study it came from, as the paper's table of its 15 source datasets counts them
+  (:func:`totals_by_source`).
 """
 
 from __future__ import annotations
@@ -204,3 +207,29 @@ def dataset_totals(subjects: list[dict[str, Any]]) -> dict[str, Any]:
         "residual_moment_bins_BWh": list(RESIDUAL_BINS_BWH),
         "residual_moment_hist_BWh": _sum_hist(dyn, "residual_moment_hist_BWh", len(RESIDUAL_BINS_BWH)),
     }
+
+
+#: The source of a subject at the top of the dataset folder (no folder above it).
+TOP_LEVEL = "."
+
+
+def source_of(rel: str) -> str:
+    """The source (lab, study) of the subject at relative path ``rel``: its first folder
+    (``labA`` of ``labA/s01``), :data:`TOP_LEVEL` for a subject at the top of the dataset."""
+    return rel.split("/", 1)[0] if "/" in rel else TOP_LEVEL
+
+
+def totals_by_source(subjects: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """:func:`dataset_totals` of each source's subjects (:func:`source_of`), sources sorted by
+    name: the paper's per-dataset counts (subjects, trials, hours, hours with measured force).
+
+    Parameters
+    ----------
+    subjects
+        Entries of ``dataset_summary.json`` (each with its ``rel`` path), as for
+        :func:`dataset_totals`.
+    """
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for s in subjects:
+        groups.setdefault(source_of(s["rel"]), []).append(s)
+    return {name: dataset_totals(group) for name, group in sorted(groups.items())}

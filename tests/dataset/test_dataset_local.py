@@ -228,6 +228,20 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
     measured = sum(r.get("n_observed_frames", 0) for r in rows)
     assert f"  frames (with measured force): {sum(r['n_frames'] for r in rows)} ({measured})" in text, text
     assert "1 failed" in text and f"addb info {out} summarizes the whole run" in text
+    # the whole tree's "by source" lines (the paper's per-dataset table) equal each source's folder
+    assert cli(["info", str(out)]) == 0
+    whole = capsys.readouterr().out
+    for lab in ("labA", "labB"):
+        assert cli(["info", str(out / lab)]) == 0
+        part = dict(line.strip().split(": ", 1) for line in capsys.readouterr().out.splitlines()[2:-1])
+        (line,) = [x for x in whole.splitlines() if x.startswith(f"    {lab}: ")]
+        subjects, trials, frames, hours, hours_measured, clinical, rms = line.split(": ", 1)[1].split("; ")
+        assert subjects + f" ({len([r for r in [*FULL_TREE, BROKEN, KINEMATICS_ONLY] if r.startswith(lab)])} in all)" == part["subjects"]
+        assert (trials, frames, hours, hours_measured) == (part["trials (with dynamics)"], part["frames (with measured force)"],
+                                                           part["hours"], part["hours with measured force"])  # fmt: skip
+        assert clinical == part["clinical-grade frames (both Hicks thresholds met)"] and rms == part["marker RMS per trial, mean / median (cm)"].split(" / ")[1]
+    page = (out / "dataset_report.html").read_text()
+    assert "By source (the first folder of each subject" in page and page.count('<td class="l">labA</td>') == 1
 
 
 def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(

@@ -167,6 +167,12 @@ def test_report_escapes_names_and_lists_failures_with_file_and_line() -> None:
                           "totals": totals, "subjects": subjects})  # fmt: skip
     assert "lab&lt;A&gt;/s&amp;1" in page and "lab<A>" not in page
     assert "/d/markers.trc:7" in page and "Failures (1)" in page and "<svg" in page
+    # two sources (first folders): a row each, the source's name escaped too
+    assert '<td class="l">lab&lt;A&gt;</td><td>1 failed</td><td>0 (0)</td>' in page
+    assert '<td class="l">labA</td><td>1 kinematics_only</td><td>1 (0)</td><td>100 (0)</td>' in page
+    one = [dict(s, rel=s["rel"].replace("lab<A>", "labA")) for s in subjects]  # one source: no table
+    assert "By source" not in render_report({"dataset": "/d", "out": "/o", "addb_version": "x", "finished": "now",
+                                             "seconds": 1.0, "totals": dataset_totals(one), "subjects": one})  # fmt: skip
 
 
 def test_a_worker_killed_between_the_two_renames_loses_no_finished_output(tmp_path: Path) -> None:
