@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.errors import OutputFolderError, listed
+from solver.errors import FileFormatError, OutputFolderError, listed
 from solver.files import as_created
 
 CACHE_DIR = ".addb_cache"
@@ -70,6 +70,41 @@ def output_tree_above(folder: str | Path) -> Path | None:
         if (parent / SUMMARY_NAME).is_file():
             return parent
     return None
+
+
+def read_summary(out_dir: str | Path) -> dict:
+    """The summary a dataset run wrote at the top of its output tree ``out_dir``
+    (:data:`SUMMARY_NAME`, :func:`solver.dataset.runner.process_dataset`), read once for every
+    reader (``addb info``, ``addb benchmark``, the workbench's queue).
+
+    Returns
+    -------
+    dict
+        The summary as written: ``dataset`` (the dataset folder, str), ``subjects`` (a list of
+        dicts, each with its ``rel`` path below the tree, ``status`` and ``trials``),
+        ``totals`` and the run's time and workers.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``out_dir`` holds no summary.
+    FileFormatError
+        The summary is not valid JSON (with its line) or not a dataset summary of addb (no
+        ``subjects`` list of objects each with its ``rel`` path, no ``dataset`` folder).
+    """
+    path = Path(out_dir) / SUMMARY_NAME
+    try:
+        summary = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    subjects = summary.get("subjects") if isinstance(summary, dict) else None
+    if (
+        not isinstance(subjects, list)
+        or not all(isinstance(s, dict) and isinstance(s.get("rel"), str) for s in subjects)
+        or not isinstance(summary.get("dataset"), str)
+    ):
+        raise FileFormatError("expected a dataset summary of addb (its dataset folder and subjects, written by addb process DATASET_DIR)", path=path)
+    return summary
 
 
 def _clean(value: Any) -> Any:

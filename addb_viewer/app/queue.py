@@ -32,17 +32,11 @@ from typing import Any
 import numpy as np
 
 from addb_viewer.locations import annotations_path, cache_root
-from solver.dataset.discover import (
-    SUMMARY_NAME,
-    DatasetScan,
-    b3d_note,
-    loop_note,
-    read_summary,
-    scan_dataset,
-)
+from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
+from solver.outputs import SUMMARY_NAME, read_summary
 
 #: Output folder of a dataset inside a writable dataset folder.
 DATASET_OUTPUT_NAME = "addb_out"
@@ -175,7 +169,7 @@ def open_dataset(path: str | Path, out_dir: str | Path | None = None) -> OpenedD
     DatasetError
         A tree without any subject folder.
     FileFormatError
-        An output tree whose summary is damaged (:func:`solver.dataset.discover.read_summary`).
+        An output tree whose summary is damaged (:func:`solver.outputs.read_summary`).
     """
     p = Path(path).resolve()
     if (p / SUMMARY_NAME).is_file():

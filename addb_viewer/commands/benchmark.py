@@ -34,7 +34,7 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
     Raises
     ------
     FileFormatError
-        The output tree's summary is damaged (:func:`solver.dataset.discover.read_summary`).
+        The output tree's summary is damaged (:func:`solver.outputs.read_summary`).
     SubjectFolderError
         The argument is a dataset folder of subject folders (processed by ``addb process
         DATASET_DIR --out OUT``, whose output tree is what to give), or an output tree with no

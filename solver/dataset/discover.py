@@ -25,7 +25,6 @@ not processed and how to make them subject folders (``addb convert``).
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -33,7 +32,7 @@ from pathlib import Path, PurePosixPath
 from solver.errors import DatasetError, FileFormatError, counted, listed
 from solver.files import folders_to_search
 from solver.io.subject import SUBJECT_JSON, output_folder_note, output_tree_part_note
-from solver.outputs import SUMMARY_NAME
+from solver.outputs import SUMMARY_NAME, read_summary
 
 #: Its HTML report, beside it (:mod:`solver.dataset.report`).
 REPORT_NAME = "dataset_report.html"
@@ -112,41 +111,6 @@ class DatasetScan:
         return self.subjects
 
 
-def read_summary(out_dir: str | Path) -> dict:
-    """The summary a dataset run wrote at the top of its output tree ``out_dir``
-    (:data:`SUMMARY_NAME`, :func:`solver.dataset.runner.process_dataset`), read once for every
-    reader (``addb info``, ``addb benchmark``, the workbench's queue).
-
-    Returns
-    -------
-    dict
-        The summary as written: ``dataset`` (the dataset folder, str), ``subjects`` (a list of
-        dicts, each with its ``rel`` path below the tree, ``status`` and ``trials``),
-        ``totals`` and the run's time and workers.
-
-    Raises
-    ------
-    FileNotFoundError
-        ``out_dir`` holds no summary.
-    FileFormatError
-        The summary is not valid JSON (with its line) or not a dataset summary of addb (no
-        ``subjects`` list of objects each with its ``rel`` path, no ``dataset`` folder).
-    """
-    path = Path(out_dir) / SUMMARY_NAME
-    try:
-        summary = json.loads(path.read_bytes().decode("utf-8", errors="replace"))
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
-    subjects = summary.get("subjects") if isinstance(summary, dict) else None
-    if (
-        not isinstance(subjects, list)
-        or not all(isinstance(s, dict) and isinstance(s.get("rel"), str) for s in subjects)
-        or not isinstance(summary.get("dataset"), str)
-    ):
-        raise FileFormatError("expected a dataset summary of addb (its dataset folder and subjects, written by addb process DATASET_DIR)", path=path)
-    return summary
-
-
 @dataclass(frozen=True)
 class TreeSubjects:
     """The subjects a dataset run's output tree, or a folder inside it, stands for
@@ -184,7 +148,7 @@ def tree_subjects(folder: str | Path) -> TreeSubjects | None:
     Raises
     ------
     FileFormatError
-        The tree's summary is damaged (:func:`read_summary`).
+        The tree's summary is damaged (:func:`solver.outputs.read_summary`).
     """
     from solver.outputs import output_marker, output_tree_above
     from solver.results import processed_trials

@@ -18,16 +18,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.discover import (
-    SUMMARY_NAME,
-    DatasetScan,
-    b3d_note,
-    loop_note,
-    read_summary,
-    scan_dataset,
-)
+from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
 from solver.errors import AddbError, listed
 from solver.io.summary import summarize
+from solver.outputs import SUMMARY_NAME, read_summary
 
 
 def _seconds(trial: dict[str, Any]) -> float:
@@ -120,7 +114,7 @@ def dataset_inventory(
         ``root`` is not a folder or holds no subject folder (the message says what it is
         instead: an output folder, a folder of ``.b3d`` files).
     FileFormatError
-        The output tree's summary is damaged (:func:`solver.dataset.discover.read_summary`).
+        The output tree's summary is damaged (:func:`solver.outputs.read_summary`).
     """
     scan = scan_dataset(root) if scan is None else scan
     found = scan.require_subjects(root)

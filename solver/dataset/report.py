@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from solver.dataset.discover import REPORT_NAME, SUMMARY_NAME, read_summary
+from solver.dataset.discover import REPORT_NAME
 from solver.dataset.summary import dataset_totals, totals_by_source
 from solver.errors import FileFormatError, listed
+from solver.outputs import SUMMARY_NAME, read_summary
 
 _CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:24px;color:#222}
@@ -137,7 +138,7 @@ def run_text(out_dir: str | Path) -> str:
     Raises
     ------
     FileFormatError
-        ``dataset_summary.json`` is not a dataset summary (:func:`solver.dataset.discover.read_summary`) or has no totals.
+        ``dataset_summary.json`` is not a dataset summary (:func:`solver.outputs.read_summary`) or has no totals.
     """
     summary = read_summary(out_dir)
     try:
@@ -177,7 +178,7 @@ def part_text(tree: str | Path, part: str) -> str | None:
     Raises
     ------
     FileFormatError
-        ``dataset_summary.json`` is not a dataset summary (:func:`solver.dataset.discover.read_summary`).
+        ``dataset_summary.json`` is not a dataset summary (:func:`solver.outputs.read_summary`).
     """
     summary = read_summary(tree)
     below = [s for s in summary["subjects"] if s["rel"] == part or s["rel"].startswith(f"{part}/")]

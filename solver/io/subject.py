@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from solver.errors import SubjectFolderError, listed
+from solver.errors import FileFormatError, SubjectFolderError, listed
 from solver.files import folders_to_search
 from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
-from solver.outputs import output_marker, output_tree_above
+from solver.outputs import output_marker, output_tree_above, read_summary
 
 SUBJECT_JSON = "_subject.json"
 MODEL_FILE = "unscaled_generic.osim"
@@ -139,7 +139,8 @@ def output_folder_note(folder: str | Path, command: Sequence[str] | None = None)
     """What to tell a user who gave an output folder of addb where a subject folder was
     expected (its ``subject.json``, ``manifest.json`` or cache marks it,
     :func:`solver.outputs.output_marker`), naming its subject folder when that is the folder
-    above it (``<subject>/addb_out``); None for any other folder.
+    above it (``<subject>/addb_out``) or, for a subject of a dataset run's output tree, the
+    subject folder of the dataset its summary records; None for any other folder.
 
     The message reads "is an output folder of addb (it holds subject.json), not a subject
     folder; expected the subject folder (the one with _subject.json) ...", to follow the
@@ -159,17 +160,37 @@ def output_folder_note(folder: str | Path, command: Sequence[str] | None = None)
     marker = output_marker(folder)
     if marker is None or (folder / SUBJECT_JSON).is_file():
         return None
-    parent = folder.resolve().parent
-    known = (parent / SUBJECT_JSON).is_file()
+    subject = _subject_of_output(folder)
     if command is not None:
-        subject_dir = str(parent) if known else "SUBJECT_DIR"
+        subject_dir = str(subject) if subject is not None else "SUBJECT_DIR"
         line = shlex.join(["addb", *(subject_dir if a == "SUBJECT_DIR" else a for a in command), "--out", str(folder)])
         where = f", with this folder given as --out: {line}"
-    elif known:
-        where = f": here probably {parent}, with this folder given as --out"
+    elif subject is not None:
+        where = f": here probably {subject}, with this folder given as --out"
     else:
         where = ", with this folder given as --out"
     return f"is an output folder of addb (it holds {marker}), not a subject folder; expected the subject folder (the one with {SUBJECT_JSON}){where}"
+
+
+def _subject_of_output(folder: Path) -> Path | None:
+    """The subject folder an output folder was made from, when it can be told: the folder
+    above (``<subject>/addb_out``), or, for a subject's folder of a dataset run's output tree,
+    the dataset folder its summary records joined with the subject's path in the tree."""
+    parent = folder.resolve().parent
+    if (parent / SUBJECT_JSON).is_file():
+        return parent
+    tree = output_tree_above(folder)
+    if tree is None:
+        return None
+    try:
+        summary = read_summary(tree)
+    except (OSError, FileFormatError):
+        return None
+    rel = folder.resolve().relative_to(tree).as_posix()
+    if rel not in {s["rel"] for s in summary["subjects"]}:
+        return None
+    subject = Path(summary["dataset"]).joinpath(*rel.split("/"))
+    return subject if (subject / SUBJECT_JSON).is_file() else None
 
 
 def output_tree_part_note(folder: str | Path) -> str | None:

@@ -244,6 +244,22 @@ def test_info_summarizes_the_output_tree_and_each_subjects_output_folder(first_r
     assert "By source (the first folder of each subject" in page and page.count('<td class="l">labA</td>') == 1
 
 
+def test_a_subjects_output_folder_given_as_its_subject_names_its_subject_folder(first_run, tree: Path, capsys) -> None:
+    """``addb diagnose OUT/labA/s01`` (a dataset run's output, where the subject folder goes)
+    said "expected the subject folder ..., with this folder given as --out" without naming it;
+    the output tree's summary records the dataset folder, so the message names the subject
+    folder, and record/export's suggested command has it filled in."""
+    out = first_run[0]
+    rel = next(iter(FULL_TREE))
+    capsys.readouterr()
+    assert cli(["diagnose", str(out / rel), "--trial", "walk"]) == 1
+    assert f"(the one with _subject.json): here probably {(tree / rel).resolve()}, with this folder given as --out" in capsys.readouterr().err
+    assert cli(["record", str(out / rel), "--trial", "walk", "-o", str(out.parent / "walk.rrd")]) == 1
+    err = capsys.readouterr().err
+    assert f"given as --out: addb record {(tree / rel).resolve()} --trial walk -o {out.parent / 'walk.rrd'} --out {out / rel}" in err, err
+    assert not (out.parent / "walk.rrd").exists()
+
+
 def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
     first_run, tree: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

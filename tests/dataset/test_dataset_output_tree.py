@@ -174,12 +174,12 @@ def test_a_run_counts_subjects_processed_up_to_date_and_failed_apart(tmp_path: P
 def test_a_damaged_summary_is_named_by_every_reader(dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``dataset_summary.json`` is read by ``addb info``, ``addb benchmark``, the workbench's
     queue and the check of ``addb process OUT``; one reader
-    (:func:`solver.dataset.discover.read_summary`) serves them all. Cut short or rewritten by
+    (:func:`solver.outputs.read_summary`) serves them all. Cut short or rewritten by
     hand, it is named with its line (the workbench gave a traceback from the JSON parser) and
     the tree is still named as an output tree."""
     from addb_viewer.app.queue import open_dataset
-    from solver.dataset.discover import read_summary
     from solver.errors import FileFormatError
+    from solver.outputs import read_summary
 
     out = tmp_path / "out"
     for rel in LINKED:  # every subject fails alone: no cluster starts
