@@ -46,6 +46,10 @@ MANIFEST_NAME = "manifest.json"
 #: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
 SUMMARY_NAME = "dataset_summary.json"
 
+#: A trial's metrics in its output folder (``OUT/<trial>/results.json``, written by
+#: :func:`solver.pipeline.process_subject` beside the trial's ``trial.npz``).
+TRIAL_RESULTS = "results.json"
+
 #: Entries of which one marks a folder as an output of addb: :data:`SUBJECT_RECORD` (every
 #: subject output, kinematics only included), :data:`MANIFEST_NAME` (a dataset run's subject
 #: folder, also when the subject failed) or :data:`CACHE_DIR` (a folder the diagnosis'
@@ -70,6 +74,31 @@ def output_tree_above(folder: str | Path) -> Path | None:
         if (parent / SUMMARY_NAME).is_file():
             return parent
     return None
+
+
+def tree_part(folder: str | Path) -> tuple[Path, str] | None:
+    """Where ``folder`` lies in a dataset run's output tree when it is a folder inside one that
+    holds no output of its own (``OUT/labA``, a folder of subject outputs): ``(tree, rel)``,
+    ``rel`` its path below the tree with ``/`` separators (``"labA"``). None for a path that is
+    not a folder, the tree itself, a subject's output folder (:func:`output_marker`, or trial
+    outputs directly in it), a trial's output folder (:data:`TRIAL_RESULTS`) and any folder
+    outside an output tree (:func:`output_tree_above`). The one test behind ``addb info
+    OUT/labA``, ``addb benchmark`` and ``addb export`` of it, and the note the other commands
+    give (:func:`solver.io.subject.output_tree_part_note`)."""
+    from solver.results import processed_trials
+
+    p = Path(folder)
+    if not p.is_dir() or output_marker(p) is not None or (p / TRIAL_RESULTS).is_file() or processed_trials(p):
+        return None
+    tree = output_tree_above(p)
+    return None if tree is None else (tree, p.resolve().relative_to(tree).as_posix())
+
+
+def summary_subjects(summary: dict, below: str | None = None) -> list[dict]:
+    """The subject entries of a dataset run's summary (:func:`read_summary`), those below the
+    folder ``below`` when given: its path below the output tree (``"labA"``: ``labA/s01`` and
+    ``labA/x/s02``, not ``labAB/s03``; :func:`tree_part`)."""
+    return [s for s in summary["subjects"] if below is None or s["rel"].startswith(f"{below}/")]
 
 
 def read_summary(out_dir: str | Path) -> dict:

@@ -42,7 +42,14 @@ from solver.model.osim import OsimModel, read_osim
 from solver.model.osim_writer import write_osim
 from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
-from solver.outputs import CACHE_DIR, SUBJECT_RECORD, check_output_folder, staged_output, write_json
+from solver.outputs import (
+    CACHE_DIR,
+    SUBJECT_RECORD,
+    TRIAL_RESULTS,
+    check_output_folder,
+    staged_output,
+    write_json,
+)
 from solver.provenance import addb_version, code_digest
 from solver.results import PlateData, ProcessedTrial, save_processed
 from solver.sampling import frame_rate
@@ -295,7 +302,7 @@ def _process_kinematics(
                 "ik_trial": trial.seconds,
                 "kinematics_total": total,
             }
-            write_json(tmp / trial.name / "results.json", metrics)
+            write_json(tmp / trial.name / TRIAL_RESULTS, metrics)
             model_file = str(Path(out_dir).resolve() / model_name)
             save_processed(tmp / trial.name / "trial.npz", build_processed(sk, trial, model_path=model_file, metrics=metrics))
         write_subject_summary(tmp, sk, {"scaled_model": str(Path(scaled_model).resolve())} if scaled_model else None)
@@ -684,7 +691,7 @@ def _process_subject(
                 )
             seconds["total"] = time.perf_counter() - t0
             metrics["stage_seconds"] = seconds
-            write_json(folder / "results.json", metrics)
+            write_json(folder / TRIAL_RESULTS, metrics)
             save_processed(folder / "trial.npz", replace(processed, metrics=metrics))
         write_subject_summary(
             tmp,

@@ -59,16 +59,14 @@ def _output_tree_part(path: Path) -> str | None:
     subject's output folder (``OUT/labA``: :func:`solver.dataset.report.part_text`); None for
     any other path."""
     from solver.dataset.discover import is_subject_folder
-    from solver.outputs import output_marker, output_tree_above
+    from solver.outputs import tree_part
 
-    if not path.is_dir() or is_subject_folder(path) or output_marker(path) is not None or (path / "results.json").is_file():
-        return None
-    tree = output_tree_above(path)
-    if tree is None:
+    found = None if is_subject_folder(path) else tree_part(path)
+    if found is None:
         return None
     from solver.dataset.report import part_text
 
-    return part_text(tree, path.resolve().relative_to(tree).as_posix())
+    return part_text(*found)
 
 
 def _dataset_scan(path: Path):

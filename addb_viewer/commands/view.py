@@ -139,10 +139,9 @@ def run(args: argparse.Namespace) -> int:
     Raises
     ------
     SubjectFolderError
-        The path is a file other than a .b3d file, an output folder of addb
-        (:func:`solver.io.subject.output_folder_note`), or a folder without ``_subject.json``
-        (:func:`solver.io.subject.load_subject`'s message: a folder inside a dataset output
-        tree, or no subject folder at all), before the server starts.
+        The path is a file other than a .b3d file, or a folder without ``_subject.json``
+        (:func:`solver.io.subject.check_subject_folder`: an output folder of addb, a folder
+        inside a dataset output tree, or no subject folder at all), before the server starts.
     OutputFolderError
         ``--out`` of a subject is a folder its processing would refuse
         (:func:`solver.outputs.check_output_folder`: the subject folder or a folder above
@@ -154,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     from addb_viewer.app.queue import is_dataset
     from addb_viewer.app.server import ReviewApp
     from solver.errors import SubjectFolderError
-    from solver.io.subject import SUBJECT_JSON, load_subject, output_folder_note
+    from solver.io.subject import check_subject_folder
     from solver.outputs import check_output_folder
 
     subject = Path(args.subject) if args.subject else None
@@ -183,11 +182,7 @@ def run(args: argparse.Namespace) -> int:
     if not subject.is_dir():
         print(f"addb view: no such subject folder: {subject}", file=sys.stderr)
         return 1
-    note = output_folder_note(subject)
-    if note is not None:  # refused here, on the terminal, not in a page that cannot load it
-        raise SubjectFolderError(note, path=subject)
-    if not (subject / SUBJECT_JSON).is_file():  # nothing to review: the reader's message (a folder
-        load_subject(subject)  # inside an output tree, a dataset folder deeper than the search, none)
+    check_subject_folder(subject)  # refused here, on the terminal, not in a page that cannot load it
     paths = ReviewPaths.for_subject(subject, args.out)
     # processing and Reprocess write the output folder through this check: refused here, on
     # the terminal, rather than in the page once the server runs

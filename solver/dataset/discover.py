@@ -31,8 +31,13 @@ from pathlib import Path, PurePosixPath
 
 from solver.errors import DatasetError, FileFormatError, counted, listed
 from solver.files import folders_to_search
-from solver.io.subject import SUBJECT_JSON, output_folder_note, output_tree_part_note
-from solver.outputs import SUMMARY_NAME, read_summary
+from solver.io.subject import (
+    SUBJECT_JSON,
+    output_folder_note,
+    output_tree_part_note,
+    trial_output_note,
+)
+from solver.outputs import SUMMARY_NAME, read_summary, summary_subjects, tree_part
 
 #: Its HTML report, beside it (:mod:`solver.dataset.report`).
 REPORT_NAME = "dataset_report.html"
@@ -96,12 +101,12 @@ class DatasetScan:
         DatasetError
             There is none below ``root``; the message names the ``.b3d`` files met instead,
             which are not subject folders, and how to make them ones, or says that ``root`` is
-            an output folder of addb (:func:`solver.io.subject.output_folder_note`), a
-            dataset run's output tree or a folder inside one
-            (:func:`~solver.io.subject.output_tree_part_note`).
+            an output folder of addb (:func:`solver.io.subject.output_folder_note`), a trial's
+            (:func:`~solver.io.subject.trial_output_note`), a dataset run's output tree or a
+            folder inside one (:func:`~solver.io.subject.output_tree_part_note`).
         """
         if not self.subjects:
-            note = output_folder_note(root) or _output_tree_note(Path(root)) or output_tree_part_note(root)
+            note = output_folder_note(root) or trial_output_note(root) or _output_tree_note(Path(root)) or output_tree_part_note(root)
             if note is not None:  # an output folder given as the dataset: say so, not "no subject folder"
                 raise DatasetError(note, path=Path(root).resolve())
             message = f"no subject folder (a folder holding {SUBJECT_JSON}) below this folder"
@@ -150,17 +155,16 @@ def tree_subjects(folder: str | Path) -> TreeSubjects | None:
     FileFormatError
         The tree's summary is damaged (:func:`solver.outputs.read_summary`).
     """
-    from solver.outputs import output_marker, output_tree_above
     from solver.results import processed_trials
 
     p = Path(folder)
     if (p / SUMMARY_NAME).is_file():
         tree, part = p, None
-    elif p.is_dir() and output_marker(p) is None and not processed_trials(p) and (above := output_tree_above(p)) is not None:
-        tree, part = above, p.resolve().relative_to(above).as_posix()
+    elif (found := tree_part(p)) is not None:
+        tree, part = found
     else:
         return None
-    rels = [s["rel"] for s in read_summary(tree)["subjects"] if part is None or s["rel"].startswith(f"{part}/")]
+    rels = [s["rel"] for s in summary_subjects(read_summary(tree), part)]
     done = {rel: bool(processed_trials(tree / rel)) for rel in rels}
     return TreeSubjects(tree, tuple(r for r in rels if done[r]), tuple(r for r in rels if not done[r]), part)
 

@@ -134,19 +134,26 @@ def dataset_inventory(
         "hours": sum(s["seconds"] for s in readable) / 3600.0,
         "hours_with_force": sum(s["seconds_with_force"] for s in readable) / 3600.0,
     }
-    output = None
-    if output_tree is not None:
-        output = {"path": str(output_tree), "found": (Path(output_tree) / SUMMARY_NAME).is_file()}
-    if output is not None and output["found"]:
-        summary = read_summary(output_tree)
-        listed_rels = {s["rel"] for s in summary["subjects"]}
-        output.update(
-            finished=summary.get("finished"),
-            counts=_output_states(summary["subjects"]),
-            new=[s["rel"] for s in subjects if s["rel"] not in listed_rels],
-        )
     left_out = [n for n in (b3d_note(scan), loop_note(scan)) if n is not None]
-    return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": output}
+    return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": _output_entry(output_tree, subjects)}
+
+
+def _output_entry(output_tree: str | Path | None, subjects: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The ``output`` entry of :func:`dataset_inventory` (see there) for the inventory's
+    ``subjects``."""
+    if output_tree is None:
+        return None
+    if not (Path(output_tree) / SUMMARY_NAME).is_file():
+        return {"path": str(output_tree), "found": False}
+    summary = read_summary(output_tree)
+    listed_rels = {s["rel"] for s in summary["subjects"]}
+    return {
+        "path": str(output_tree),
+        "found": True,
+        "finished": summary.get("finished"),
+        "counts": _output_states(summary["subjects"]),
+        "new": [s["rel"] for s in subjects if s["rel"] not in listed_rels],
+    }
 
 
 def _count(n: int, noun: str) -> str:

@@ -10,6 +10,8 @@ table row per subject and trial.
 from __future__ import annotations
 
 import html
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +20,7 @@ import numpy as np
 from solver.dataset.discover import REPORT_NAME
 from solver.dataset.summary import dataset_totals, totals_by_source
 from solver.errors import FileFormatError, listed
-from solver.outputs import SUMMARY_NAME, read_summary
+from solver.outputs import SUMMARY_NAME, read_summary, summary_subjects
 
 _CSS = """
 body{font:14px/1.4 system-ui,sans-serif;margin:24px;color:#222}
@@ -107,6 +109,11 @@ def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int |
     return f"<figure>{svg}<figcaption>{_esc(title)}</figcaption></figure>"
 
 
+def _by_status(t: dict[str, Any]) -> str:
+    """The subjects of totals ``t`` counted by status (``"3 done, 1 failed"``)."""
+    return ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items()))
+
+
 def totals_rows(t: dict[str, Any]) -> list[tuple[str, str]]:
     """The dataset's totals as (label, value) text rows, in the paper's terms: subjects by
     status, trials and frames (with dynamics, with measured force), hours, the contact
@@ -115,7 +122,7 @@ def totals_rows(t: dict[str, Any]) -> list[tuple[str, str]]:
     (:func:`solver.dataset.summary.dataset_totals`). Shared by the HTML report and ``addb info``."""
     share = t.get("contact_share") or {}
     return [
-        ("subjects", ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items())) + f" ({t['n_subjects']} in all)"),
+        ("subjects", f"{_by_status(t)} ({t['n_subjects']} in all)"),
         ("trials (with dynamics)", f"{t['trials']} ({t['dynamics_trials']})"),
         ("frames (with measured force)", f"{t['frames']} ({t['measured_frames']})"),
         ("hours", _num(t["hours"], "{:.4f}")),
@@ -130,6 +137,17 @@ def totals_rows(t: dict[str, Any]) -> list[tuple[str, str]]:
     ]  # fmt: skip
 
 
+@contextmanager
+def _summary_read(tree: str | Path, what: str) -> Iterator[None]:
+    """Turn a missing key or a value of the wrong type met while reading the summary of the
+    output tree ``tree`` into a FileFormatError naming the file and ``what`` was expected
+    ("its totals", "each subject's trials")."""
+    try:
+        yield
+    except (KeyError, TypeError):
+        raise FileFormatError(f"expected a dataset summary with {what} (written by addb process DATASET_DIR)", path=Path(tree) / SUMMARY_NAME) from None
+
+
 def run_text(out_dir: str | Path) -> str:
     """A dataset run's output tree as text (``addb info OUT``): the dataset folder, when the
     run ended, its wall time and workers, the totals (:func:`totals_rows`), one line per
@@ -141,20 +159,16 @@ def run_text(out_dir: str | Path) -> str:
         ``dataset_summary.json`` is not a dataset summary (:func:`solver.outputs.read_summary`) or has no totals.
     """
     summary = read_summary(out_dir)
-    try:
+    with _summary_read(out_dir, "its totals"):
         rows = totals_rows(summary["totals"])
-    except (KeyError, TypeError):
-        raise FileFormatError("expected a dataset summary with its totals (written by addb process DATASET_DIR)", path=Path(out_dir) / SUMMARY_NAME) from None
     when = f", finished {summary['finished']}" if summary.get("finished") else ""
     took = f" in {summary['seconds']:.1f} s" if isinstance(summary.get("seconds"), (int, float)) else ""
     n = summary.get("workers")
     workers = f" on {n} worker{'s' if n != 1 else ''}" if isinstance(n, int) else ""
     lines = [f"{Path(out_dir)}: dataset output", f"  dataset run of {summary.get('dataset')}{when}{took}{workers}"]
     lines += [f"  {label}: {value}" for label, value in rows]
-    try:
+    with _summary_read(out_dir, "each subject's trials"):
         by_source = source_rows(summary["subjects"])
-    except (KeyError, TypeError):
-        raise FileFormatError("expected a dataset summary with each subject's trials (written by addb process DATASET_DIR)", path=Path(out_dir) / SUMMARY_NAME) from None
     if by_source:
         lines.append(f"  by source ({'; '.join(SOURCE_HEAD[1:])}):")
         lines += [f"    {r[0]}: {'; '.join(r[1:])}" for r in by_source]
@@ -181,13 +195,11 @@ def part_text(tree: str | Path, part: str) -> str | None:
         ``dataset_summary.json`` is not a dataset summary (:func:`solver.outputs.read_summary`).
     """
     summary = read_summary(tree)
-    below = [s for s in summary["subjects"] if s["rel"] == part or s["rel"].startswith(f"{part}/")]
+    below = summary_subjects(summary, part)
     if not below:
         return None
-    try:
+    with _summary_read(tree, "each subject's trials"):
         rows = totals_rows(dataset_totals(below))
-    except (KeyError, TypeError):
-        raise FileFormatError("expected a dataset summary with each subject's trials (written by addb process DATASET_DIR)", path=Path(tree) / SUMMARY_NAME) from None
     rels = [s["rel"] for s in below]
     lines = [
         f"{Path(tree) / part}: part of the dataset output tree {tree}",
@@ -208,7 +220,7 @@ def source_rows(subjects: list[dict[str, Any]]) -> list[tuple[str, ...]]:
     if len(by_source) < 2:
         return []
     return [
-        (name, ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items())), f"{t['trials']} ({t['dynamics_trials']})",
+        (name, _by_status(t), f"{t['trials']} ({t['dynamics_trials']})",
          f"{t['frames']} ({t['measured_frames']})", _num(t["hours"], "{:.4f}"), _num(t["hours_with_measured_force"], "{:.4f}"),
          _num(t["clinical_grade_share"], "{:.1%}"), _num(t["marker_rms_median_m"], scale=100))
         for name, t in by_source.items()

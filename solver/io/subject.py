@@ -31,7 +31,7 @@ from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
-from solver.outputs import output_marker, output_tree_above, read_summary
+from solver.outputs import TRIAL_RESULTS, output_marker, output_tree_above, read_summary, tree_part
 
 SUBJECT_JSON = "_subject.json"
 MODEL_FILE = "unscaled_generic.osim"
@@ -193,17 +193,33 @@ def _subject_of_output(folder: Path) -> Path | None:
     return subject if (subject / SUBJECT_JSON).is_file() else None
 
 
-def output_tree_part_note(folder: str | Path) -> str | None:
-    """What to tell a user who gave a folder inside a dataset run's output tree (``OUT/labA``,
-    not itself a subject's output folder: :func:`output_folder_note` names those) where a
-    subject folder was expected; None for a folder with its own ``_subject.json`` or outside
-    any output tree (:func:`solver.outputs.output_tree_above`)."""
+def trial_output_note(folder: str | Path) -> str | None:
+    """What to tell a user who gave a trial's output folder (``OUT/walk``: it holds
+    :data:`solver.outputs.TRIAL_RESULTS`) where a subject folder was expected, naming the
+    subject folder when the output folder above it tells it (:func:`output_folder_note`'s
+    rule); None for any other folder, and for one with its own ``_subject.json``."""
     folder = Path(folder)
-    if (folder / SUBJECT_JSON).is_file() or output_marker(folder) is not None:
+    if not (folder / TRIAL_RESULTS).is_file() or (folder / SUBJECT_JSON).is_file():
         return None
-    tree = output_tree_above(folder)
-    if tree is None:
+    out = folder.resolve().parent
+    subject = _subject_of_output(out)
+    where = f": here probably {subject}, with {out} given as --out" if subject is not None else f", with {out} given as --out"
+    return (
+        f"is the output folder of one trial (it holds {TRIAL_RESULTS}), not a subject folder; expected the subject "
+        f"folder (the one with {SUBJECT_JSON}){where}"
+    )
+
+
+def output_tree_part_note(folder: str | Path) -> str | None:
+    """What to tell a user who gave a folder inside a dataset run's output tree that is no
+    output of its own (``OUT/labA``, :func:`solver.outputs.tree_part`; :func:`output_folder_note`
+    and :func:`trial_output_note` name the others) where a subject folder was expected; None for
+    any other folder, and for one with its own ``_subject.json``."""
+    folder = Path(folder)
+    found = None if (folder / SUBJECT_JSON).is_file() else tree_part(folder)
+    if found is None:
         return None
+    tree = found[0]
     return (
         f"is a folder inside the dataset output tree {tree}, not a subject folder; expected a subject folder of the "
         f"dataset (addb info {tree} names the dataset folder), or addb view {tree} to review its subjects"
@@ -237,6 +253,27 @@ def dataset_folder_note(folder: str | Path, depth: int = 3) -> str | None:
     )
 
 
+def check_subject_folder(folder: str | Path) -> None:
+    """Refuse a folder given where a subject folder goes that holds no ``_subject.json``,
+    saying what it is instead. ``addb view`` calls it to refuse such a folder on the terminal
+    before its server starts; :func:`load_subject` calls it first.
+
+    Raises
+    ------
+    SubjectFolderError
+        Naming ``folder``: an output folder of addb (:func:`output_folder_note`), a trial's
+        (:func:`trial_output_note`), a folder inside a dataset output tree
+        (:func:`output_tree_part_note`) or a dataset folder (:func:`dataset_folder_note`);
+        naming ``_subject.json`` when none of these says more: it is missing.
+    """
+    folder = Path(folder)
+    note = output_folder_note(folder) or trial_output_note(folder) or output_tree_part_note(folder) or dataset_folder_note(folder)
+    if note is not None:
+        raise SubjectFolderError(note, path=folder)
+    if not (folder / SUBJECT_JSON).is_file():
+        raise SubjectFolderError(f"{SUBJECT_JSON} is missing; expected a JSON object with massKg and heightM", path=folder / SUBJECT_JSON)
+
+
 def load_subject(path: str | Path) -> Subject:
     """Read and check an AddBiomechanics subject folder (JSON, model, trial files).
 
@@ -245,10 +282,9 @@ def load_subject(path: str | Path) -> Subject:
     FileNotFoundError
         ``path`` does not exist.
     SubjectFolderError
-        ``path`` is not a folder; it is an output folder of addb (:func:`output_folder_note`),
-        a folder inside a dataset output tree (:func:`output_tree_part_note`) or a dataset
-        folder (:func:`dataset_folder_note`);
-        ``_subject.json`` missing, not valid JSON (with its
+        ``path`` is not a folder, or not a subject folder (:func:`check_subject_folder`:
+        an output folder of addb, a folder inside a dataset output tree, a dataset folder,
+        ``_subject.json`` missing); ``_subject.json`` not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
         the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
         unit error); a malformed ``heightM``, ``footBodyNames`` (or an empty list) or ``disableDynamics``;
@@ -260,9 +296,7 @@ def load_subject(path: str | Path) -> Subject:
         raise FileNotFoundError(2, "No such file or folder", str(folder))
     if not folder.is_dir():
         raise SubjectFolderError("expected a subject folder, found a file", path=folder)
-    note = output_folder_note(folder) or output_tree_part_note(folder) or dataset_folder_note(folder)
-    if note is not None:
-        raise SubjectFolderError(note, path=folder)
+    check_subject_folder(folder)
     raw = _read_json(folder / SUBJECT_JSON)
     json_path = folder / SUBJECT_JSON
     mass = _number(raw, "massKg", json_path, required=True, most=MOST_KG)
@@ -286,11 +320,7 @@ def load_subject(path: str | Path) -> Subject:
 
 
 def _read_json(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        raise SubjectFolderError(
-            f"{SUBJECT_JSON} is missing; expected a JSON object with massKg and heightM",
-            path=path,
-        )
+    """The subject's ``_subject.json`` (:func:`check_subject_folder` found it) as an object."""
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except UnicodeDecodeError:

@@ -30,7 +30,7 @@ from solver.io.subject import SUBJECT_JSON, load_subject, load_trial
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.masks import true_runs
-from solver.outputs import MANIFEST_NAME, SUBJECT_RECORD, output_marker
+from solver.outputs import MANIFEST_NAME, SUBJECT_RECORD, TRIAL_RESULTS, output_marker
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
@@ -88,8 +88,8 @@ def _dispatch(p: Path) -> dict[str, Any]:
             return _b3d_folder(p, b3d_files)
         if not (p / SUBJECT_JSON).exists() and output_marker(p) is not None:
             return _output(p)
-        if not (p / SUBJECT_JSON).exists() and (p / "results.json").is_file():
-            return _json(p / "results.json")  # a trial's output folder: its results
+        if not (p / SUBJECT_JSON).exists() and (p / TRIAL_RESULTS).is_file():
+            return _json(p / TRIAL_RESULTS)  # a trial's output folder: its results
         return _subject(p)  # a folder without _subject.json: the reader's error names it
     readers: dict[str, Callable[[Path], dict[str, Any]]] = {
         ".trc": _trc,
