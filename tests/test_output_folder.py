@@ -132,60 +132,37 @@ def test_a_recording_or_b3d_named_by_a_folder_is_refused_before_processing(argv:
     assert not out.exists() and list(folder.iterdir()) == []  # nothing processed, nothing written
 
 
+@pytest.mark.parametrize("given", ["subject output", "trial output"])
 @pytest.mark.parametrize(
     "argv",
     [["kinematics", "--out", "{other}"], ["process", "--out", "{other}"], ["diagnose", "--trial", "walk"], ["view", "--port", "0"]],
     ids=["kinematics", "process", "diagnose", "view"],
 )
 def test_an_output_folder_given_as_the_subject_is_named_as_one(
-    argv: list[str], subject: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    argv: list[str], given: str, subject: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A user gives ``addb_out`` where the subject folder goes. kinematics and diagnose said
-    "_subject.json is missing", process "no subject folder below this folder" (it took the
-    folder for a dataset), and view started a page that showed that error; each now says the
-    folder is an output of addb and names the subject folder above it, and writes nothing."""
+    """A user gives ``addb_out``, or a trial's output folder ``addb_out/walk``, where the
+    subject folder goes. kinematics and diagnose said "_subject.json is missing", process "no
+    subject folder below this folder" (it took the folder for a dataset), and view started a
+    page that showed that error (for ``addb_out``); each now says what output the folder is and
+    names the subject folder and the folder to give as --out, and writes nothing."""
     import addb_viewer.app.server
 
     out = subject / "addb_out"
     assert cli(["kinematics", str(subject), "--out", str(out)]) == 0
+    folder = out if given == "subject output" else out / "walk"
+    expected = {
+        "subject output": f"({out}): is an output folder of addb (it holds subject.json), not a subject folder; expected the "
+        f"subject folder (the one with _subject.json): here probably {subject}, with this folder given as --out",
+        "trial output": f"({folder}): is the output folder of one trial (it holds results.json), not a subject folder; expected "
+        f"the subject folder (the one with _subject.json): here probably {subject}, with {out} given as --out",
+    }[given]
     before = _tree(subject)
     monkeypatch.setattr(addb_viewer.app.server, "ReviewApp", lambda *a, **k: pytest.fail("addb view started the review app"))
     capsys.readouterr()
-    assert cli([argv[0], str(out), *(a.format(other=tmp_path / "other") for a in argv[1:])]) == 1
+    assert cli([argv[0], str(folder), *(a.format(other=tmp_path / "other") for a in argv[1:])]) == 1
     err = capsys.readouterr().err
-    assert (
-        f"({out}): is an output folder of addb (it holds subject.json), not a subject folder; expected the subject "
-        f"folder (the one with _subject.json): here probably {subject}, with this folder given as --out"
-    ) in err, err
-    assert "Traceback" not in err and _tree(subject) == before and not (tmp_path / "other").exists()
-
-
-@pytest.mark.parametrize(
-    "argv",
-    [["kinematics", "--out", "{other}"], ["process", "--out", "{other}"], ["diagnose", "--trial", "walk"], ["view", "--port", "0"]],
-    ids=["kinematics", "process", "diagnose", "view"],
-)
-def test_a_trial_output_folder_given_as_the_subject_is_named_as_one(
-    argv: list[str], subject: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A user gives a trial's output folder (``addb_out/walk``) where the subject folder goes:
-    the commands said "_subject.json is missing" (process: "no subject folder below this
-    folder"); each now says it is one trial's output and names the subject folder and the
-    output folder to give as --out, and writes nothing."""
-    import addb_viewer.app.server
-
-    out = subject / "addb_out"
-    assert cli(["kinematics", str(subject), "--out", str(out)]) == 0
-    trial = out / "walk"
-    before = _tree(subject)
-    monkeypatch.setattr(addb_viewer.app.server, "ReviewApp", lambda *a, **k: pytest.fail("addb view started the review app"))
-    capsys.readouterr()
-    assert cli([argv[0], str(trial), *(a.format(other=tmp_path / "other") for a in argv[1:])]) == 1
-    err = capsys.readouterr().err
-    assert (
-        f"({trial}): is the output folder of one trial (it holds results.json), not a subject folder; expected the "
-        f"subject folder (the one with _subject.json): here probably {subject}, with {out} given as --out"
-    ) in err, err
+    assert expected in err, err
     assert "Traceback" not in err and _tree(subject) == before and not (tmp_path / "other").exists()
 
 
