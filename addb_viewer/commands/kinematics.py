@@ -17,10 +17,12 @@ def run(args: argparse.Namespace) -> int:
     Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`).
     """
     from addb_viewer.progress import ProgressBar, table
+    from solver.dataset.lock import subject_output_lock
     from solver.pipeline import ProcessOptions, process_kinematics
 
     opts = ProcessOptions(trials=tuple(args.trial) if args.trial else None)
-    result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar(), scaled_model=args.model)
+    with subject_output_lock(args.out):  # not while a dataset run writes the tree --out lies in
+        result = process_kinematics(args.subject, args.out, options=opts, progress=ProgressBar(), scaled_model=args.model)
     rows = [
         [t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", f"{t.marker_max * 100:.2f}", t.worst_marker]
         for t in result.kinematics.trials

@@ -166,8 +166,11 @@ def run(args: argparse.Namespace) -> int:
 
         record = review_file(args.annotations)  # before anything is created
         unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
+    from solver.dataset.lock import subject_output_lock
+
     try:
-        result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+        with subject_output_lock(args.out):  # not while a dataset run writes the tree --out lies in
+            result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
     except DynamicsError as exc:
         raise with_kept_kinematics(exc, Path(args.out)) from None
     rows = []

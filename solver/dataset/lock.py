@@ -7,6 +7,11 @@ so the other's running subjects would fail, and a failure with unchanged inputs 
 again. :func:`output_tree_lock` takes an exclusive ``flock`` on ``OUT/.addb_run.lock`` for
 the run: the system releases it when the process ends, however it ends, so a crashed run
 leaves no stale lock. The file stays, naming the last run that held it.
+
+A one-subject run whose ``--out`` lies inside a dataset run's output tree (``addb process
+labA/s01 --out OUT/labA/s01``) replaces that subject's folder: it holds the same lock
+(:func:`subject_output_lock`), so that it does not write the folder while a dataset run
+works on the tree, nor a dataset run start while it does.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from solver.errors import DatasetError
+from solver.outputs import output_tree_above
 
 #: The lock file in the output tree (hidden: the dataset search and the exports skip it).
 LOCK_NAME = ".addb_run.lock"
@@ -62,3 +68,22 @@ def output_tree_lock(out_dir: str | Path) -> Iterator[None]:
         finally:
             if held:
                 fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@contextmanager
+def subject_output_lock(out_dir: str | Path) -> Iterator[Path | None]:
+    """Hold the dataset output tree that a one-subject run's output folder ``out_dir`` lies
+    in (:func:`solver.outputs.output_tree_above`) while the run writes it, yielding the tree;
+    yield None, holding nothing, when ``out_dir`` lies in no output tree.
+
+    Raises
+    ------
+    DatasetError
+        A dataset run (or another one-subject run) holds the tree (:func:`output_tree_lock`).
+    """
+    tree = output_tree_above(out_dir)
+    if tree is None:
+        yield None
+        return
+    with output_tree_lock(tree):
+        yield tree

@@ -230,3 +230,34 @@ def test_a_second_run_on_one_output_tree_is_refused_while_the_first_holds_it(tre
     holder.wait(timeout=30)
     with output_tree_lock(out):
         assert f"process {os.getpid()} on " in (out / LOCK_NAME).read_text()
+
+
+@pytest.mark.parametrize("command", ["process", "kinematics"])
+def test_a_one_subject_run_into_a_dataset_output_tree_holds_the_tree(command: str, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """``addb process labA/s01 --out OUT/labA/s01`` replaced the subject's folder of a dataset
+    run's output tree without the tree's lock, so it could write while a dataset run worked on
+    the tree. It now holds the lock: refused, writing nothing, while a run holds it; and while
+    it holds it, a dataset run is refused. Outside an output tree it holds nothing."""
+    import os
+
+    from addb_viewer.cli import main as cli
+    from solver.dataset.lock import LOCK_NAME, output_tree_lock, subject_output_lock
+    from solver.outputs import SUMMARY_NAME
+
+    out = tmp_path / "OUT"
+    out.mkdir()
+    (out / SUMMARY_NAME).write_text("{}")  # what marks an output tree
+    folder = out / "labA" / "s01"
+    with output_tree_lock(out):
+        assert cli([command, str(SUBJECTS / "rajagopal2016_walk"), "--out", str(folder)]) == 1
+        err = capsys.readouterr().err
+        assert f"DatasetError ({out}): another addb run is writing this output tree (process {os.getpid()} on " in err, err
+        assert "Traceback" not in err
+    assert sorted(p.name for p in out.iterdir()) == sorted([LOCK_NAME, SUMMARY_NAME])  # nothing written
+    with subject_output_lock(folder) as held:
+        assert held == out.resolve()
+        with pytest.raises(DatasetError, match="another addb run is writing this output tree"), output_tree_lock(out):
+            pass
+    with subject_output_lock(tmp_path / "elsewhere" / "s01") as held:
+        assert held is None
