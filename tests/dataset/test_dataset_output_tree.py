@@ -207,3 +207,40 @@ def test_a_damaged_summary_is_named_by_every_reader(dataset: Path, tmp_path: Pat
         open_dataset(out)
     assert cli(["benchmark", str(out)]) == 1
     assert "expected a dataset summary of addb" in capsys.readouterr().err
+
+
+def test_a_folder_inside_an_output_tree_is_told_from_the_outputs_in_it(tmp_path: Path) -> None:
+    """The one test behind ``addb info OUT/labA``, ``addb benchmark``/``export`` of it and the
+    subject reader's note (:func:`solver.outputs.tree_part`), on a tree laid out by hand: a
+    folder of subject outputs is a part of the tree, named by its path below it; the tree
+    itself, a subject's output folder (its manifest, or trial outputs in it), a trial's output
+    folder and a folder outside any tree are not. A part's subjects are those whose path is
+    below it, not those whose path only starts with its name (``labAB`` is not in ``labA``)."""
+    from solver.outputs import (
+        MANIFEST_NAME,
+        SUMMARY_NAME,
+        TRIAL_RESULTS,
+        summary_subjects,
+        tree_part,
+    )
+
+    out = tmp_path / "OUT"
+    rels = ["labA/s01", "labA/2024/s02", "labAB/s03", "s04"]
+    for rel in rels:
+        (out / rel / "walk").mkdir(parents=True)
+        (out / rel / MANIFEST_NAME).write_text("{}")
+        (out / rel / "walk" / TRIAL_RESULTS).write_text("{}")
+    (out / "s04" / MANIFEST_NAME).unlink()
+    (out / "s04" / "walk" / "trial.npz").write_bytes(b"")  # a subject's folder without its records: trial outputs in it
+    summary = {"dataset": str(tmp_path / "data"), "subjects": [{"rel": r, "status": "ok", "trials": []} for r in rels]}
+    (out / SUMMARY_NAME).write_text(json.dumps(summary))
+    (tmp_path / "elsewhere").mkdir()
+
+    assert tree_part(out / "labA") == (out.resolve(), "labA")
+    assert tree_part(out / "labA" / "2024") == (out.resolve(), "labA/2024")
+    not_parts = [out, out / "labA" / "s01", out / "s04", out / "labA" / "s01" / "walk", tmp_path / "elsewhere",
+                 out / "labA" / "missing", out / SUMMARY_NAME]  # fmt: skip
+    assert [tree_part(p) for p in not_parts] == [None] * len(not_parts)
+    assert [s["rel"] for s in summary_subjects(summary, "labA")] == ["labA/s01", "labA/2024/s02"]
+    assert [s["rel"] for s in summary_subjects(summary, "labA/2024")] == ["labA/2024/s02"]
+    assert [s["rel"] for s in summary_subjects(summary)] == rels
