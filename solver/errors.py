@@ -165,7 +165,8 @@ def listed(names: Sequence[str], limit: int, sep: str = ", ") -> str:
     return sep.join(names[:limit]) + (f" and {more} more" if more > 0 else "")
 
 
-def counted(n: int, noun: str) -> str:
-    """``n`` of ``noun`` for a message: "a .b3d file", "3 .b3d files" (``noun`` singular,
-    its plural made with an s)."""
-    return f"a {noun}" if n == 1 else f"{n} {noun}s"
+def counted(n: int, noun: str, *, figure: bool = False) -> str:
+    """``n`` of ``noun`` for a message: "a .b3d file", "3 .b3d files", "1,200 trials"
+    (``noun`` singular, its plural made with an s); with ``figure``, one is written as a
+    figure too ("1 trial"), as in a table of counts."""
+    return f"a {noun}" if n == 1 and not figure else f"{n:,} {noun}{'' if n == 1 else 's'}"

@@ -41,21 +41,16 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
         processed subject.
     """
     from solver.dataset.discover import SUMMARY_NAME, scan_dataset, tree_subjects
-    from solver.errors import SubjectFolderError, counted, listed
+    from solver.errors import SubjectFolderError, counted
+    from solver.io.subject import SUBJECT_JSON
     from solver.results import processed_trials
 
     p = Path(path)
     found = tree_subjects(p)
     if found is not None:
-        if not found.processed:
-            raise SubjectFolderError(
-                "a dataset output tree (or a folder of one) without a processed subject (every subject failed or "
-                "was cancelled, or none is below it)", path=p)
-        if found.left_out:
-            print(f"addb benchmark: {p}: left out {counted(len(found.left_out), 'subject')} without processed trials "
-                  f"({listed(list(found.left_out), 3)})", file=sys.stderr)  # fmt: skip
-        return [(str(found.tree / rel), rel) for rel in found.processed]
-    if not p.is_dir() or (p / "_subject.json").is_file() or processed_trials(p):
+        processed = found.require_processed(p, lambda line: print(f"addb benchmark: {p}: {line}", file=sys.stderr))
+        return [(str(found.tree / rel), rel) for rel in processed]
+    if not p.is_dir() or (p / SUBJECT_JSON).is_file() or processed_trials(p):
         return [(path, None)]
     scan = scan_dataset(p)
     if scan.subjects:
@@ -75,6 +70,7 @@ def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
     """(processed output folder, subject folder or None) of a command-line argument."""
     from addb_viewer.recording.jobs import ensure_processed
     from solver.errors import SubjectFolderError
+    from solver.io.subject import SUBJECT_JSON
     from solver.results import processed_trials
 
     p = Path(path)
@@ -84,7 +80,7 @@ def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
         raise SubjectFolderError("not a folder", path=p)
     if processed_trials(p):
         return p, None
-    if not (p / "_subject.json").is_file():
+    if not (p / SUBJECT_JSON).is_file():
         raise SubjectFolderError("neither a processed output folder nor a subject folder (no _subject.json)", path=p)
     return ensure_processed(p, progress=progress), p
 

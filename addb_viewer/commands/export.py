@@ -60,7 +60,7 @@ def _record_beside(out_dir: Path) -> tuple[Path | None, Path | None]:
 def export_b3d(args: argparse.Namespace) -> int:
     """``--format b3d``: a processed output folder, a subject folder, or a dataset output tree."""
     from solver.dataset.discover import tree_subjects
-    from solver.errors import SubjectFolderError, counted, listed
+    from solver.errors import counted
     from solver.io.b3d_convert import processed_to_b3d
     from solver.outputs import SUBJECT_RECORD
     from solver.results import processed_trials
@@ -69,19 +69,15 @@ def export_b3d(args: argparse.Namespace) -> int:
     output = Path(args.output)
     found = tree_subjects(src)
     if found is not None:  # a dataset output tree, or a folder of one: a .b3d file per processed subject
-        if not found.processed:
-            raise SubjectFolderError("a dataset output tree (or a folder of one) without a processed subject", path=src)
-        if found.left_out:
-            print(f"addb export: {src}: left out {counted(len(found.left_out), 'subject')} without processed trials "
-                  f"({listed(list(found.left_out), 3)})", file=sys.stderr)  # fmt: skip
-        for rel in found.processed:
+        processed = found.require_processed(src, lambda line: print(f"addb export: {src}: {line}", file=sys.stderr))
+        for rel in processed:
             out_dir = found.tree / rel
             target = output / Path(found.below_folder(rel)).parent / f"{out_dir.name}.b3d"  # the given folder's layout
             target.parent.mkdir(parents=True, exist_ok=True)
             subject_dir, record = _record_beside(out_dir)
             processed_to_b3d(out_dir, target, manual=_manual_masks(record, out_dir), subject_info=_subject_info(subject_dir))
             print(f"wrote {target} ({target.stat().st_size / 1e6:.1f} MB)")
-        print(f"{counted(len(found.processed), 'subject')} written under {output}")
+        print(f"{counted(len(processed), 'subject')} written under {output}")
         return 0
     if output.is_dir():
         from solver.errors import OutputFolderError

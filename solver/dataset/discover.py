@@ -26,10 +26,11 @@ not processed and how to make them subject folders (``addb convert``).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from solver.errors import DatasetError, FileFormatError, counted, listed
+from solver.errors import DatasetError, FileFormatError, SubjectFolderError, counted, listed
 from solver.files import folders_to_search
 from solver.io.subject import (
     SUBJECT_JSON,
@@ -142,6 +143,23 @@ class TreeSubjects:
     def below_folder(self, rel: str) -> str:
         """``rel`` relative to the folder given (``labA/s01`` -> ``s01`` for ``OUT/labA``)."""
         return rel if self.part is None else rel[len(self.part) + 1 :]
+
+    def require_processed(self, folder: str | Path, tell: Callable[[str], object]) -> tuple[str, ...]:
+        """:attr:`processed`, after passing ``tell`` the line naming the subjects left out
+        ("left out 2 subjects without processed trials (labA/s03, labB/p7)"), if any.
+
+        Raises
+        ------
+        SubjectFolderError
+            No subject below ``folder`` (the folder given) has processed trials.
+        """
+        if not self.processed:
+            raise SubjectFolderError(
+                "a dataset output tree (or a folder of one) without a processed subject (every subject failed or "
+                "was cancelled, or none is below it)", path=folder)  # fmt: skip
+        if self.left_out:
+            tell(f"left out {counted(len(self.left_out), 'subject')} without processed trials ({listed(list(self.left_out), 3)})")
+        return self.processed
 
 
 def tree_subjects(folder: str | Path) -> TreeSubjects | None:

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
-from solver.errors import AddbError, listed
+from solver.errors import AddbError, counted, listed
 from solver.io.summary import summarize
 from solver.outputs import SUMMARY_NAME, read_summary
 
@@ -156,17 +156,13 @@ def _output_entry(output_tree: str | Path | None, subjects: list[dict[str, Any]]
     }
 
 
-def _count(n: int, noun: str) -> str:
-    return f"{n:,} {noun}{'' if n == 1 else 's'}"
-
-
 def _subject_line(s: dict[str, Any]) -> list[str]:
     if "error" in s:
         return [f"  {s['rel']}: cannot be read: {s['error']}"]
     height = f"{s['height_m']:.4g} m" if s["height_m"] else "unknown height"
     force = f"{s['trials_with_force']} with force plates" if not s["disable_dynamics"] else "dynamics disabled"
     line = (
-        f"  {s['rel']}: {s['mass_kg']:.4g} kg, {height}; {_count(s['trials'], 'trial')} ({force}), "
+        f"  {s['rel']}: {s['mass_kg']:.4g} kg, {height}; {counted(s['trials'], 'trial', figure=True)} ({force}), "
         f"{s['frames']:,} frames, {s['seconds']:.1f} s"
     )
     return [line] + [f"    note: {n}" for n in s["notes"]]
@@ -181,7 +177,7 @@ def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_
     lines = [
         f"{d['path']}: dataset folder",
         (
-            f"  {_count(t['subjects'], 'subject')}{unreadable}; {_count(t['trials'], 'trial')} "
+            f"  {counted(t['subjects'], 'subject', figure=True)}{unreadable}; {counted(t['trials'], 'trial', figure=True)} "
             f"({t['trials_with_force']} with force plates), {t['frames']:,} frames, "
             f"{t['hours']:.4f} hours ({t['hours_with_force']:.4f} with force plates)"
         ),

@@ -110,7 +110,7 @@ def bar_chart(counts: list[float], labels: list[str], title: str, *, mark: int |
 
 
 def _by_status(t: dict[str, Any]) -> str:
-    """The subjects of totals ``t`` counted by status (``"3 done, 1 failed"``)."""
+    """The subjects of totals ``t`` counted by status, in the statuses' order by name (``"1 failed, 3 ok"``)."""
     return ", ".join(f"{v} {k}" for k, v in sorted(t["subjects"].items()))
 
 

@@ -369,7 +369,7 @@ def process_dataset(
     with output_tree_lock(out):  # one run per output tree: each removes the work folders it finds
         remove_stale_work(out)
         context = _Run(subjects, out, source, opts, t0)
-        results, jobs = _plan(subjects, out, opts, masks, review_digest)
+        results, jobs = _plan(context, masks, review_digest)
         notify = events or (lambda kind, data: None)
         notify("queued", {"rels": [j.rel for j in jobs]})
         total = len(subjects)
@@ -387,21 +387,19 @@ def process_dataset(
 
 
 def _plan(
-    subjects: Sequence[DatasetSubject],
-    out: Path,
-    opts: DatasetOptions,
+    run: _Run,
     masks: MaskLoader | None,
     review_digest: Callable[[str, str], str | None] | None,
 ) -> tuple[dict[str, dict[str, Any]], list[SubjectJob]]:
-    """What each subject needs: (outcomes known without running, keyed by relative path, and
+    """What each of the run's subjects needs: (outcomes known without running, keyed by relative path, and
     the jobs to run). A subject whose output folder holds another's files, or whose files or
     review record cannot be read, has failed; one whose manifest matches its inputs now is
-    skipped (or, if it failed with the same inputs, not run again) unless ``opts.force``."""
-    settings = {"addb_process": "default", **opts.settings}
+    skipped (or, if it failed with the same inputs, not run again) unless ``run.opts.force``."""
+    settings = {"addb_process": "default", **run.opts.settings}
     results: dict[str, dict[str, Any]] = {}
     jobs: list[SubjectJob] = []
-    for entry in subjects:
-        target = entry.out_dir(out)
+    for entry in run.subjects:
+        target = entry.out_dir(run.out)
         try:
             check_output_folder(target, (entry.path,))
         except OutputFolderError as exc:  # a folder of someone else's where the subject's output would go
@@ -416,7 +414,7 @@ def _plan(
         except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
             results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
             continue
-        stored = None if opts.force else current_manifest(target, key)
+        stored = None if run.opts.force else current_manifest(target, key)
         if stored is not None:
             stored.pop("key")
             if stored["status"] == "failed":  # the same inputs failed before: not run again

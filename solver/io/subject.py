@@ -267,11 +267,12 @@ def check_subject_folder(folder: str | Path) -> None:
         naming ``_subject.json`` when none of these says more: it is missing.
     """
     folder = Path(folder)
+    if (folder / SUBJECT_JSON).is_file():
+        return  # a subject folder: none of the notes applies
     note = output_folder_note(folder) or trial_output_note(folder) or output_tree_part_note(folder) or dataset_folder_note(folder)
     if note is not None:
         raise SubjectFolderError(note, path=folder)
-    if not (folder / SUBJECT_JSON).is_file():
-        raise SubjectFolderError(f"{SUBJECT_JSON} is missing; expected a JSON object with massKg and heightM", path=folder / SUBJECT_JSON)
+    raise SubjectFolderError(f"{SUBJECT_JSON} is missing; expected a JSON object with massKg and heightM", path=folder / SUBJECT_JSON)
 
 
 def load_subject(path: str | Path) -> Subject:
