@@ -20,6 +20,7 @@ import html
 import json
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -73,6 +74,12 @@ class ReprocessHost(Protocol):
         ...
     def set_trial_options(self, selected: str) -> None:
         """Fill the trial list with :attr:`trials` and select ``selected``."""
+        ...
+
+    def background_run(self) -> str | None:
+        """What a dataset's background run does to the subject shown: None (none goes),
+        "starting", "queued" (it processes this subject) or "other" (it holds the output tree
+        and goes on without this subject)."""
         ...
 
 
@@ -171,6 +178,7 @@ class Reprocessor:
         self.finished = threading.Event()
         self.pending_warning = SecondThought()  # Reprocess with pending proposals: (trial, pending frames)
         self._review: str | None | bool = False  # the flags' digest when the running Reprocess started
+        self._tree = ExitStack()  # the output tree held by the run going (_hold_output_tree)
         self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
@@ -329,6 +337,11 @@ class Reprocessor:
             p.reprocess.disabled = True
             p.job_status.content = f"{label}: starting…"
             p.comparison.content = ""
+            try:
+                self._tree = self._hold_output_tree()
+            except AddbError as exc:  # another run writes the output tree: nothing started
+                self._say(f"<span style='color:#c00'>**{html.escape(label)}: not started**</span>: {html.escape(str(exc), quote=False)}")
+                return
             self.finished.clear()
             self.job = SolverJob(
                 spec,
@@ -336,7 +349,42 @@ class Reprocessor:
                 on_progress=lambda m, f: self._progress(label, m, f),
                 on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work, kind=kind),
             )
-            self.job.start()
+            try:
+                self.job.start()
+            except BaseException:
+                self._tree.close()
+                raise
+
+    def _hold_output_tree(self) -> ExitStack:
+        """Hold, for a run about to start, the dataset output tree the subject's output folder
+        lies in, as ``addb process SUBJECT --out OUT/labA/s01`` does
+        (:func:`solver.dataset.lock.subject_output_lock`): the run does not write while another
+        addb run writes the tree, nor does a dataset run start into it meanwhile. Under this
+        server's own background run (``addb view DATASET_DIR``), whose lock is held in this
+        process, that run's lock stands for both, as long as the run does not process this
+        subject. Returns what to close when the run ends (holding nothing outside a tree).
+
+        Raises
+        ------
+        DatasetError
+            Another run holds the tree (the message names it), or this server's background run
+            processes this subject or has not yet said which subjects it processes.
+        """
+        from solver.dataset.lock import subject_output_lock
+        from solver.errors import DatasetError
+
+        out_dir = self.app.paths.out_dir
+        state = self.app.background_run()
+        if state == "queued":
+            raise DatasetError("the background processing has this subject queued (its inputs or review changed); "
+                               "wait until it is processed (the queue says when)", path=out_dir)  # fmt: skip
+        if state == "starting":
+            raise DatasetError("the background processing is starting; press again once the queue shows what it "
+                               "processes", path=out_dir)  # fmt: skip
+        hold = ExitStack()
+        if state is None:
+            hold.enter_context(subject_output_lock(out_dir))
+        return hold
 
     # ------------------------------------------------------------------ progress / end
     def _progress(self, label: str, message: str, fraction: float) -> None:
@@ -378,6 +426,7 @@ class Reprocessor:
         except Exception as exc:  # noqa: BLE001 - shown in the page
             app.show_error(f"{label}: could not use the result", exc)
         finally:
+            self._tree.close()  # the output tree, held since the run started
             p.progress.visible = False
             p.cancel.disabled = True
             p.cancel.visible = False

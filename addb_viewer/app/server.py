@@ -289,6 +289,12 @@ class ReviewApp:
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not reload the trial", exc)
 
+    def background_run(self) -> str | None:
+        """What the dataset queue's background run does to the subject shown
+        (:meth:`addb_viewer.app.workbench.Workbench.background_state`: None, "starting",
+        "queued" or "other"); None when no dataset is reviewed."""
+        return None if self.workbench is None else self.workbench.background_state(self.paths.out_dir)
+
     def _subject_label(self, paths: ReviewPaths) -> str:
         """A subject's name as the reviewer knows it: its place in the dataset queue
         (``labB/run``), else the .b3d file it was converted from (``results.b3d``; its

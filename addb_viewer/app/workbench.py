@@ -136,6 +136,7 @@ class Workbench:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self.processing_done = threading.Event()
+        self._planned = False  # whether the background run going has said which subjects it processes
         self._dataset_note: tuple[str | None, tuple[str, ...]] = (None, ())  # the .b3d files and loops left out (OpenedDataset.notes)
         self._run_notes: list[str] = []  # what the running background run told its user
         gui = app.server.gui
@@ -320,6 +321,10 @@ class Workbench:
             if not self.processing_done.is_set():
                 self.run_status.content = "Background processing is running already."
                 return False
+            if self.app.jobs.running:  # it could process the subject that run writes
+                self.run_status.content = "A solver run of the subject on screen is in progress; press again once it ends."
+                return False
+            self._planned = False
             self.processing_done.clear()
         self.run_status.content = "Background processing: starting…"
         try:
@@ -339,6 +344,7 @@ class Workbench:
             with self._lock:
                 if kind == "queued":
                     self.running.update(dict.fromkeys(data["rels"], "queued"))
+                    self._planned = True
                 elif kind == "done":
                     self.running.pop(data["rel"], None)
                 elif kind == "progress" and data.get("rel") in self.running:
@@ -393,6 +399,22 @@ class Workbench:
             self.processing_done.set()
             if not self._stop.is_set():
                 self.refresh()
+
+    def background_state(self, out_dir: str | Path) -> str | None:
+        """What this workbench's background run does to the subject whose output folder is
+        ``out_dir``: None when no run is going (nor the tree's lock held by one); "starting"
+        before the run has said which subjects it processes; "queued" when it processes this
+        one (queued or running); "other" when it goes on without it. A run going holds the
+        output tree's lock (:func:`solver.dataset.lock.output_tree_lock`) in this process, so
+        the page's own solver runs (:mod:`addb_viewer.app.reprocess`) ask here instead."""
+        target = Path(out_dir).resolve()
+        with self._lock:
+            if self.processing_done.is_set():
+                return None
+            if not self._planned:
+                return "starting"
+            rel = next((s.rel for s in self.subjects if Path(s.out_dir).resolve() == target), None)
+            return "queued" if rel in self.running else "other"
 
     def stop(self) -> None:
         """Cancel the background run (subjects not finished keep their old output)."""

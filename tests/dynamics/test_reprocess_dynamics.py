@@ -220,7 +220,8 @@ def test_app_reprocess_job_reruns_the_dynamics_only(
     panel = widget(trial=widget(value="walk"), progress=widget(value=0, visible=False), cancel=widget(disabled=True),
                    reprocess=widget(disabled=False), job_status=widget(content=""), comparison=widget(content=""))  # fmt: skip
     app = SimpleNamespace(paths=SimpleNamespace(subject_dir=subject, out_dir=out, jobs_dir=tmp_path / "jobs"),
-                          store=None, trial=None, trials=["static", "walk"], panel=panel)  # fmt: skip
+                          store=None, trial=None, trials=["static", "walk"], panel=panel,
+                          background_run=lambda: None)  # fmt: skip
     reprocess.Reprocessor(app).reprocess("walk")  # type: ignore[arg-type]
     assert len(specs) == 1 and specs[0].dynamics_only and specs[0].trials == ("walk",)
     reprocess.Reprocessor(app).process_subject()  # type: ignore[arg-type]

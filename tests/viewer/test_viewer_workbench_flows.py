@@ -247,3 +247,88 @@ def test_a_reprocess_keeps_the_dataset_manifest_current(dataset: Path, make_app)
     before = (out / "manifest.json").read_bytes()
     assert not mark_reprocessed(subject, out, digest)
     assert (out / "manifest.json").read_bytes() == before
+
+
+class _HeldJob:
+    """A solver job that runs until the test ends it (no child process): the page's run
+    state while it goes is what the test looks at."""
+
+    def __init__(self, spec: object, work: object, *, on_progress: object, on_done) -> None:
+        self.on_done, self.running = on_done, False
+
+    def start(self) -> None:
+        self.running = True
+
+    def end(self) -> None:
+        from addb_viewer.app.jobs import JobResult
+
+        self.running = False
+        self.on_done(JobResult("cancelled", None, 0.0))
+
+    def cancel(self) -> None:  # the app's stop
+        if self.running:
+            self.end()
+
+    def wait(self, timeout: float | None = None) -> None:
+        pass
+
+    def cleanup(self) -> None:
+        pass
+
+
+def _tree_free(tree: Path) -> bool:
+    from solver.dataset.lock import output_tree_lock
+    from solver.errors import DatasetError
+
+    try:
+        with output_tree_lock(tree):
+            return True
+    except DatasetError:
+        return False
+
+
+def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_app, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Reprocess (or diagnosis) from the page writes the subject's folder in the dataset's
+    output tree: it holds the tree's lock as ``addb process SUBJECT --out OUT/labA/s01`` does
+    (it wrote while another addb run could be writing the tree). Refused, with the holder
+    named and nothing started, while another run holds the tree; held while it goes (a
+    dataset run started meanwhile is refused, and so is "Process changed subjects"); freed
+    when it ends. Under the workbench's own background run (whose lock this process holds)
+    it starts unless that run processes the subject, or has not said yet what it processes."""
+    from addb_viewer.app import reprocess
+    from solver.dataset.lock import output_tree_lock
+
+    monkeypatch.setattr(reprocess, "SolverJob", _HeldJob)
+    app, bench = _bench(dataset, make_app)
+    tree = dataset / "addb_out"
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())  # no pending proposal to confirm
+    with output_tree_lock(tree):  # another run (its lock file names this process)
+        app.jobs.reprocess("walk")
+    status = app.panel.job_status.content
+    assert app.jobs.job is None and "Reprocessing walk: not started" in status, status
+    assert "another addb run is writing this output tree (process " in status, status
+
+    app.jobs.reprocess("walk")
+    job = app.jobs.job
+    assert job is not None and job.running and not _tree_free(tree)
+    bench.workers = 1  # "Process changed subjects" would process the subject this run writes
+    assert not bench.process_again() and "in progress" in bench.run_status.content, bench.run_status.content
+    job.end()
+    assert _tree_free(tree) and not app.jobs.running
+
+    # the workbench's own background run holds the tree in this process
+    with output_tree_lock(tree):
+        bench.processing_done.clear()
+        assert app.background_run() == "starting"
+        app.jobs.reprocess("walk")
+        assert "not started" in app.panel.job_status.content and "is starting" in app.panel.job_status.content
+        bench._planned, bench.running["labA/walk"] = True, "queued"
+        assert app.background_run() == "queued"
+        app.jobs.diagnose("walk")
+        assert "Diagnosing walk: not started" in app.panel.job_status.content and "has this subject queued" in app.panel.job_status.content
+        bench.running.clear()  # the run goes on with other subjects: its lock stands for the Reprocess
+        app.jobs.reprocess("walk")
+        assert app.jobs.job is not job and app.jobs.running, app.panel.job_status.content
+        app.jobs.job.end()
+        bench.processing_done.set()
+    assert _tree_free(tree)
