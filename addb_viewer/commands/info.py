@@ -14,7 +14,8 @@ def run(args: argparse.Namespace) -> int:
     its JSON files), a dataset run's (its totals, in the report's terms) or a folder inside one
     (the totals of the subjects below it), a trial's output folder (its results.json), or a dataset folder
     (its subjects, trials, frames and hours, what the search leaves out and the state of its
-    output tree at ``addb view``'s default place: :mod:`solver.dataset.inventory`).
+    output tree, ``--out`` or ``addb view``'s default place: what the run left, and which
+    subjects a new run processes again: :mod:`solver.dataset.inventory`).
 
     Returns
     -------
@@ -31,6 +32,12 @@ def run(args: argparse.Namespace) -> int:
         path = DEMO_SUBJECT
     from solver.dataset.discover import SUMMARY_NAME
 
+    scan = None if (Path(path) / SUMMARY_NAME).is_file() else _dataset_scan(Path(path))
+    if scan is None and getattr(args, "out", None):
+        from solver.errors import DatasetError
+
+        raise DatasetError("is not a dataset folder; --out names the output tree of a dataset folder, to compare its run "
+                           "with the dataset now (addb info OUT alone summarizes an output tree)", path=Path(path))  # fmt: skip
     if (Path(path) / SUMMARY_NAME).is_file():  # a dataset run's output tree
         from solver.dataset.report import run_text
 
@@ -40,14 +47,15 @@ def run(args: argparse.Namespace) -> int:
     if part is not None:
         print(part)
         return 0
-    scan = _dataset_scan(Path(path))
     if scan is not None:
         from addb_viewer.app.queue import dataset_output_dir
         from addb_viewer.progress import ProgressBar
+        from addb_viewer.review_masks import review_digest
         from solver.dataset.inventory import dataset_inventory, inventory_text
 
         bar = ProgressBar() if sys.stderr.isatty() else None  # every trial file is read: a while on a large dataset
-        inventory = dataset_inventory(path, dataset_output_dir(path), scan=scan, progress=bar)
+        tree = args.out if getattr(args, "out", None) else dataset_output_dir(path)
+        inventory = dataset_inventory(path, tree, scan=scan, progress=bar, review_digest=review_digest)
         print(inventory_text(inventory, "addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)"))
         return 0
     print(format_summary(summarize(path)))
@@ -92,4 +100,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "path", nargs="?",
         help="file, subject folder, folder of .b3d files, dataset folder or output folder (default: the bundled demo subject)",
     )
+    p.add_argument(
+        "--out", default=None, metavar="OUT",
+        help="for a dataset folder: its output tree (--out of addb process DATASET_DIR; default: where addb view "
+        "DATASET_DIR writes), whose run is compared with the dataset now",
+    )  # fmt: skip
     p.set_defaults(handler=run)

@@ -6,7 +6,9 @@ their trials, frames and hours in the terms of the AddBiomechanics Dataset paper
 al.: subjects, trials, hours, hours with force plates), each subject's mass and height, the
 subjects that cannot be read (named with their error, the others still listed), what the
 search leaves out (``.b3d`` files, symbolic-link loops), and the state of the dataset's
-output tree when it has one.
+output tree when it has one: what its run left, the subjects added since, and those whose
+files, review or addb's code changed since, which a new run processes again (the others it
+skips: the test of the run's manifests, :mod:`solver.dataset.manifest`).
 
 Frames with *measured* force are known only after the dynamics stage (its choice of frames);
 before it, the measure of force data is the trials recorded with force plates.
@@ -14,14 +16,15 @@ before it, the measure of force data is the trials recorded with force plates.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
+from solver.dataset.discover import DatasetScan, DatasetSubject, b3d_note, loop_note, scan_dataset
+from solver.dataset.manifest import key_changes, manifest_key, read_manifest, run_settings
 from solver.errors import AddbError, counted, listed
 from solver.io.summary import summarize
-from solver.outputs import SUMMARY_NAME, read_summary
+from solver.outputs import SUBJECT_RECORD, SUMMARY_NAME, read_summary
 
 
 def _seconds(trial: dict[str, Any]) -> float:
@@ -30,6 +33,10 @@ def _seconds(trial: dict[str, Any]) -> float:
     rate = trial.get("rate_hz")
     return trial["frames"] / rate if rate else float(trial.get("duration_s") or 0.0)
 
+
+#: Subjects changed since the output tree's run named one per line by :func:`inventory_text`
+#: (the others counted).
+CHANGED_SHOWN = 10
 
 #: What an output tree's subject folders hold, by the status its summary records (a subject
 #: skipped as up to date counts by the status of the output it kept).
@@ -74,6 +81,7 @@ def dataset_inventory(
     *,
     scan: DatasetScan | None = None,
     progress: Callable[[str, float], None] | None = None,
+    review_digest: Callable[[str, str], str | None] | None = None,
 ) -> dict[str, Any]:
     """The inventory of the dataset folder ``root``: every subject folder the dataset search
     finds, read as ``addb info SUBJECT_DIR`` reads it (:func:`solver.io.summary.summarize`:
@@ -91,6 +99,10 @@ def dataset_inventory(
     progress
         Called with (message, fraction of subjects read) before each subject and at the end:
         every trial file is read, which takes a while on a large dataset.
+    review_digest
+        ``(subject folder, output folder) -> digest`` of the reviewer's flags, as a dataset
+        run takes it (:func:`addb_viewer.review_masks.review_digest`; the solver package
+        reads no review record); None: the flags recorded by the run are taken as unchanged.
 
     Returns
     -------
@@ -105,8 +117,11 @@ def dataset_inventory(
         ``left_out`` (the dataset run's messages on ``.b3d`` files and link loops);
         ``output`` (None without ``output_tree``, else its ``path``, ``found`` (it holds a
         dataset run's summary) and, when found, ``finished``, subject ``counts`` by what their
-        folders hold (:data:`OUTPUT_STATES`) and ``new``: subjects found now that the run did
-        not list).
+        folders hold (:data:`OUTPUT_STATES`), ``new``: subjects found now that the run did
+        not list, ``changed``: those it listed that a new run (``addb process DATASET_DIR
+        --out OUT``, default options) processes again, in its order, each as ``rel`` and
+        ``changes`` (phrases of :func:`solver.dataset.manifest.key_changes`, or why there is
+        no record to compare with), and ``unchanged``: how many it would skip).
 
     Raises
     ------
@@ -135,24 +150,35 @@ def dataset_inventory(
         "hours_with_force": sum(s["seconds_with_force"] for s in readable) / 3600.0,
     }
     left_out = [n for n in (b3d_note(scan), loop_note(scan)) if n is not None]
-    return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": _output_entry(output_tree, subjects)}
+    output = _output_entry(output_tree, found, review_digest)
+    return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": output}
 
 
-def _output_entry(output_tree: str | Path | None, subjects: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The ``output`` entry of :func:`dataset_inventory` (see there) for the inventory's
-    ``subjects``."""
+def _output_entry(
+    output_tree: str | Path | None,
+    found: Sequence[DatasetSubject],
+    review_digest: Callable[[str, str], str | None] | None,
+) -> dict[str, Any] | None:
+    """The ``output`` entry of :func:`dataset_inventory` (see there) for the subject folders
+    ``found``."""
     if output_tree is None:
         return None
     if not (Path(output_tree) / SUMMARY_NAME).is_file():
         return {"path": str(output_tree), "found": False}
     summary = read_summary(output_tree)
     listed_rels = {s["rel"] for s in summary["subjects"]}
+    changed = []
+    for entry in found:
+        if entry.rel in listed_rels and (why := _changes(entry, Path(output_tree), review_digest)):
+            changed.append({"rel": entry.rel, "changes": why})
     return {
         "path": str(output_tree),
         "found": True,
         "finished": summary.get("finished"),
         "counts": _output_states(summary["subjects"]),
-        "new": [s["rel"] for s in subjects if s["rel"] not in listed_rels],
+        "new": [s.rel for s in found if s.rel not in listed_rels],
+        "changed": changed,
+        "unchanged": sum(1 for s in found if s.rel in listed_rels) - len(changed),
     }
 
 
@@ -166,6 +192,27 @@ def _subject_line(s: dict[str, Any]) -> list[str]:
         f"{s['frames']:,} frames, {s['seconds']:.1f} s"
     )
     return [line] + [f"    note: {n}" for n in s["notes"]]
+
+
+def _changes(entry: DatasetSubject, tree: Path, review_digest: Callable[[str, str], str | None] | None) -> list[str]:
+    """Why a new dataset run into ``tree`` would process the subject ``entry`` again, as
+    phrases; [] when it would skip it (its manifest's key is the key of its files now: the
+    test of :func:`solver.dataset.runner.process_dataset`, with default options)."""
+    target = entry.out_dir(tree)
+    stored = read_manifest(target)
+    if stored is None and (target / SUBJECT_RECORD).is_file():
+        return ["its output holds no record of the inputs it was made from (written by a one-subject run, addb process SUBJECT --out)"]
+    if stored is None or stored.get("status") not in ("ok", "kinematics_only", "failed"):
+        return ["no finished output (cancelled, or its worker died)"]
+    try:
+        review = review_digest(str(entry.path), str(target)) if review_digest else stored["key"].get("annotations")
+    except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
+        return [f"its review record cannot be read ({exc})"]
+    try:
+        now = manifest_key(entry.path, run_settings({}), review)
+    except OSError as exc:
+        return [f"its files cannot be read ({exc})"]
+    return key_changes(stored["key"], now)
 
 
 def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_DIR --out OUT") -> str:
@@ -197,4 +244,10 @@ def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_
         lines.append(f"  output tree: {out['path']} (a run{when}: {counts or 'no subject'}; addb info OUTPUT_TREE for its totals)")
         if out["new"]:
             lines.append(f"    not in that run: {listed(out['new'], 3)} (added since; a new run processes them)")
+        if out["changed"]:
+            lines.append(f"    changed since that run: {counted(len(out['changed']), 'subject', figure=True)} (a new run processes them again)")
+            lines += [f"      {c['rel']}: {'; '.join(c['changes'])}" for c in out["changed"][:CHANGED_SHOWN]]
+            if len(out["changed"]) > CHANGED_SHOWN:
+                lines.append(f"      and {len(out['changed']) - CHANGED_SHOWN} more")
+        lines.append(f"    up to date: {counted(out['unchanged'], 'subject', figure=True)} (a new run skips them)")
     return "\n".join(lines)

@@ -99,6 +99,39 @@ def manifest_key(subject_dir: str | Path, settings: dict[str, Any], review: str 
     }
 
 
+def run_settings(options: dict[str, Any]) -> dict[str, Any]:
+    """The ``settings`` of the key a dataset run keys its subjects on, for the run's
+    ``options`` (:attr:`solver.dataset.runner.DatasetOptions.settings`: ``{}`` for a plain
+    ``addb process DATASET_DIR --out OUT``)."""
+    return {"addb_process": "default", **options}
+
+
+def key_changes(stored: dict[str, Any], now: dict[str, Any], most: int = 3) -> list[str]:
+    """What differs between a manifest's stored ``key`` and the key of the subject now
+    (:func:`manifest_key`), as phrases for a user: "addb's code changed", "the settings
+    changed", "the review's flags changed", "trials/walk/markers.trc changed", "trials/run
+    added", "trials/old removed" (input files named up to ``most`` of a kind, then a count);
+    [] when the keys are equal (the output is up to date)."""
+    out = []
+    if any(stored.get(k) != now.get(k) for k in ("schema", "addb_version", "code")):
+        out.append("addb's code changed")
+    if stored.get("settings") != now.get("settings"):
+        out.append("the settings changed")
+    old, new = stored.get("inputs") or {}, now.get("inputs") or {}
+    kinds = (
+        ("changed", [f for f in new if f in old and old[f] != new[f]]),
+        ("added", [f for f in new if f not in old]),
+        ("removed", [f for f in old if f not in new]),
+    )
+    for kind, files in kinds:
+        if files:
+            named = ", ".join(files[:most]) + (f" and {len(files) - most} more files" if len(files) > most else "")
+            out.append(f"{named} {kind}")
+    if stored.get("annotations") != now.get("annotations"):
+        out.append("the review's flags changed")
+    return out
+
+
 def subject_status(rows: list[dict[str, Any]]) -> str:
     """A processed subject's manifest ``status`` from its trials' summary rows
     (:func:`solver.dataset.summary.subject_rows`).

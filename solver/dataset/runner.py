@@ -52,7 +52,7 @@ from solver.dataset.discover import (
     subjects_below,
 )
 from solver.dataset.lock import output_tree_lock
-from solver.dataset.manifest import current_manifest, manifest_key
+from solver.dataset.manifest import current_manifest, manifest_key, run_settings
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
     PROGRESS_TOPIC,
@@ -395,7 +395,7 @@ def _plan(
     the jobs to run). A subject whose output folder holds another's files, or whose files or
     review record cannot be read, has failed; one whose manifest matches its inputs now is
     skipped (or, if it failed with the same inputs, not run again) unless ``run.opts.force``."""
-    settings = {"addb_process": "default", **run.opts.settings}
+    settings = run_settings(run.opts.settings)
     results: dict[str, dict[str, Any]] = {}
     jobs: list[SubjectJob] = []
     for entry in run.subjects:

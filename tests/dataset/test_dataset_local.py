@@ -309,6 +309,56 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
         shutil.rmtree(tree / "labC")
 
 
+def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again(
+    first_run, tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``addb info DATASET_DIR --out OUT`` could not say which subjects changed since the run
+    (a dataset builder learnt it only by running). It compares each subject's files now with
+    its manifest: after a run every subject is up to date (the broken one too: the same
+    inputs are not run again); after an edit of one subject's ``_subject.json`` and a file
+    added to another, it names those two and what changed, and a run then processes exactly
+    those two again; a subject whose output a one-subject run replaced is named as such."""
+    out = first_run[0]
+    everyone = [*FULL_TREE, BROKEN, KINEMATICS_ONLY]
+
+    def info() -> str:
+        capsys.readouterr()
+        assert cli(["info", str(tree), "--out", str(out)]) == 0
+        return capsys.readouterr().out
+
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
+    text = info()
+    assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in text and "changed since" not in text, text
+    edited, added = list(FULL_TREE)[:2]
+    subject_json = tree / edited / "_subject.json"
+    original = subject_json.read_bytes()
+    try:
+        subject_json.write_bytes(original + b"\n")
+        (tree / added / "notes.txt").write_text("session notes")
+        text = info()
+        assert "    changed since that run: 2 subjects (a new run processes them again)\n" in text, text
+        lines = sorted([f"      {edited}: _subject.json changed\n", f"      {added}: notes.txt added\n"])  # the search's order
+        assert "".join(lines) in text, text
+        assert f"    up to date: {len(everyone) - 2} subjects (a new run skips them)" in text
+        assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+        status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+        assert {rel for rel, st in status.items() if st != "skipped"} == {edited, added, BROKEN}, status
+        assert status[BROKEN] == "failed" and status[edited] == status[added] == "ok"
+    finally:
+        subject_json.write_bytes(original)
+        (tree / added / "notes.txt").unlink(missing_ok=True)
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
+    assert f"    up to date: {len(everyone)} subjects" in info()
+    # a one-subject run into the tree writes no manifest: the next run processes the subject again
+    assert cli(["kinematics", str(tree / edited), "--out", str(out / edited)]) == 0
+    assert f"      {edited}: its output holds no record of the inputs it was made from (written by a one-subject run" in info()
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+    assert f"    up to date: {len(everyone)} subjects" in info()
+    for other in (tree / edited, out):  # --out belongs to a dataset folder
+        assert cli(["info", str(other), "--out", str(out)]) == 1
+        assert f"DatasetError ({other}): is not a dataset folder; --out names the output tree of a dataset folder" in capsys.readouterr().err
+
+
 def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_path(
     first_run, tree: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -103,6 +103,28 @@ def test_manifest_key_follows_the_inputs_and_only_them(tree: Path) -> None:
     assert len(input_files(subject)) == 5
 
 
+def test_key_changes_name_what_changed_between_two_keys(tree: Path) -> None:
+    """The phrases ``addb info DATASET_DIR`` prints for a subject a new run processes again,
+    from the keys of the subject's files before and after real edits."""
+    from solver.dataset.manifest import key_changes, run_settings
+
+    subject = tree / "labA" / "s01"
+    before = manifest_key(subject, run_settings({}))
+    assert key_changes(before, manifest_key(subject, run_settings({}))) == []
+    trc = subject / "trials" / "walk" / "markers.trc"
+    trc.write_bytes(trc.read_bytes() + b"\n")
+    (subject / "trials" / "walk" / "grf.mot").unlink()
+    (subject / "notes.txt").write_text("session notes")
+    now = manifest_key(subject, run_settings({"fit": "alternation"}), "digest")
+    assert key_changes(before, now) == [
+        "the settings changed", "trials/walk/markers.trc changed", "notes.txt added", "trials/walk/grf.mot removed",
+        "the review's flags changed",
+    ]  # fmt: skip
+    assert key_changes({**before, "code": "0" * 64}, before) == ["addb's code changed"]
+    many = {**before, "inputs": {f"trials/t{k}/markers.trc": "0" for k in range(5)}}
+    assert key_changes(before, many)[0] == "trials/t0/markers.trc, trials/t1/markers.trc, trials/t2/markers.trc and 2 more files added"
+
+
 def test_manifest_key_follows_the_solver_code(tmp_path: Path) -> None:
     # the version number stays 0.1.0 across commits: the key carries a digest of the solver
     # package's source, so a rerun after a code update processes the subjects again
