@@ -328,6 +328,11 @@ class Reprocessor:
             if self.running:
                 self._say("A solver run is already in progress; cancel it first.")
                 return
+            try:
+                self._tree = self._hold_output_tree()
+            except AddbError as exc:  # another run writes the output tree: nothing started, the panel as it was
+                self._say(f"<span style='color:#c00'>**{html.escape(label)}: not started**</span>: {html.escape(str(exc), quote=False)}")
+                return
             before = trial_summary(self.app.trial) if trial and self.app.trial is not None and self.app.trial.trial == trial else None
             p = self.app.panel
             p.progress.value = 0.0
@@ -337,11 +342,6 @@ class Reprocessor:
             p.reprocess.disabled = True
             p.job_status.content = f"{label}: starting…"
             p.comparison.content = ""
-            try:
-                self._tree = self._hold_output_tree()
-            except AddbError as exc:  # another run writes the output tree: nothing started
-                self._say(f"<span style='color:#c00'>**{html.escape(label)}: not started**</span>: {html.escape(str(exc), quote=False)}")
-                return
             self.finished.clear()
             self.job = SolverJob(
                 spec,

@@ -307,6 +307,7 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
     status = app.panel.job_status.content
     assert app.jobs.job is None and "Reprocessing walk: not started" in status, status
     assert "another addb run is writing this output tree (process " in status, status
+    assert not app.panel.reprocess.disabled and not app.panel.progress.visible and not app.panel.cancel.visible
 
     app.jobs.reprocess("walk")
     job = app.jobs.job
@@ -326,6 +327,7 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
         assert app.background_run() == "queued"
         app.jobs.diagnose("walk")
         assert "Diagnosing walk: not started" in app.panel.job_status.content and "has this subject queued" in app.panel.job_status.content
+        assert not app.panel.reprocess.disabled  # the page can try again
         bench.running.clear()  # the run goes on with other subjects: its lock stands for the Reprocess
         app.jobs.reprocess("walk")
         assert app.jobs.job is not job and app.jobs.running, app.panel.job_status.content
