@@ -244,3 +244,28 @@ def test_a_folder_inside_an_output_tree_is_told_from_the_outputs_in_it(tmp_path:
     assert [s["rel"] for s in summary_subjects(summary, "labA")] == ["labA/s01", "labA/2024/s02"]
     assert [s["rel"] for s in summary_subjects(summary, "labA/2024")] == ["labA/2024/s02"]
     assert [s["rel"] for s in summary_subjects(summary)] == rels
+
+
+@pytest.mark.slow
+def test_an_output_tree_without_a_processed_subject_is_refused_alike_by_benchmark_and_export(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``addb benchmark OUT`` and ``addb export OUT --format b3d`` of a run whose every subject
+    failed each refused in its own words (one of them without saying why there is none); both
+    now say the same (:meth:`solver.dataset.discover.TreeSubjects.require_processed`), for the
+    tree and for a folder of it, and write nothing."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    root = build_tree(tmp_path / "ds", {}, broken=True)
+    out = tmp_path / "OUT"
+    assert cli(["process", str(root), "--out", str(out), "--workers", "1"]) == 1  # its one subject fails
+    before = _files(tmp_path)
+    for folder in (out, out / BROKEN.split("/")[0]):
+        capsys.readouterr()
+        assert cli(["benchmark", str(folder), "-o", str(tmp_path / "bench")]) == 1
+        bench = capsys.readouterr().err
+        assert cli(["export", str(folder), "--format", "b3d", "-o", str(tmp_path / "b3d")]) == 1
+        export = capsys.readouterr().err
+        said = (f"({folder}): a dataset output tree (or a folder of one) without a processed subject (every subject "
+                "failed or was cancelled, or none is below it)")  # fmt: skip
+        assert said in bench and said in export and "Traceback" not in bench + export, (bench, export)
+    assert _files(tmp_path) == before
