@@ -9,6 +9,10 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+#: The ``--fit`` names of ``addb process`` and ``addb info``: :data:`solver.pipeline.FIT_CHOICES`,
+#: written out because the CLI does not import the pipeline at start-up (a test compares them).
+FIT_CHOICES = ("default", "converged", "rounds", "band")
+
 
 def whole_number(least: int) -> Callable[[str], int]:
     """An argparse ``type`` for a whole number of at least ``least``: ``--workers -1`` is refused

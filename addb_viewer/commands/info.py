@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from addb_viewer.commands import FIT_CHOICES
+
 
 def run(args: argparse.Namespace) -> int:
     """``addb info [PATH]``: print the summary of a lab file, model, .b3d file, subject folder,
@@ -15,7 +17,7 @@ def run(args: argparse.Namespace) -> int:
     (the totals of the subjects below it), a trial's output folder (its results.json), or a dataset folder
     (its subjects, trials, frames and hours, what the search leaves out and the state of its
     output tree, ``--out`` or ``addb view``'s default place: what the run left, and which
-    subjects a new run processes again: :mod:`solver.dataset.inventory`).
+    subjects a new run (with ``--fit``) processes again: :mod:`solver.dataset.inventory`).
 
     Returns
     -------
@@ -32,21 +34,18 @@ def run(args: argparse.Namespace) -> int:
         path = DEMO_SUBJECT
     from solver.dataset.discover import SUMMARY_NAME
 
-    scan = None if (Path(path) / SUMMARY_NAME).is_file() else _dataset_scan(Path(path))
-    if scan is None and getattr(args, "out", None):
-        from solver.errors import DatasetError
-
-        raise DatasetError("is not a dataset folder; --out names the output tree of a dataset folder, to compare its run "
-                           "with the dataset now (addb info OUT alone summarizes an output tree)", path=Path(path))  # fmt: skip
     if (Path(path) / SUMMARY_NAME).is_file():  # a dataset run's output tree
         from solver.dataset.report import run_text
 
+        _dataset_options_only(args, path)
         print(run_text(path))
         return 0
     part = _output_tree_part(Path(path))
     if part is not None:
+        _dataset_options_only(args, path)
         print(part)
         return 0
+    scan = _dataset_scan(Path(path))
     if scan is not None:
         from addb_viewer.app.queue import dataset_output_dir
         from addb_viewer.progress import ProgressBar
@@ -55,11 +54,31 @@ def run(args: argparse.Namespace) -> int:
 
         bar = ProgressBar() if sys.stderr.isatty() else None  # every trial file is read: a while on a large dataset
         tree = args.out if getattr(args, "out", None) else dataset_output_dir(path)
-        inventory = dataset_inventory(path, tree, scan=scan, progress=bar, review_digest=review_digest)
+        fit = getattr(args, "fit", "default")
+        settings = {"fit": fit} if fit != "default" else {}  # as addb process DATASET_DIR --fit records it
+        inventory = dataset_inventory(path, tree, scan=scan, progress=bar, review_digest=review_digest, settings=settings)
         print(inventory_text(inventory, "addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)"))
         return 0
+    _dataset_options_only(args, path)
     print(format_summary(summarize(path)))
     return 0
+
+
+def _dataset_options_only(args: argparse.Namespace, path: str | Path) -> None:
+    """Refuse ``--out`` and ``--fit`` for a path that is not a dataset folder.
+
+    Raises
+    ------
+    DatasetError
+        Naming ``path`` and what the options are for.
+    """
+    given = [f"--{name}" for name, unset in (("out", None), ("fit", "default")) if getattr(args, name, unset) != unset]
+    if given:
+        from solver.errors import DatasetError
+
+        raise DatasetError(f"is not a dataset folder; {' and '.join(given)} of addb info {'apply' if len(given) > 1 else 'applies'} "
+                           "only to a dataset folder (they name its output tree and the run to compare it with; addb "
+                           "info OUT alone summarizes an output tree)", path=Path(path))  # fmt: skip
 
 
 def _output_tree_part(path: Path) -> str | None:
@@ -104,5 +123,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out", default=None, metavar="OUT",
         help="for a dataset folder: its output tree (--out of addb process DATASET_DIR; default: where addb view "
         "DATASET_DIR writes), whose run is compared with the dataset now",
+    )  # fmt: skip
+    p.add_argument(
+        "--fit", choices=FIT_CHOICES, default="default",
+        help="for a dataset folder: the --fit of the new run to compare its output tree with (a run with another fit "
+        "processes every subject again; default: default)",
     )  # fmt: skip
     p.set_defaults(handler=run)

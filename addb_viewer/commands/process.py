@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-from addb_viewer.commands import memory_size, whole_number
+from addb_viewer.commands import FIT_CHOICES, memory_size, whole_number
 
 
 def run_dataset(args: argparse.Namespace) -> int:
@@ -214,7 +214,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output folder: new, empty, or an earlier output of addb (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
-        "--fit", choices=("default", "converged", "rounds", "band"), default="default",  # solver.pipeline.FIT_CHOICES, not imported at start-up
+        "--fit", choices=FIT_CHOICES, default="default",
         help="dynamics fit: 'default' = 'converged' (exact banded Gauss-Newton steps of the coordinates and the "
              "body mass factors together until the cost settles), 'rounds' (the same steps alternating with "
              "mass solves; the fit addb diagnose judges on) or 'band' (truncated-band steps, a fixed number of "

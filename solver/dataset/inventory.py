@@ -21,7 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from solver.dataset.discover import DatasetScan, DatasetSubject, b3d_note, loop_note, scan_dataset
-from solver.dataset.manifest import key_changes, manifest_key, read_manifest, run_settings
+from solver.dataset.manifest import (
+    KeyUnreadable,
+    finished_manifest,
+    key_changes,
+    run_settings,
+    subject_key_now,
+)
 from solver.errors import AddbError, counted, listed
 from solver.io.summary import summarize
 from solver.outputs import SUBJECT_RECORD, SUMMARY_NAME, read_summary
@@ -82,6 +88,7 @@ def dataset_inventory(
     scan: DatasetScan | None = None,
     progress: Callable[[str, float], None] | None = None,
     review_digest: Callable[[str, str], str | None] | None = None,
+    settings: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The inventory of the dataset folder ``root``: every subject folder the dataset search
     finds, read as ``addb info SUBJECT_DIR`` reads it (:func:`solver.io.summary.summarize`:
@@ -103,6 +110,10 @@ def dataset_inventory(
         ``(subject folder, output folder) -> digest`` of the reviewer's flags, as a dataset
         run takes it (:func:`addb_viewer.review_masks.review_digest`; the solver package
         reads no review record); None: the flags recorded by the run are taken as unchanged.
+    settings
+        The options of the new run the output tree is compared with
+        (:attr:`solver.dataset.runner.DatasetOptions.settings`: ``{"fit": "band"}`` for
+        ``addb process DATASET_DIR --out OUT --fit band``); None: a plain run's, ``{}``.
 
     Returns
     -------
@@ -119,7 +130,7 @@ def dataset_inventory(
         dataset run's summary) and, when found, ``finished``, subject ``counts`` by what their
         folders hold (:data:`OUTPUT_STATES`), ``new``: subjects found now that the run did
         not list, ``changed``: those it listed that a new run (``addb process DATASET_DIR
-        --out OUT``, default options) processes again, in its order, each as ``rel`` and
+        --out OUT`` with ``settings``) processes again, in its order, each as ``rel`` and
         ``changes`` (phrases of :func:`solver.dataset.manifest.key_changes`, or why there is
         no record to compare with), and ``unchanged``: how many it would skip).
 
@@ -150,7 +161,7 @@ def dataset_inventory(
         "hours_with_force": sum(s["seconds_with_force"] for s in readable) / 3600.0,
     }
     left_out = [n for n in (b3d_note(scan), loop_note(scan)) if n is not None]
-    output = _output_entry(output_tree, found, review_digest)
+    output = _output_entry(output_tree, found, review_digest, run_settings(settings or {}))
     return {"kind": "dataset", "path": str(root), "subjects": subjects, "totals": totals, "left_out": left_out, "output": output}
 
 
@@ -158,9 +169,10 @@ def _output_entry(
     output_tree: str | Path | None,
     found: Sequence[DatasetSubject],
     review_digest: Callable[[str, str], str | None] | None,
+    settings: dict[str, Any],
 ) -> dict[str, Any] | None:
     """The ``output`` entry of :func:`dataset_inventory` (see there) for the subject folders
-    ``found``."""
+    ``found`` and a new run's key ``settings`` (:func:`solver.dataset.manifest.run_settings`)."""
     if output_tree is None:
         return None
     if not (Path(output_tree) / SUMMARY_NAME).is_file():
@@ -169,7 +181,7 @@ def _output_entry(
     listed_rels = {s["rel"] for s in summary["subjects"]}
     changed = []
     for entry in found:
-        if entry.rel in listed_rels and (why := _changes(entry, Path(output_tree), review_digest)):
+        if entry.rel in listed_rels and (why := _changes(entry, Path(output_tree), review_digest, settings)):
             changed.append({"rel": entry.rel, "changes": why})
     return {
         "path": str(output_tree),
@@ -194,24 +206,26 @@ def _subject_line(s: dict[str, Any]) -> list[str]:
     return [line] + [f"    note: {n}" for n in s["notes"]]
 
 
-def _changes(entry: DatasetSubject, tree: Path, review_digest: Callable[[str, str], str | None] | None) -> list[str]:
-    """Why a new dataset run into ``tree`` would process the subject ``entry`` again, as
-    phrases; [] when it would skip it (its manifest's key is the key of its files now: the
-    test of :func:`solver.dataset.runner.process_dataset`, with default options)."""
+def _changes(
+    entry: DatasetSubject,
+    tree: Path,
+    review_digest: Callable[[str, str], str | None] | None,
+    settings: dict[str, Any],
+) -> list[str]:
+    """Why a new dataset run into ``tree`` with the key ``settings`` would process the
+    subject ``entry`` again, as phrases; [] when it would skip it (the run's own test:
+    :func:`solver.dataset.manifest.subject_key_now` against the finished manifest)."""
     target = entry.out_dir(tree)
-    stored = read_manifest(target)
+    stored = finished_manifest(target)
     if stored is None and (target / SUBJECT_RECORD).is_file():
         return ["its output holds no record of the inputs it was made from (written by a one-subject run, addb process SUBJECT --out)"]
-    if stored is None or stored.get("status") not in ("ok", "kinematics_only", "failed"):
+    if stored is None:
         return ["no finished output (cancelled, or its worker died)"]
+    kept = stored["key"].get("annotations")
     try:
-        review = review_digest(str(entry.path), str(target)) if review_digest else stored["key"].get("annotations")
-    except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
-        return [f"its review record cannot be read ({exc})"]
-    try:
-        now = manifest_key(entry.path, run_settings({}), review)
-    except OSError as exc:
-        return [f"its files cannot be read ({exc})"]
+        now = subject_key_now(entry.path, target, settings, review_digest or (lambda subject, out: kept))
+    except KeyUnreadable as exc:
+        return [str(exc)]
     return key_changes(stored["key"], now)
 
 
@@ -236,18 +250,24 @@ def inventory_text(d: dict[str, Any], command_hint: str = "addb process DATASET_
     if out is None or not out["found"]:
         where = f"none at {out['path']}" if out is not None else "none given"
         lines.append(
-            f"  output tree: {where}; {command_hint} processes every subject (addb info OUT summarizes a run's output tree)"
+            f"  output tree: {where}; {command_hint} processes every subject (then addb info OUT summarizes the run, "
+            "and addb info DATASET_DIR --out OUT names the subjects a new run processes again)"
         )
     else:
         counts = ", ".join(f"{n} {status}" for status, n in out["counts"].items() if n)
         when = f" finished {out['finished']}" if out["finished"] else ""
         lines.append(f"  output tree: {out['path']} (a run{when}: {counts or 'no subject'}; addb info OUTPUT_TREE for its totals)")
         if out["new"]:
-            lines.append(f"    not in that run: {listed(out['new'], 3)} (added since; a new run processes them)")
+            lines.append(f"    not in that run: {listed(out['new'], 3)} (added since; a new run processes {_them(len(out['new']))})")
         if out["changed"]:
-            lines.append(f"    changed since that run: {counted(len(out['changed']), 'subject', figure=True)} (a new run processes them again)")
+            n = len(out["changed"])
+            lines.append(f"    changed since that run: {counted(n, 'subject', figure=True)} (a new run processes {_them(n)} again)")
             lines += [f"      {c['rel']}: {'; '.join(c['changes'])}" for c in out["changed"][:CHANGED_SHOWN]]
             if len(out["changed"]) > CHANGED_SHOWN:
                 lines.append(f"      and {len(out['changed']) - CHANGED_SHOWN} more")
-        lines.append(f"    up to date: {counted(out['unchanged'], 'subject', figure=True)} (a new run skips them)")
+        lines.append(f"    up to date: {counted(out['unchanged'], 'subject', figure=True)} (a new run skips {_them(out['unchanged'])})")
     return "\n".join(lines)
+
+
+def _them(n: int) -> str:
+    return "it" if n == 1 else "them"

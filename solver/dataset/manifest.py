@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,22 @@ NOT_INPUTS = frozenset({"addb_out", "Geometry", "__pycache__"})
 
 #: Review record names inside a subject folder (entered as ``annotations``, not inputs).
 REVIEW_RECORDS = frozenset({"annotations.json"})
+
+#: The manifest statuses of a subject whose run finished: its output (``"ok"``,
+#: ``"kinematics_only"``) or the failure it records (``"failed"``). A manifest with any other
+#: status (a damaged record) stands for no finished run.
+FINAL_STATUSES = frozenset({"ok", "kinematics_only", "failed"})
+
+
+class KeyUnreadable(Exception):
+    """The key of a subject's files now cannot be made (:func:`subject_key_now`): a file
+    cannot be read, or the review record is damaged. The message says which, for the
+    subject's failure record or a user; ``error_type`` names the error underneath
+    (``"OSError"``, or the review reader's error class)."""
+
+    def __init__(self, message: str, error_type: str) -> None:
+        super().__init__(message)
+        self.error_type = error_type
 
 
 def file_sha256(path: str | Path) -> str:
@@ -99,6 +116,34 @@ def manifest_key(subject_dir: str | Path, settings: dict[str, Any], review: str 
     }
 
 
+def subject_key_now(
+    subject_dir: str | Path,
+    out_dir: str | Path,
+    settings: dict[str, Any],
+    review_digest: Callable[[str, str], str | None] | None,
+) -> dict[str, Any]:
+    """The key a dataset run computes for a subject before it decides to skip it: the
+    subject's files now, the run's ``settings`` (:func:`run_settings`) and the digest of the
+    reviewer's flags (``review_digest(subject_dir, out_dir)``, or None without a
+    ``review_digest``). The one test of :func:`solver.dataset.runner.process_dataset` and of
+    ``addb info DATASET_DIR`` (:mod:`solver.dataset.inventory`).
+
+    Raises
+    ------
+    KeyUnreadable
+        A file of the subject cannot be read, or its review record is damaged (the
+        ``review_digest``'s error).
+    """
+    try:
+        review = review_digest(str(subject_dir), str(out_dir)) if review_digest else None
+    except Exception as exc:  # a damaged review record: the annotations package's error, unknown here
+        raise KeyUnreadable(f"cannot read the review record: {exc}", type(exc).__name__) from exc
+    try:
+        return manifest_key(subject_dir, settings, review)
+    except OSError as exc:
+        raise KeyUnreadable(f"cannot read the subject's files: {exc}", "OSError") from exc
+
+
 def run_settings(options: dict[str, Any]) -> dict[str, Any]:
     """The ``settings`` of the key a dataset run keys its subjects on, for the run's
     ``options`` (:attr:`solver.dataset.runner.DatasetOptions.settings`: ``{}`` for a plain
@@ -116,7 +161,7 @@ def key_changes(stored: dict[str, Any], now: dict[str, Any], most: int = 3) -> l
     if any(stored.get(k) != now.get(k) for k in ("schema", "addb_version", "code")):
         out.append("addb's code changed")
     if stored.get("settings") != now.get("settings"):
-        out.append("the settings changed")
+        out.append(f"the settings changed ({_settings_changes(stored.get('settings') or {}, now.get('settings') or {})})")
     old, new = stored.get("inputs") or {}, now.get("inputs") or {}
     kinds = (
         ("changed", [f for f in new if f in old and old[f] != new[f]]),
@@ -130,6 +175,15 @@ def key_changes(stored: dict[str, Any], now: dict[str, Any], most: int = 3) -> l
     if stored.get("annotations") != now.get("annotations"):
         out.append("the review's flags changed")
     return out
+
+
+def _settings_changes(old: dict[str, Any], new: dict[str, Any]) -> str:
+    """"fit: band then, default now" for each setting that differs (an absent one is the
+    default: a plain run records none)."""
+    keys = sorted(set(old) | set(new))
+    return ", ".join(
+        f"{k}: {old.get(k, 'default')} then, {new.get(k, 'default')} now" for k in keys if old.get(k) != new.get(k)
+    )
 
 
 def subject_status(rows: list[dict[str, Any]]) -> str:
@@ -156,10 +210,15 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) and isinstance(data.get("key"), dict) else None
 
 
-def current_manifest(out_dir: str | Path, key: dict[str, Any]) -> dict[str, Any] | None:
-    """The stored manifest when its key equals ``key`` (the output, or the failure it
-    records, is up to date with the inputs), else None."""
+def finished_manifest(out_dir: str | Path) -> dict[str, Any] | None:
+    """The stored manifest of a subject whose run finished (its status one of
+    :data:`FINAL_STATUSES`), else None (none, unreadable, or damaged)."""
     stored = read_manifest(out_dir)
-    if stored is None or stored["key"] != key or stored.get("status") not in ("ok", "kinematics_only", "failed"):
-        return None
-    return stored
+    return stored if stored is not None and stored.get("status") in FINAL_STATUSES else None
+
+
+def current_manifest(out_dir: str | Path, key: dict[str, Any]) -> dict[str, Any] | None:
+    """The stored manifest when its run finished and its key equals ``key`` (the output, or
+    the failure it records, is up to date with the inputs), else None."""
+    stored = finished_manifest(out_dir)
+    return stored if stored is not None and stored["key"] == key else None

@@ -52,7 +52,7 @@ from solver.dataset.discover import (
     subjects_below,
 )
 from solver.dataset.lock import output_tree_lock
-from solver.dataset.manifest import current_manifest, manifest_key, run_settings
+from solver.dataset.manifest import KeyUnreadable, current_manifest, run_settings, subject_key_now
 from solver.dataset.summary import dataset_totals
 from solver.dataset.task import (
     PROGRESS_TOPIC,
@@ -406,13 +406,9 @@ def _plan(
             results[entry.rel] = _failure(entry, "OutputFolderError", str(exc))
             continue
         try:
-            review = review_digest(str(entry.path), str(target)) if review_digest else None
-            key = manifest_key(entry.path, settings, review)
-        except OSError as exc:
-            results[entry.rel] = _failure(entry, "OSError", f"cannot read the subject's files: {exc}")
-            continue
-        except Exception as exc:  # noqa: BLE001 - a damaged review record (the annotations package's error)
-            results[entry.rel] = _failure(entry, type(exc).__name__, f"cannot read the review record: {exc}")
+            key = subject_key_now(entry.path, target, settings, review_digest)
+        except KeyUnreadable as exc:
+            results[entry.rel] = _failure(entry, exc.error_type, str(exc))
             continue
         stored = None if run.opts.force else current_manifest(target, key)
         if stored is not None:

@@ -304,7 +304,7 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
         assert d["output"]["new"] == ["labC/new"]
         text = inventory_text(d)
         assert f"  output tree: {out} (a run finished " in text and ": 3 processed, 1 kinematics only, 1 failed; addb info" in text
-        assert "    not in that run: labC/new (added since; a new run processes them)" in text
+        assert "    not in that run: labC/new (added since; a new run processes it)" in text
     finally:
         shutil.rmtree(tree / "labC")
 
@@ -329,6 +329,12 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
     text = info()
     assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in text and "changed since" not in text, text
+    # a run with another fit processes every subject again (the run above used the default)
+    capsys.readouterr()
+    assert cli(["info", str(tree), "--out", str(out), "--fit", "band"]) == 0
+    text = capsys.readouterr().out
+    assert f"    changed since that run: {len(everyone)} subjects (a new run processes them again)\n" in text, text
+    assert text.count(": the settings changed (fit: default then, band now)\n") == len(everyone), text
     edited, added = list(FULL_TREE)[:2]
     subject_json = tree / edited / "_subject.json"
     original = subject_json.read_bytes()
@@ -351,12 +357,16 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
     assert f"    up to date: {len(everyone)} subjects" in info()
     # a one-subject run into the tree writes no manifest: the next run processes the subject again
     assert cli(["kinematics", str(tree / edited), "--out", str(out / edited)]) == 0
-    assert f"      {edited}: its output holds no record of the inputs it was made from (written by a one-subject run" in info()
+    text = info()
+    assert "    changed since that run: 1 subject (a new run processes it again)\n" in text, text
+    assert f"      {edited}: its output holds no record of the inputs it was made from (written by a one-subject run" in text
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
     assert f"    up to date: {len(everyone)} subjects" in info()
-    for other in (tree / edited, out):  # --out belongs to a dataset folder
-        assert cli(["info", str(other), "--out", str(out)]) == 1
-        assert f"DatasetError ({other}): is not a dataset folder; --out names the output tree of a dataset folder" in capsys.readouterr().err
+    part = out / edited.split("/")[0]  # a folder of the tree: addb info prints its totals
+    for other, option in ((tree / edited, ["--out", str(out)]), (out, ["--out", str(out)]), (part, ["--fit", "band"])):
+        assert cli(["info", str(other), *option]) == 1  # --out and --fit belong to a dataset folder
+        message = f"DatasetError ({other}): is not a dataset folder; {option[0]} of addb info applies only to a dataset folder"
+        assert message in capsys.readouterr().err
 
 
 def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_path(

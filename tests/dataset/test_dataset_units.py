@@ -9,7 +9,14 @@ from pathlib import Path
 import pytest
 
 from solver.dataset.discover import find_subjects, loop_note, scan_dataset
-from solver.dataset.manifest import current_manifest, input_files, manifest_key, subject_status
+from solver.dataset.manifest import (
+    FINAL_STATUSES,
+    current_manifest,
+    finished_manifest,
+    input_files,
+    manifest_key,
+    subject_status,
+)
 from solver.dataset.report import render_report
 from solver.dataset.summary import dataset_totals
 from solver.errors import DatasetError
@@ -117,12 +124,37 @@ def test_key_changes_name_what_changed_between_two_keys(tree: Path) -> None:
     (subject / "notes.txt").write_text("session notes")
     now = manifest_key(subject, run_settings({"fit": "alternation"}), "digest")
     assert key_changes(before, now) == [
-        "the settings changed", "trials/walk/markers.trc changed", "notes.txt added", "trials/walk/grf.mot removed",
+        "the settings changed (fit: default then, alternation now)", "trials/walk/markers.trc changed", "notes.txt added", "trials/walk/grf.mot removed",
         "the review's flags changed",
     ]  # fmt: skip
     assert key_changes({**before, "code": "0" * 64}, before) == ["addb's code changed"]
     many = {**before, "inputs": {f"trials/t{k}/markers.trc": "0" for k in range(5)}}
     assert key_changes(before, many)[0] == "trials/t0/markers.trc, trials/t1/markers.trc, trials/t2/markers.trc and 2 more files added"
+
+
+def test_a_subject_whose_key_cannot_be_made_is_named_with_what_cannot_be_read(tree: Path) -> None:
+    """The one key test of a run and of ``addb info DATASET_DIR`` (``subject_key_now``): a
+    review record its reader refuses, or an input file that cannot be opened (a link to
+    nowhere), raise ``KeyUnreadable`` naming which, with the error's class for the subject's
+    failure record; otherwise the key is the manifest key with the reader's digest."""
+    from solver.dataset.manifest import KeyUnreadable, subject_key_now
+
+    subject = tree / "labA" / "s01"
+
+    def damaged(subject_dir: str, out_dir: str) -> str:
+        raise ValueError(f"{out_dir}/annotations.json: line 3: expected an object")
+
+    assert subject_key_now(subject, tree / "out", {"a": 1}, lambda s, o: "digest") == manifest_key(subject, {"a": 1}, "digest")
+    assert subject_key_now(subject, tree / "out", {"a": 1}, None) == manifest_key(subject, {"a": 1})
+    with pytest.raises(KeyUnreadable) as caught:
+        subject_key_now(subject, tree / "out", {}, damaged)
+    assert str(caught.value) == f"cannot read the review record: {tree / 'out'}/annotations.json: line 3: expected an object"
+    assert caught.value.error_type == "ValueError"
+    (subject / "trials" / "walk" / "extra.trc").symlink_to(tree / "nowhere.trc")
+    with pytest.raises(KeyUnreadable) as caught:
+        subject_key_now(subject, tree / "out", {}, None)
+    assert str(caught.value).startswith("cannot read the subject's files: ") and "extra.trc" in str(caught.value)
+    assert caught.value.error_type == "OSError"
 
 
 def test_manifest_key_follows_the_solver_code(tmp_path: Path) -> None:
@@ -154,6 +186,10 @@ def test_a_stored_manifest_counts_only_with_an_equal_key_and_a_final_status(tmp_
     assert current_manifest(tmp_path, key) is None
     (tmp_path / "manifest.json").write_text('{"key": ')  # cut short by a crash: not current
     assert current_manifest(tmp_path, key) is None
+    assert finished_manifest(tmp_path) is None
+    for status in FINAL_STATUSES:  # what addb info compares with, whatever the key
+        (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": status}))
+        assert finished_manifest(tmp_path)["status"] == status
 
 
 def test_a_subjects_status_follows_its_trials_in_one_place() -> None:

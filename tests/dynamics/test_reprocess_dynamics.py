@@ -307,13 +307,14 @@ def test_converged_fit_reprocess_is_warm_started_and_equals_a_full_run_to_its_to
 
 
 def test_the_command_offers_every_named_fit() -> None:
-    """``addb process --fit`` lists its choices literally (the CLI does not import the
-    pipeline at start-up); they must be :data:`solver.pipeline.FIT_CHOICES`."""
+    """``addb process --fit`` and ``addb info --fit`` list their choices literally (the CLI
+    does not import the pipeline at start-up); they must be :data:`solver.pipeline.FIT_CHOICES`."""
     from addb_viewer.cli import build_parser
 
     sub = next(a for a in build_parser()._subparsers._group_actions if a.choices)
-    fit = next(a for a in sub.choices["process"]._actions if a.dest == "fit")
-    assert tuple(fit.choices) == pipeline.FIT_CHOICES
+    for command in ("process", "info"):
+        fit = next(a for a in sub.choices[command]._actions if a.dest == "fit")
+        assert tuple(fit.choices) == pipeline.FIT_CHOICES, command
 
 
 def test_an_unknown_fit_name_is_refused() -> None:
