@@ -33,6 +33,9 @@ from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError, AnnotationStore
 from solver.errors import AddbError
 
+#: How often a run waiting for the background run's plan asks again, s.
+PLAN_POLL_S = 0.2
+
 
 class ReprocessHost(Protocol):
     """What the reprocessor needs from the app (:class:`~addb_viewer.app.server.ReviewApp`
@@ -180,12 +183,14 @@ class Reprocessor:
         self._review: str | None | bool = False  # the flags' digest when the running Reprocess started
         self._tree = ExitStack()  # the output tree held by the run going (_hold_output_tree)
         self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites
+        self._waiter: tuple[threading.Event, threading.Thread] | None = None  # a run waiting for the background plan
         prestart_solver(app.paths.jobs_dir)  # the first Reprocess finds the solver's imports done (jobs.py)
 
     @property
     def running(self) -> bool:
-        """Whether a solver run is in progress."""
-        return self.job is not None and self.job.running
+        """Whether a solver run is in progress, or waiting to start until the page's
+        background run says which subjects it processes (:meth:`_wait_for_plan`)."""
+        return self._waiter is not None or (self.job is not None and self.job.running)
 
     # ------------------------------------------------------------------ starting
     def process_subject(self) -> None:
@@ -323,64 +328,108 @@ class Reprocessor:
         except (AnnotationError, OSError):
             return False
 
-    def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str = "process") -> None:
+    def _start(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str = "process",
+               waited: tuple[threading.Event, threading.Thread] | None = None) -> None:  # fmt: skip
+        """Start the solver run; ``waited``: the waiter (:meth:`_wait_for_plan`) that calls
+        this, the run counting as in progress until it has started or been refused."""
         with self._lock:
-            if self.running:
-                self._say("A solver run is already in progress; cancel it first.")
-                return
             try:
-                self._tree = self._hold_output_tree()
-            except AddbError as exc:  # another run writes the output tree: nothing started, the panel as it was
-                self._say(f"<span style='color:#c00'>**{html.escape(label)}: not started**</span>: {html.escape(str(exc), quote=False)}")
-                return
-            before = trial_summary(self.app.trial) if trial and self.app.trial is not None and self.app.trial.trial == trial else None
-            p = self.app.panel
-            p.progress.value = 0.0
-            p.progress.visible = True
-            p.cancel.disabled = False
-            p.cancel.visible = True
-            p.reprocess.disabled = True
-            p.job_status.content = f"{label}: starting…"
-            p.comparison.content = ""
-            self.finished.clear()
-            self.job = SolverJob(
-                spec,
-                work,
-                on_progress=lambda m, f: self._progress(label, m, f),
-                on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work, kind=kind),
-            )
-            try:
-                self.job.start()
-            except BaseException:
-                self._tree.close()
-                raise
+                self._start_locked(spec, work, label=label, trial=trial, kind=kind, waited=waited)
+            finally:
+                if waited is not None and self._waiter is waited:
+                    self._waiter = None
 
-    def _hold_output_tree(self) -> ExitStack:
+    def _start_locked(self, spec: JobSpec, work: Any, *, label: str, trial: str | None, kind: str,
+                      waited: tuple[threading.Event, threading.Thread] | None) -> None:  # fmt: skip
+        if waited is not None and waited[0].is_set():
+            self._say(f"{label}: cancelled before it started.")
+            return
+        if waited is None and self.running:
+            self._say("A solver run is already in progress; cancel it first.")
+            return
+        state = self.app.background_run()
+        if state == "starting":
+            self._wait_for_plan(lambda w: self._start(spec, work, label=label, trial=trial, kind=kind, waited=w), label)
+            return
+        try:
+            self._tree = self._hold_output_tree(state)
+        except AddbError as exc:  # another run writes the output tree: nothing started, the panel as it was
+            self._say(f"<span style='color:#c00'>**{html.escape(label)}: not started**</span>: {html.escape(str(exc), quote=False)}")
+            return
+        before = trial_summary(self.app.trial) if trial and self.app.trial is not None and self.app.trial.trial == trial else None
+        p = self.app.panel
+        p.progress.value = 0.0
+        p.progress.visible = True
+        p.cancel.disabled = False
+        p.cancel.visible = True
+        p.reprocess.disabled = True
+        p.job_status.content = f"{label}: starting…"
+        p.comparison.content = ""
+        self.finished.clear()
+        self.job = SolverJob(
+            spec,
+            work,
+            on_progress=lambda m, f: self._progress(label, m, f),
+            on_done=lambda r: self._done(r, label=label, trial=trial, before=before, work=work, kind=kind),
+        )
+        try:
+            self.job.start()
+        except BaseException:
+            self._tree.close()
+            raise
+
+    def _wait_for_plan(self, start: Any, label: str) -> None:
+        """Wait, in a thread, until this server's background run has said which subjects it
+        processes (it hashes every subject's files first: seconds, or minutes on a large
+        dataset), then ``start()`` the run pressed for (a Reprocess pressed in that window
+        was refused and had to be pressed again). Meanwhile the run counts as in progress
+        (:attr:`running`), the Reprocess button waits and Cancel (or opening another subject)
+        drops it. ``start(waiter)`` runs in the thread. Called holding ``self._lock``."""
+        stop = threading.Event()
+        p = self.app.panel
+        p.reprocess.disabled = True
+        p.cancel.disabled = False
+        p.cancel.visible = True
+        p.job_status.content = f"{label}: waiting until the background processing says which subjects it processes…"
+
+        def wait() -> None:
+            while not stop.wait(PLAN_POLL_S) and self.app.background_run() == "starting":
+                pass
+            p.reprocess.disabled = False
+            p.cancel.visible = False
+            try:
+                start(waiter)  # it says "cancelled" when Cancel was pressed meanwhile
+            except Exception as exc:  # noqa: BLE001 - no button handler above this thread: shown in the page
+                self.app.show_error(f"{label}: could not start", exc)
+
+        waiter = (stop, threading.Thread(target=wait, name="addb-wait-for-plan", daemon=True))
+        self._waiter = waiter
+        waiter[1].start()
+
+    def _hold_output_tree(self, state: str | None) -> ExitStack:
         """Hold, for a run about to start, the dataset output tree the subject's output folder
         lies in, as ``addb process SUBJECT --out OUT/labA/s01`` does
         (:func:`solver.dataset.lock.subject_output_lock`): the run does not write while another
         addb run writes the tree, nor does a dataset run start into it meanwhile. Under this
-        server's own background run (``addb view DATASET_DIR``), whose lock is held in this
-        process, that run's lock stands for both, as long as the run does not process this
-        subject. Returns what to close when the run ends (holding nothing outside a tree).
+        server's own background run (``addb view DATASET_DIR``; ``state``, of
+        :meth:`addb_viewer.app.workbench.Workbench.background_state`, not "starting"), whose
+        lock is held in this process, that run's lock stands for both, as long as the run
+        does not process this subject. Returns what to close when the run ends (holding
+        nothing outside a tree).
 
         Raises
         ------
         DatasetError
             Another run holds the tree (the message names it), or this server's background run
-            processes this subject or has not yet said which subjects it processes.
+            processes this subject.
         """
         from solver.dataset.lock import subject_output_lock
         from solver.errors import DatasetError
 
         out_dir = self.app.paths.out_dir
-        state = self.app.background_run()
         if state == "queued":
             raise DatasetError("the background processing has this subject queued (its inputs or review changed); "
                                "wait until it is processed (the queue says when)", path=out_dir)  # fmt: skip
-        if state == "starting":
-            raise DatasetError("the background processing is starting; press again once the queue shows what it "
-                               "processes", path=out_dir)  # fmt: skip
         hold = ExitStack()
         if state is None:
             hold.enter_context(subject_output_lock(out_dir))
@@ -473,7 +522,14 @@ class Reprocessor:
             )
 
     def cancel(self, *, wait: bool = False) -> None:
-        """Cancel the running solver (no-op when none); ``wait`` for its end."""
+        """Cancel the running solver, or the run waiting to start (no-op when none); ``wait``
+        for its end."""
+        waiter = self._waiter
+        if waiter is not None:
+            waiter[0].set()  # the waiter's start sees it (under the lock) and starts nothing
+            if not wait:
+                return
+            waiter[1].join(10.0)  # then the job it may have started just before is cancelled too
         job = self.job
         if job is None:
             return

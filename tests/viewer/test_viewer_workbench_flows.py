@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -276,6 +277,14 @@ class _HeldJob:
         pass
 
 
+def _until(condition, seconds: float = 10.0) -> None:
+    """Wait for a thread of the page to make ``condition()`` true (fails after ``seconds``)."""
+    end = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < end, "the page's thread did not get there"
+        time.sleep(0.01)
+
+
 def _tree_free(tree: Path) -> bool:
     from solver.dataset.lock import output_tree_lock
     from solver.errors import DatasetError
@@ -294,7 +303,8 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
     named and nothing started, while another run holds the tree; held while it goes (a
     dataset run started meanwhile is refused, and so is "Process changed subjects"); freed
     when it ends. Under the workbench's own background run (whose lock this process holds)
-    it starts unless that run processes the subject, or has not said yet what it processes."""
+    it starts unless that run processes the subject; pressed before that run has said what it
+    processes, it waits for that (Cancel drops it), then starts or is refused."""
     from addb_viewer.app import reprocess
     from solver.dataset.lock import output_tree_lock
 
@@ -317,13 +327,37 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
     job.end()
     assert _tree_free(tree) and not app.jobs.running
 
-    # the workbench's own background run holds the tree in this process
+    # the workbench's own background run holds the tree in this process; pressed before it
+    # has said what it processes, a run waits for that (it was refused), then goes or not
+    monkeypatch.setattr(reprocess, "PLAN_POLL_S", 0.02)
     with output_tree_lock(tree):
         bench.processing_done.clear()
         assert app.background_run() == "starting"
         app.jobs.reprocess("walk")
-        assert "not started" in app.panel.job_status.content and "is starting" in app.panel.job_status.content
-        bench._planned, bench.running["labA/walk"] = True, "queued"
+        waiting = app.panel.job_status.content
+        assert app.jobs.running and app.jobs.job is job and "waiting until the background processing says" in waiting, waiting
+        assert app.panel.reprocess.disabled and app.panel.cancel.visible
+        app.jobs.cancel(wait=True)  # Cancel drops it
+        assert not app.jobs.running and app.jobs.job is job and not app.panel.reprocess.disabled
+        assert app.panel.job_status.content == "Reprocessing walk: cancelled before it started."
+        app.jobs.reprocess("walk")
+        with bench._lock:
+            bench._planned, bench.running["labA/walk"] = True, "queued"  # the plan processes this subject
+        _until(lambda: not app.jobs.running)
+        assert app.jobs.job is job and "Reprocessing walk: not started" in app.panel.job_status.content
+        assert "has this subject queued" in app.panel.job_status.content and not app.panel.reprocess.disabled
+        with bench._lock:
+            bench._planned = False
+            bench.running.clear()
+        app.jobs.reprocess("walk")
+        assert app.jobs.running and app.jobs.job is job
+        with bench._lock:
+            bench._planned = True  # the plan leaves this subject out: the run goes
+        _until(lambda: app.jobs.job is not job)
+        assert app.jobs.job.running and app.jobs.running
+        app.jobs.job.end()
+        job = app.jobs.job
+        bench.running["labA/walk"] = "queued"
         assert app.background_run() == "queued"
         app.jobs.diagnose("walk")
         assert "Diagnosing walk: not started" in app.panel.job_status.content and "has this subject queued" in app.panel.job_status.content
