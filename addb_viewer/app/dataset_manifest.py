@@ -23,7 +23,13 @@ import os
 from pathlib import Path
 from typing import Any
 
-from solver.dataset.manifest import MANIFEST_NAME, manifest_key, read_manifest, subject_status
+from solver.dataset.manifest import (
+    MANIFEST_NAME,
+    PROCESSED_STATUSES,
+    manifest_key,
+    read_manifest,
+    subject_status,
+)
 from solver.dataset.summary import subject_rows
 
 
@@ -44,7 +50,7 @@ def mark_reprocessed(subject_dir: str | os.PathLike[str], out_dir: str | os.Path
         changed since the run (the dataset run must process it again).
     """
     stored = read_manifest(out_dir)
-    if stored is None or stored.get("status") not in ("ok", "kinematics_only"):
+    if stored is None or stored.get("status") not in PROCESSED_STATUSES:
         return False
     key = stored["key"]
     try:

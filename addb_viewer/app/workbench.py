@@ -41,6 +41,7 @@ from addb_viewer.app.queue import (
     next_to_review,
     open_dataset,
 )
+from solver.dataset.manifest import PROCESSED_STATUSES
 
 #: Size of the queue's floating window, px (narrower on a narrower canvas), and its gap
 #: from the canvas' top-left corner.
@@ -360,7 +361,7 @@ class Workbench:
             if kind == "done" and self.current is not None and self.current[0] == data["rel"]:
                 if self.app.trial is None:
                     self.open(data["rel"])  # the subject on screen was waiting for its output
-                elif data.get("status") in ("ok", "kinematics_only"):  # its output was rewritten
+                elif data.get("status") in PROCESSED_STATUSES:  # its output was rewritten
                     self.app.panel.comparison.content = ""  # an earlier Reprocess's table: no longer the output
                     self.app.reload_shown(
                         f"{data['rel']} was processed again in the background (its inputs or its review changed): "

@@ -42,10 +42,14 @@ NOT_INPUTS = frozenset({"addb_out", "Geometry", "__pycache__"})
 #: Review record names inside a subject folder (entered as ``annotations``, not inputs).
 REVIEW_RECORDS = frozenset({"annotations.json"})
 
-#: The manifest statuses of a subject whose run finished: its output (``"ok"``,
-#: ``"kinematics_only"``) or the failure it records (``"failed"``). A manifest with any other
-#: status (a damaged record) stands for no finished run.
-FINAL_STATUSES = frozenset({"ok", "kinematics_only", "failed"})
+#: The manifest statuses of a processed subject: its output is in place (with dynamics, or
+#: kinematics only).
+PROCESSED_STATUSES = frozenset({"ok", "kinematics_only"})
+
+#: The manifest statuses of a subject whose run finished: its output (:data:`PROCESSED_STATUSES`)
+#: or the failure it records (``"failed"``). A manifest with any other status (a damaged
+#: record) stands for no finished run.
+FINAL_STATUSES = PROCESSED_STATUSES | {"failed"}
 
 
 class KeyUnreadable(Exception):
