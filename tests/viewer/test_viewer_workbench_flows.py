@@ -136,6 +136,34 @@ def test_a_failed_subject_empties_the_trial_controls_and_says_its_error(dataset:
     assert app.trial.trial == "walk" and not p.reviewed.disabled and not p.frame.disabled and p.timeline.content
 
 
+
+def test_a_run_waiting_for_the_background_plan_is_dropped_when_another_subject_opens(
+    dataset: Path, make_app, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A Reprocess pressed while the page's background run has not said what it processes
+    waits for that; opening another subject in the queue drops it, as it cancels a run going
+    (the page says so, naming both subjects), and nothing starts when the plan comes."""
+    from addb_viewer.app import reprocess
+    from solver.dataset.lock import output_tree_lock
+
+    monkeypatch.setattr(reprocess, "SolverJob", _HeldJob)
+    monkeypatch.setattr(reprocess, "PLAN_POLL_S", 0.02)
+    app, bench = _bench(dataset, make_app)
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())  # no pending proposal to confirm
+    with output_tree_lock(dataset / "addb_out"):  # the page's own background run holds the tree
+        bench.processing_done.clear()
+        app.jobs.reprocess("walk")
+        assert app.jobs.running and app.jobs.job is None, app.panel.job_status.content
+        bench.open("labA/broken")
+        assert not app.jobs.running and app.jobs.job is None
+        status = app.panel.job_status.content
+        assert status == "labA/walk · Reprocessing walk: cancelled before it started. (you opened labA/broken)", status
+        with bench._lock:
+            bench._planned = True  # the plan comes: the dropped run stays dropped
+        time.sleep(0.2)
+        assert app.jobs.job is None and not app.jobs.running
+        bench.processing_done.set()
+
 def test_a_trial_picked_in_the_trial_list_becomes_the_queue_row(dataset: Path, make_app) -> None:
     app, bench = _bench(dataset, make_app)
     app._trial_picked("static")
