@@ -290,6 +290,7 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
     assert f"  {BROKEN}: cannot be read: TrcFormatError ({tree / BROKEN / 'trials' / 'walk' / 'markers.trc'}:{BROKEN_LINE})" in text
     assert "  5 subjects, 1 of them unreadable; " in text and f", {int(frames):,} frames, {seconds / 3600:.4f} hours (" in text
     assert f"output tree: none at {tree / 'addb_out'}; addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)" in text
+    assert "and addb info DATASET_DIR --out OUT names the subjects a new run processes again)" in text
     # with the module's output tree, and a subject added since its run
     added = tree / "labC" / "new"
     added.mkdir(parents=True)
@@ -367,6 +368,8 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
         assert cli(["info", str(other), *option]) == 1  # --out and --fit belong to a dataset folder
         message = f"DatasetError ({other}): is not a dataset folder; {option[0]} of addb info applies only to a dataset folder"
         assert message in capsys.readouterr().err
+    assert cli(["info", str(tree / edited), "--out", str(out), "--fit", "band"]) == 1
+    assert "is not a dataset folder; --out and --fit of addb info apply only to a dataset folder" in capsys.readouterr().err
 
 
 def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_path(
