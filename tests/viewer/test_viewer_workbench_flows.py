@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from viewer_support import wait_for
 
 from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.app.queue import dataset_subjects
@@ -305,14 +306,6 @@ class _HeldJob:
         pass
 
 
-def _until(condition, seconds: float = 10.0) -> None:
-    """Wait for a thread of the page to make ``condition()`` true (fails after ``seconds``)."""
-    end = time.monotonic() + seconds
-    while not condition():
-        assert time.monotonic() < end, "the page's thread did not get there"
-        time.sleep(0.01)
-
-
 def _tree_free(tree: Path) -> bool:
     from solver.dataset.lock import output_tree_lock
     from solver.errors import DatasetError
@@ -371,7 +364,7 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
         app.jobs.reprocess("walk")
         with bench._lock:
             bench._planned, bench.running["labA/walk"] = True, "queued"  # the plan processes this subject
-        _until(lambda: not app.jobs.running)
+        wait_for(lambda: not app.jobs.running, timeout=10.0, what="the waiting run to be refused")
         assert app.jobs.job is job and "Reprocessing walk: not started" in app.panel.job_status.content
         assert "has this subject queued" in app.panel.job_status.content and not app.panel.reprocess.disabled
         with bench._lock:
@@ -381,7 +374,7 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
         assert app.jobs.running and app.jobs.job is job
         with bench._lock:
             bench._planned = True  # the plan leaves this subject out: the run goes
-        _until(lambda: app.jobs.job is not job)
+        wait_for(lambda: app.jobs.job is not job, timeout=10.0, what="the waiting run to start")
         assert app.jobs.job.running and app.jobs.running
         app.jobs.job.end()
         job = app.jobs.job
