@@ -26,8 +26,9 @@ from typing import Any
 from solver.dataset.manifest import (
     MANIFEST_NAME,
     PROCESSED_STATUSES,
-    manifest_key,
+    KeyUnreadable,
     read_manifest,
+    subject_key_now,
     subject_status,
 )
 from solver.dataset.summary import subject_rows
@@ -54,8 +55,8 @@ def mark_reprocessed(subject_dir: str | os.PathLike[str], out_dir: str | os.Path
         return False
     key = stored["key"]
     try:
-        now = manifest_key(subject_dir, key.get("settings") or {}, review)
-    except OSError:
+        now = subject_key_now(subject_dir, out_dir, key.get("settings") or {}, lambda _subject, _out: review)
+    except KeyUnreadable:  # a file of the subject cannot be read now: the dataset run names it
         return False
     if _without_review(now) != _without_review(key):
         return False

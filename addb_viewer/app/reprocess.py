@@ -413,9 +413,11 @@ class Reprocessor:
         addb run writes the tree, nor does a dataset run start into it meanwhile. Under this
         server's own background run (``addb view DATASET_DIR``; ``state``, of
         :meth:`addb_viewer.app.workbench.Workbench.background_state`, not "starting"), whose
-        lock is held in this process, that run's lock stands for both, as long as the run
-        does not process this subject. Returns what to close when the run ends (holding
-        nothing outside a tree).
+        lock is held in this process, the run joins that hold
+        (:func:`solver.dataset.lock.join_tree_hold`) as long as that run does not process this
+        subject: the tree stays held until both have ended (before, a background run that ended
+        first freed the tree while the Reprocess still wrote). Returns what to close when the
+        run ends (holding nothing outside a tree).
 
         Raises
         ------
@@ -423,16 +425,21 @@ class Reprocessor:
             Another run holds the tree (the message names it), or this server's background run
             processes this subject.
         """
-        from solver.dataset.lock import subject_output_lock
+        from solver.dataset.lock import join_tree_hold, subject_output_lock
         from solver.errors import DatasetError
+        from solver.outputs import output_tree_above
 
         out_dir = self.app.paths.out_dir
         if state == "queued":
             raise DatasetError("the background processing has this subject queued (its inputs or review changed); "
                                "wait until it is processed (the queue says when)", path=out_dir)  # fmt: skip
         hold = ExitStack()
-        if state is None:
-            hold.enter_context(subject_output_lock(out_dir))
+        try:
+            if state is None or not hold.enter_context(join_tree_hold(output_tree_above(out_dir))):
+                hold.enter_context(subject_output_lock(out_dir))  # (the background run has just ended)
+        except BaseException:
+            hold.close()
+            raise
         return hold
 
     # ------------------------------------------------------------------ progress / end

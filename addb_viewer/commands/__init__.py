@@ -14,6 +14,15 @@ from collections.abc import Callable
 FIT_CHOICES = ("default", "converged", "rounds", "band")
 
 
+def fit_settings(fit: str) -> dict[str, str]:
+    """The ``settings`` a dataset run keys its subjects on for ``--fit fit``
+    (:attr:`solver.dataset.runner.DatasetOptions.settings`): ``{}`` for ``default``, so that a
+    plain ``addb process DATASET_DIR`` keeps its key, else ``{"fit": fit}``. ``addb process
+    DATASET_DIR --fit`` records it and ``addb info DATASET_DIR --fit`` compares with it, so the
+    two cannot disagree."""
+    return {"fit": fit} if fit != "default" else {}
+
+
 def whole_number(least: int) -> Callable[[str], int]:
     """An argparse ``type`` for a whole number of at least ``least``: ``--workers -1`` is refused
     at the command line ("expected a whole number of at least 1, got '-1'") instead of

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from addb_viewer.commands import FIT_CHOICES
+from addb_viewer.commands import FIT_CHOICES, fit_settings
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
         bar = ProgressBar() if sys.stderr.isatty() else None  # every trial file is read: a while on a large dataset
         tree = args.out if getattr(args, "out", None) else dataset_output_dir(path)
-        fit = getattr(args, "fit", "default")
-        settings = {"fit": fit} if fit != "default" else {}  # as addb process DATASET_DIR --fit records it
+        settings = fit_settings(getattr(args, "fit", "default"))  # as addb process DATASET_DIR --fit records it
         inventory = dataset_inventory(path, tree, scan=scan, progress=bar, review_digest=review_digest, settings=settings)
         print(inventory_text(inventory, "addb process DATASET_DIR --out OUT (or addb view DATASET_DIR)"))
         return 0

@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-from addb_viewer.commands import FIT_CHOICES, memory_size, whole_number
+from addb_viewer.commands import FIT_CHOICES, fit_settings, memory_size, whole_number
 
 
 def run_dataset(args: argparse.Namespace) -> int:
@@ -32,7 +32,7 @@ def run_dataset(args: argparse.Namespace) -> int:
         raise SystemExit("addb process: --trial and --annotations apply to one subject folder, not a dataset")
     opts = DatasetOptions(
         workers=args.workers, scheduler=args.scheduler, retries=args.retries, force=args.force,
-        memory_limit=args.memory_limit, settings={"fit": args.fit} if args.fit != "default" else {},
+        memory_limit=args.memory_limit, settings=fit_settings(args.fit),
     )  # fmt: skip
     run = process_dataset(
         args.subject, args.out, options=opts, masks=subject_masks, review_digest=review_digest,

@@ -290,6 +290,44 @@ def test_a_second_run_on_one_output_tree_is_refused_while_the_first_holds_it(tre
         assert f"process {os.getpid()} on " in (out / LOCK_NAME).read_text()
 
 
+def test_a_writer_that_joins_this_process_hold_keeps_the_tree_until_it_ends(tmp_path: Path) -> None:
+    """The review app's Reprocess under its own background dataset run wrote on without a
+    lock of its own: when the dataset run ended first, the tree was freed while the Reprocess
+    still wrote. A writer that joins the process's hold (``join_tree_hold``) now keeps the
+    ``flock`` until it ends, whichever ends first; outside a hold it joins nothing."""
+    import subprocess
+    import sys
+
+    from solver.dataset.lock import join_tree_hold, output_tree_lock
+
+    out = tmp_path / "OUT"
+    out.mkdir()
+
+    def free() -> bool:  # asked from another process, as a dataset run in another terminal would
+        script = ("import sys\nfrom solver.dataset.lock import output_tree_lock\nfrom solver.errors import DatasetError\n"
+                  "try:\n    with output_tree_lock(sys.argv[1]): print('free')\nexcept DatasetError: print('held')")
+        answer = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, check=True,
+                                cwd=Path(__file__).resolve().parents[2])  # fmt: skip
+        return {"free": True, "held": False}[answer.stdout.strip()]
+
+    with join_tree_hold(out) as joined:
+        assert joined is False and free()
+    with join_tree_hold(None) as joined:
+        assert joined is False
+    first = output_tree_lock(out)
+    first.__enter__()
+    with join_tree_hold(out) as joined:
+        assert joined is True
+        first.__exit__(None, None, None)  # the dataset run ends first
+        assert not free()
+        with pytest.raises(DatasetError, match="another addb run is writing this output tree"), output_tree_lock(out):
+            pass  # nor does a new holder of this process get it
+    assert free()
+    with output_tree_lock(out), join_tree_hold(out) as joined:  # the joined writer ends first
+        assert joined is True
+    assert free()
+
+
 @pytest.mark.parametrize("command", ["process", "kinematics"])
 def test_a_one_subject_run_into_a_dataset_output_tree_holds_the_tree(command: str, tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:

@@ -324,8 +324,9 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
     named and nothing started, while another run holds the tree; held while it goes (a
     dataset run started meanwhile is refused, and so is "Process changed subjects"); freed
     when it ends. Under the workbench's own background run (whose lock this process holds)
-    it starts unless that run processes the subject; pressed before that run has said what it
-    processes, it waits for that (Cancel drops it), then starts or is refused."""
+    it starts unless that run processes the subject, and holds the tree until it ends even if
+    that run ends first; pressed before that run has said what it processes, it waits for that
+    (Cancel drops it), then starts or is refused."""
     from addb_viewer.app import reprocess
     from solver.dataset.lock import output_tree_lock
 
@@ -383,9 +384,10 @@ def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_ap
         app.jobs.diagnose("walk")
         assert "Diagnosing walk: not started" in app.panel.job_status.content and "has this subject queued" in app.panel.job_status.content
         assert not app.panel.reprocess.disabled  # the page can try again
-        bench.running.clear()  # the run goes on with other subjects: its lock stands for the Reprocess
+        bench.running.clear()  # the run goes on with other subjects: the Reprocess joins its hold
         app.jobs.reprocess("walk")
         assert app.jobs.job is not job and app.jobs.running, app.panel.job_status.content
-        app.jobs.job.end()
-        bench.processing_done.set()
+    bench.processing_done.set()  # the background run ended first: the Reprocess still holds the tree
+    assert app.jobs.job.running and not _tree_free(tree)
+    app.jobs.job.end()
     assert _tree_free(tree)
