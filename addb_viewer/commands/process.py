@@ -9,7 +9,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from addb_viewer.commands import FIT_CHOICES, fit_settings, memory_size, whole_number
 
@@ -135,6 +137,44 @@ def with_kept_kinematics(exc: Exception, out: Path) -> Exception:
     )  # fmt: skip
 
 
+def _process_one(args: argparse.Namespace, process: Callable[[], Any]) -> Any:
+    """Run ``process()`` (the one-subject pipeline into ``args.out``) holding the dataset
+    output tree ``args.out`` lies in, if any (:func:`solver.dataset.lock.subject_output_lock`:
+    not while a dataset run writes it). Into a tree, a whole run (no ``--trial``, no
+    ``--annotations``) leaves the manifest a dataset run would, so that the next dataset
+    run skips the subject while nothing changed; another run removes the folder's manifest,
+    which no longer describes it (:mod:`solver.dataset.one_subject`). The run's warnings are
+    shown as usual, after it."""
+    import time
+    import warnings
+
+    from solver.dataset.lock import subject_output_lock
+    from solver.dataset.one_subject import forget_subject_run, record_subject_run, subject_run_key
+
+    with subject_output_lock(args.out) as tree:
+        if tree is None:
+            return process()
+        whole = not args.trial and not args.annotations
+        key = subject_run_key(args.subject, fit_settings(args.fit)) if whole else None
+        t0 = time.perf_counter()
+        caught: list[warnings.WarningMessage] = []
+        try:
+            with warnings.catch_warnings(record=True) as caught:  # the filters as they are: kept for the manifest
+                result = process()
+        finally:
+            for w in caught:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
+        if key is None:
+            forget_subject_run(args.out)
+        else:
+            record_subject_run(
+                args.out, tree, key, mass_kg=result.kinematics.subject.mass_kg,
+                fitted_mass_kg=result.dynamics.mass_kg if result.dynamics is not None else None,
+                seconds=time.perf_counter() - t0, warnings=list(dict.fromkeys(str(w.message) for w in caught)),
+            )  # fmt: skip
+        return result
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb process SUBJECT_DIR --out OUT``: kinematics and dynamics of one subject, with a table
     of each trial's measured frames, marker RMS error, residual forces and Hicks verdicts; a
@@ -166,11 +206,9 @@ def run(args: argparse.Namespace) -> int:
 
         record = review_file(args.annotations)  # before anything is created
         unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
-    from solver.dataset.lock import subject_output_lock
-
     try:
-        with subject_output_lock(args.out):  # not while a dataset run writes the tree --out lies in
-            result = process_subject(args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar())
+        result = _process_one(args, lambda: process_subject(
+            args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar()))  # fmt: skip
     except DynamicsError as exc:
         raise with_kept_kinematics(exc, Path(args.out)) from None
     rows = []

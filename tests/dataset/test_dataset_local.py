@@ -356,11 +356,12 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
         (tree / added / "notes.txt").unlink(missing_ok=True)
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
     assert f"    up to date: {len(everyone)} subjects" in info()
-    # a one-subject run into the tree writes no manifest: the next run processes the subject again
+    # a kinematics run into the tree writes no manifest: the next run processes the subject again
     assert cli(["kinematics", str(tree / edited), "--out", str(out / edited)]) == 0
     text = info()
     assert "    changed since that run: 1 subject (a new run processes it again)\n" in text, text
-    assert f"      {edited}: its output holds no record of the inputs it was made from (written by a one-subject run" in text
+    assert (f"      {edited}: its output holds no record of the inputs it was made from (written by addb kinematics, "
+            "or by a one-subject addb process with --trial or --annotations)\n") in text, text
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
     assert f"    up to date: {len(everyone)} subjects" in info()
     part = out / edited.split("/")[0]  # a folder of the tree: addb info prints its totals
@@ -370,6 +371,56 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
         assert message in capsys.readouterr().err
     assert cli(["info", str(tree / edited), "--out", str(out), "--fit", "band"]) == 1
     assert "is not a dataset folder; --out and --fit of addb info apply only to a dataset folder" in capsys.readouterr().err
+
+
+def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run_would(
+    first_run, tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``addb process labA/s01 --out OUT/labA/s01`` left no manifest, so the next dataset run
+    processed the subject again though nothing had changed. A whole run now writes the
+    manifest a dataset run writes: the same key (files, code, settings, no review flags) and
+    the same summary rows, so ``addb info`` calls it up to date and the dataset run skips it.
+    Its ``--fit`` is in the key (another fit is "the settings changed"). A ``--trial`` run,
+    which merges into the folder, removes the manifest: the dataset run processes it again."""
+    out = first_run[0]
+    rel = "labA/rajagopal2016_walk"
+    everyone = [*FULL_TREE, BROKEN, KINEMATICS_ONLY]
+
+    def info(*fit: str) -> str:
+        capsys.readouterr()
+        assert cli(["info", str(tree), "--out", str(out), *fit]) == 0
+        return capsys.readouterr().out
+
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
+    by_dataset = read_manifest(out / rel)
+    assert cli(["process", str(tree / rel), "--out", str(out / rel)]) == 0
+    mine = read_manifest(out / rel)
+    assert mine is not None and mine["one_subject_run"] is True and "one_subject_run" not in by_dataset
+    assert mine["key"] == by_dataset["key"] and mine["rel"] == rel and mine["status"] == by_dataset["status"] == "ok"
+    assert mine["fitted_mass_kg"] == pytest.approx(by_dataset["fitted_mass_kg"], rel=1e-9)
+    assert [r["trial"] for r in mine["trials"]] == [r["trial"] for r in by_dataset["trials"]]
+    for a, b in zip(mine["trials"], by_dataset["trials"], strict=True):
+        for name in ("frames", "measured_frames", "marker_rms_m", "linear_residual_rms_N", "angular_residual_rms_Nm"):
+            assert (a[name] is None and b[name] is None) or a[name] == pytest.approx(b[name], rel=1e-9, abs=1e-12), (a["trial"], name)
+    assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in info()
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+    status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+    assert status[rel] == "skipped", status
+    # its fit is in the key
+    assert cli(["process", str(tree / rel), "--out", str(out / rel), "--fit", "band"]) == 0
+    assert read_manifest(out / rel)["key"]["settings"] == {"addb_process": "default", "fit": "band"}
+    assert f"      {rel}: the settings changed (fit: band then, default now)\n" in info()
+    text = info("--fit", "band")
+    assert "    changed since that run: 4 subjects (a new run processes them again)\n" in text, text
+    assert f"      {rel}: the settings changed" not in text, text
+    # some trials: the folder's manifest no longer describes it
+    assert cli(["process", str(tree / rel), "--out", str(out / rel), "--trial", "walk"]) == 0
+    assert read_manifest(out / rel) is None
+    assert f"      {rel}: its output holds no record of the inputs it was made from" in info()
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
+    status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+    assert status[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel), status
+    assert f"    up to date: {len(everyone)} subjects" in info()
 
 
 def test_benchmark_of_the_output_tree_scores_each_processed_subject_under_its_path(
