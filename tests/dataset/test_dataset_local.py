@@ -380,16 +380,23 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
     processed the subject again though nothing had changed. A whole run now writes the
     manifest a dataset run writes: the same key (files, code, settings, no review flags) and
     the same summary rows, so ``addb info`` calls it up to date and the dataset run skips it.
-    Its ``--fit`` is in the key (another fit is "the settings changed"). A ``--trial`` run,
-    which merges into the folder, removes the manifest: the dataset run processes it again."""
+    Its ``--fit`` is in the key (another fit is "the settings changed"); so is the absence of
+    the reviewer's flags it did not apply (a subject with flags is processed again). A
+    ``--trial`` run, which merges into the folder, removes the manifest: the dataset run
+    processes the subject again."""
+    from annotations import AnnotationStore
+
     out = first_run[0]
-    rel = "labA/rajagopal2016_walk"
+    rel = "labB/opencap_uhlrich2023"  # no review record
     everyone = [*FULL_TREE, BROKEN, KINEMATICS_ONLY]
 
     def info(*fit: str) -> str:
         capsys.readouterr()
         assert cli(["info", str(tree), "--out", str(out), *fit]) == 0
         return capsys.readouterr().out
+
+    def statuses() -> dict[str, str]:
+        return {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
 
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
     by_dataset = read_manifest(out / rel)
@@ -404,8 +411,7 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
             assert (a[name] is None and b[name] is None) or a[name] == pytest.approx(b[name], rel=1e-9, abs=1e-12), (a["trial"], name)
     assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in info()
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
-    status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
-    assert status[rel] == "skipped", status
+    assert statuses()[rel] == "skipped", statuses()
     # its fit is in the key
     assert cli(["process", str(tree / rel), "--out", str(out / rel), "--fit", "band"]) == 0
     assert read_manifest(out / rel)["key"]["settings"] == {"addb_process": "default", "fit": "band"}
@@ -414,12 +420,22 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
     assert "    changed since that run: 4 subjects (a new run processes them again)\n" in text, text
     assert f"      {rel}: the settings changed" not in text, text
     # some trials: the folder's manifest no longer describes it
-    assert cli(["process", str(tree / rel), "--out", str(out / rel), "--trial", "walk"]) == 0
+    assert cli(["process", str(tree / rel), "--out", str(out / rel), "--trial", "walking1"]) == 0
     assert read_manifest(out / rel) is None
     assert f"      {rel}: its output holds no record of the inputs it was made from" in info()
+    # a subject with the reviewer's flags: the one-subject run did not apply them
+    walk = "labA/rajagopal2016_walk"
+    with AnnotationStore.open(tree / walk, reviewer="tester") as store:
+        store.set_unmeasured("walk", range(100, 110))  # as the test of the flags left it (or runs alone)
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+    assert statuses()[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel)
+    assert read_manifest(out / walk)["key"]["annotations"] is not None
+    assert cli(["process", str(tree / walk), "--out", str(out / walk)]) == 0
+    assert read_manifest(out / walk)["key"]["annotations"] is None
+    text = info()
+    assert f"    changed since that run: 1 subject (a new run processes it again)\n      {walk}: the review's flags changed\n" in text, text
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
-    status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
-    assert status[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel), status
+    assert statuses()[walk] == "ok"
     assert f"    up to date: {len(everyone)} subjects" in info()
 
 
