@@ -149,11 +149,16 @@ def _process_one(args: argparse.Namespace, process: Callable[[], Any]) -> Any:
     import warnings
 
     from solver.dataset.lock import subject_output_lock
-    from solver.dataset.one_subject import forget_subject_run, record_subject_run, subject_run_key
 
     with subject_output_lock(args.out) as tree:
         if tree is None:
             return process()
+        from solver.dataset.one_subject import (
+            forget_subject_run,
+            record_subject_run,
+            subject_run_key,
+        )
+
         whole = not args.trial and not args.annotations
         key = subject_run_key(args.subject, fit_settings(args.fit)) if whole else None
         t0 = time.perf_counter()

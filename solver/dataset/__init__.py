@@ -14,7 +14,10 @@ Modules, in the order a run uses them:
 * :mod:`solver.dataset.report`: the static HTML report (inline SVG, no server).
 * :mod:`solver.dataset.runner`: the Dask cluster (local or remote), submission, retries
   of subjects whose worker died, progress, and the summary files.
-* :mod:`solver.dataset.lock`: one run at a time per output tree.
+* :mod:`solver.dataset.lock`: one run at a time per output tree (a one-subject run into it
+  too, and the review app's Reprocess beside its own background run).
+* :mod:`solver.dataset.one_subject`: the manifest a whole one-subject run into an output
+  tree leaves, as a dataset run would, so that the next dataset run skips that subject.
 * :mod:`solver.dataset.interrupt`: the local cluster's workers ignore Ctrl-C (the command
   handles it), those started again after a death included.
 """
