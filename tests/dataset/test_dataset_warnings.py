@@ -42,6 +42,18 @@ def test_a_subjects_warnings_reach_the_summary_the_manifest_and_the_terminal(tmp
     html = (out / "dataset_report.html").read_text()
     assert "<h2>Warnings (1 subject)</h2>" in html and f'<td class="l">labA/walk</td><td class="l">{html_escape(message)}</td>' in html
     assert f"warning: {message}" in (out / "labA" / "walk" / "process.log").read_text()
+    # a whole one-subject run into the tree (its manifest stands for a dataset run's): the
+    # warning is still printed, and kept in the manifest, so the next dataset run, which skips
+    # the subject, still names it
+    assert cli(["process", str(walk), "--out", str(out / "labA" / "walk")]) == 0
+    err = capsys.readouterr().err
+    assert err.count(f"addb: warning: {message}\n") == 1, err  # as the console script prints warnings, once
+    manifest = read_manifest(out / "labA" / "walk")
+    assert manifest["one_subject_run"] is True and manifest["warnings"] == [message]
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 0
+    assert f"\n1 subject(s) with warnings (each in full in {out}/SUBJECT/process.log):\n  labA/walk: {message}\n" in capsys.readouterr().err
+    subjects = {s["rel"]: s for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+    assert subjects["labA/walk"]["status"] == "skipped" and subjects["labA/walk"]["warnings"] == [message]
 
 
 def test_a_failed_subject_keeps_the_warnings_raised_before_it_failed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
