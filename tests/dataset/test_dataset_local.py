@@ -310,6 +310,18 @@ def test_info_of_the_dataset_folder_lists_its_subjects_and_its_output_tree(
         shutil.rmtree(tree / "labC")
 
 
+def _info(capsys: pytest.CaptureFixture[str], tree: Path, out: Path, *options: str) -> str:
+    """What ``addb info DATASET_DIR --out OUT [options]`` prints (it must exit 0)."""
+    capsys.readouterr()
+    assert cli(["info", str(tree), "--out", str(out), *options]) == 0
+    return capsys.readouterr().out
+
+
+def _statuses(out: Path) -> dict[str, str]:
+    """Each subject's status in the last dataset run's summary of ``out``."""
+    return {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+
+
 def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again(
     first_run, tree: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -322,18 +334,14 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
     out = first_run[0]
     everyone = [*FULL_TREE, BROKEN, KINEMATICS_ONLY]
 
-    def info() -> str:
-        capsys.readouterr()
-        assert cli(["info", str(tree), "--out", str(out)]) == 0
-        return capsys.readouterr().out
+    def info(*options: str) -> str:
+        return _info(capsys, tree, out, *options)
 
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
     text = info()
     assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in text and "changed since" not in text, text
     # a run with another fit processes every subject again (the run above used the default)
-    capsys.readouterr()
-    assert cli(["info", str(tree), "--out", str(out), "--fit", "band"]) == 0
-    text = capsys.readouterr().out
+    text = info("--fit", "band")
     assert f"    changed since that run: {len(everyone)} subjects (a new run processes them again)\n" in text, text
     assert text.count(": the settings changed (fit: default then, band now)\n") == len(everyone), text
     edited, added = list(FULL_TREE)[:2]
@@ -348,7 +356,7 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
         assert "".join(lines) in text, text
         assert f"    up to date: {len(everyone) - 2} subjects (a new run skips them)" in text
         assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
-        status = {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+        status = _statuses(out)
         assert {rel for rel, st in status.items() if st != "skipped"} == {edited, added, BROKEN}, status
         assert status[BROKEN] == "failed" and status[edited] == status[added] == "ok"
     finally:
@@ -390,13 +398,8 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
     rel = "labB/opencap_uhlrich2023"  # no review record
     everyone = [*FULL_TREE, BROKEN, KINEMATICS_ONLY]
 
-    def info(*fit: str) -> str:
-        capsys.readouterr()
-        assert cli(["info", str(tree), "--out", str(out), *fit]) == 0
-        return capsys.readouterr().out
-
-    def statuses() -> dict[str, str]:
-        return {s["rel"]: s["status"] for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+    def info(*options: str) -> str:
+        return _info(capsys, tree, out, *options)
 
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # current (earlier tests may edit)
     by_dataset = read_manifest(out / rel)
@@ -411,7 +414,7 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
             assert (a[name] is None and b[name] is None) or a[name] == pytest.approx(b[name], rel=1e-9, abs=1e-12), (a["trial"], name)
     assert f"    up to date: {len(everyone)} subjects (a new run skips them)" in info()
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
-    assert statuses()[rel] == "skipped", statuses()
+    assert _statuses(out)[rel] == "skipped", _statuses(out)
     # its fit is in the key
     assert cli(["process", str(tree / rel), "--out", str(out / rel), "--fit", "band"]) == 0
     assert read_manifest(out / rel)["key"]["settings"] == {"addb_process": "default", "fit": "band"}
@@ -428,14 +431,14 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
     with AnnotationStore.open(tree / walk, reviewer="tester") as store:
         store.set_unmeasured("walk", range(100, 110))  # as the test of the flags left it (or runs alone)
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
-    assert statuses()[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel)
+    assert _statuses(out)[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel)
     assert read_manifest(out / walk)["key"]["annotations"] is not None
     assert cli(["process", str(tree / walk), "--out", str(out / walk)]) == 0
     assert read_manifest(out / walk)["key"]["annotations"] is None
     text = info()
     assert f"    changed since that run: 1 subject (a new run processes it again)\n      {walk}: the review's flags changed\n" in text, text
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
-    assert statuses()[walk] == "ok"
+    assert _statuses(out)[walk] == "ok"
     assert f"    up to date: {len(everyone)} subjects" in info()
 
 
