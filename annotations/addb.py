@@ -36,7 +36,13 @@ KEY = "missing_grf_data"
 
 
 def encode_addb_review(mask: NDArray[np.bool_]) -> bytes:
-    """The bytes AddBiomechanics writes for a segment's mask (compact, no newline)."""
+    """The bytes AddBiomechanics writes for a segment's mask (compact, no newline).
+
+    Raises
+    ------
+    AnnotationError
+        If ``mask`` is not a ``(T,)`` bool array.
+    """
     arr = np.asarray(mask)
     if arr.ndim != 1 or (arr.size and arr.dtype != np.bool_):
         raise AnnotationError(f"mask must be a (T,) bool array, got {arr.dtype} {arr.shape}")
@@ -80,6 +86,13 @@ def export_addb_review(
     -------
     numpy.ndarray
         The ``(n_frames,)`` bool mask written.
+
+    Raises
+    ------
+    AnnotationError
+        If ``start_frame`` or ``n_frames`` is negative or a bool.
+    AnnotationFileError
+        If the folder is not writable or the disk is full; ``path`` is then unchanged.
     """
     if (
         isinstance(start_frame, bool)

@@ -18,21 +18,21 @@ FramesLike = int | range | Iterable[int] | NDArray[np.integer]
 
 
 def check_kind(kind: str) -> str:
-    """The flag kind, if it is one of ``FLAG_KINDS``."""
+    """The flag kind, if it is one of ``FLAG_KINDS``; raises ``AnnotationError`` otherwise."""
     if kind not in FLAG_KINDS:
         raise AnnotationError(f"unknown flag kind {kind!r}; expected one of {FLAG_KINDS}")
     return kind
 
 
 def check_foot(foot: str | None) -> str | None:
-    """The foot, if ``None`` or one of ``FEET``."""
+    """The foot, if ``None`` or one of ``FEET``; raises ``AnnotationError`` otherwise."""
     if foot is not None and foot not in FEET:
         raise AnnotationError(f"unknown foot {foot!r}; expected one of {FEET} or None")
     return foot
 
 
 def check_source(source: str) -> str:
-    """The provenance source, if one of ``SOURCES``."""
+    """The provenance source, if one of ``SOURCES``; raises ``AnnotationError`` otherwise."""
     if source not in SOURCES:
         raise AnnotationError(f"unknown source {source!r}; expected one of {SOURCES}")
     return source
@@ -50,14 +50,26 @@ def check_trial(trial: str) -> None:
 
 
 def count(value: Any, name: str) -> int:
-    """``value`` as an int, if it is a non-negative integer (not a bool)."""
+    """``value`` as an int, if it is a non-negative integer (not a bool).
+
+    Raises
+    ------
+    AnnotationError
+        Naming ``name``, if ``value`` is a bool, not an integer, or negative.
+    """
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
         raise AnnotationError(f"{name} must be a non-negative integer, got {value!r}")
     return int(value)
 
 
 def span(start: Any, stop: Any) -> tuple[int, int]:
-    """A half-open frame range ``(start, stop)`` with ``0 <= start < stop``."""
+    """A half-open frame range ``(start, stop)`` with ``0 <= start < stop``.
+
+    Raises
+    ------
+    AnnotationError
+        If ``start`` or ``stop`` is not a non-negative integer, or ``stop <= start``.
+    """
     s, e = count(start, "start"), count(stop, "stop")
     if e <= s:
         raise AnnotationError(f"empty or reversed frame range [{s}, {e})")
@@ -65,7 +77,14 @@ def span(start: Any, stop: Any) -> tuple[int, int]:
 
 
 def frames_list(frames: FramesLike) -> list[int]:
-    """Frame indices from an int, a range or an iterable of ints (not booleans)."""
+    """Frame indices from an int, a range or an iterable of ints (not booleans).
+
+    Raises
+    ------
+    AnnotationError
+        If ``frames`` is a bool or a boolean mask, not integers, empty, a range with a step
+        other than 1 or ending past ``MAX_FRAME``, or holds a negative index.
+    """
     if isinstance(frames, bool | np.bool_):
         raise AnnotationError("frames must be frame indices, got a boolean")
     if isinstance(frames, int | np.integer):

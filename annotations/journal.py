@@ -158,6 +158,13 @@ def read_header(fd: int, path: Path) -> tuple[str, int, int]:
     -------
     journal_id, base_seq, header_size
         The journal's id, the ``seq`` after which it starts, and the header's byte length.
+
+    Raises
+    ------
+    AnnotationFileError
+        Naming the journal and line 1, if the header is missing, incomplete or damaged, or
+        is not a valid journal header of this schema version
+        (:func:`annotations.schema.check_journal_header`).
     """
     head = os.pread(fd, _HEADER_MAX, 0)
     nl = head.find(b"\n")

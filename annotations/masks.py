@@ -67,6 +67,11 @@ def frames_to_ranges(frames: Iterable[int]) -> list[tuple[int, int]]:
     -------
     list of (int, int)
         Sorted, disjoint, non-adjacent ranges.
+
+    Raises
+    ------
+    AnnotationError
+        If a frame index is negative.
     """
     arr = np.unique(np.fromiter((int(f) for f in frames), dtype=np.int64))
     if arr.size == 0:

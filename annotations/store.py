@@ -321,6 +321,12 @@ class AnnotationStore(JournaledStore):
         -------
         Edit
             Receipt; the edit is durable.
+
+        Raises
+        ------
+        AnnotationError
+            If ``foot`` is given with ``value=False``, ``foot`` or ``source`` is unknown,
+            the trial name or ``frames`` are invalid, or a frame is past the trial's end.
         """
         foot = check_foot(foot)
         if foot is not None and not value:
@@ -373,6 +379,13 @@ class AnnotationStore(JournaledStore):
         overwrite
             If False, frames already flagged keep their flag (foot, author) where the mask
             is True; if True they are replaced.
+
+        Raises
+        ------
+        AnnotationError
+            If ``kind``, ``foot`` or ``source`` is unknown, a foot is given for
+            ``"excluded"``, ``mask`` is not a ``(T,)`` bool array, ``start_frame`` is not a
+            non-negative integer, or the mask reaches past the trial's end.
         """
         kind = check_kind(kind)
         foot = check_foot(foot)
@@ -520,7 +533,16 @@ class AnnotationStore(JournaledStore):
         note: str | None = None,
         source: str = "manual",
     ) -> Edit:
-        """Change an activity range's frames, label or note (``None``: keep)."""
+        """Change an activity range's frames, label or note (``None``: keep).
+
+        Raises
+        ------
+        AnnotationError
+            If the trial has no activity range ``activity_id``, or a new value is invalid
+            (an empty, reversed or out-of-trial range, a label not in
+            :data:`~annotations.model.ACTIVITY_LABELS`, a note that is not text, an unknown
+            ``source``).
+        """
         with self._tlock:
             cur = self._state.get(("activity", trial, activity_id))
         if cur is None:
@@ -584,7 +606,14 @@ class AnnotationStore(JournaledStore):
         )
 
     def update_note(self, trial: str, note_id: str, text: str, *, source: str = "manual") -> Edit:
-        """Replace a note's text (its frames are kept)."""
+        """Replace a note's text (its frames are kept).
+
+        Raises
+        ------
+        AnnotationError
+            If the trial has no note ``note_id``, ``text`` is not text, or ``source`` is
+            unknown.
+        """
         with self._tlock:
             cur = self._state.get(("note", trial, note_id))
         if cur is None:

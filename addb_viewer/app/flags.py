@@ -258,6 +258,11 @@ def toggled_foot(current: str | None, foot: str) -> str | None:
     Toggling a foot on an unflagged frame flags it; on a frame flagged for the other
     foot it gives "both"; on "both" it leaves the other foot; toggling the frame's own
     foot, "both", or any foot on a flag without a foot clears it.
+
+    Raises
+    ------
+    AnnotationError
+        ``foot`` is not "left", "right" or "both".
     """
     if foot not in FEET:
         raise AnnotationError(f"foot must be one of {FEET}, got {foot!r}")

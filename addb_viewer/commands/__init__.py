@@ -24,9 +24,10 @@ def fit_settings(fit: str) -> dict[str, str]:
 
 
 def whole_number(least: int) -> Callable[[str], int]:
-    """An argparse ``type`` for a whole number of at least ``least``: ``--workers -1`` is refused
-    at the command line ("expected a whole number of at least 1, got '-1'") instead of
-    reaching Dask, where no worker would ever start."""
+    """An argparse ``type`` for a whole number of at least ``least``: the parser it returns
+    raises ``argparse.ArgumentTypeError`` for any other text, so ``--workers -1`` is refused at
+    the command line ("expected a whole number of at least 1, got '-1'") instead of reaching
+    Dask, where no worker would ever start."""
 
     def parse(text: str) -> int:
         try:
@@ -42,8 +43,9 @@ def whole_number(least: int) -> Callable[[str], int]:
 
 def memory_size(text: str) -> str:
     """An argparse ``type`` for a worker's memory limit: ``auto``, or a size Dask reads
-    (``4GB``, ``500MiB``, ``2e9``); anything else is refused at the command line instead of
-    failing inside Dask's parser once the run has started."""
+    (``4GB``, ``500MiB``, ``2e9``) above zero; anything else raises
+    ``argparse.ArgumentTypeError``, so it is refused at the command line instead of failing
+    inside Dask's parser once the run has started."""
     if text.strip().lower() == "auto":
         return "auto"
     from dask.utils import parse_bytes

@@ -67,7 +67,14 @@ def dataset_entries(path: str) -> list[tuple[str, str | None]]:
 
 
 def resolve_output(path: str, progress=None) -> tuple[Path, Path | None]:
-    """(processed output folder, subject folder or None) of a command-line argument."""
+    """(processed output folder, subject folder or None) of a command-line argument.
+
+    Raises
+    ------
+    SubjectFolderError
+        The argument is neither a .b3d file nor a folder, or a folder that is neither a
+        processed output folder nor a subject folder (no ``_subject.json``).
+    """
     from addb_viewer.recording.jobs import ensure_processed
     from solver.errors import SubjectFolderError
     from solver.io.subject import SUBJECT_JSON

@@ -58,7 +58,14 @@ def _record_beside(out_dir: Path) -> tuple[Path | None, Path | None]:
 
 
 def export_b3d(args: argparse.Namespace) -> int:
-    """``--format b3d``: a processed output folder, a subject folder, or a dataset output tree."""
+    """``--format b3d``: a processed output folder, a subject folder, or a dataset output tree.
+
+    Raises
+    ------
+    OutputFolderError
+        For one subject, ``args.output`` is a folder instead of the name of the .b3d file to
+        write.
+    """
     from solver.dataset.discover import tree_subjects
     from solver.errors import counted
     from solver.io.b3d_convert import processed_to_b3d

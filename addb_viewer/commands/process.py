@@ -24,6 +24,12 @@ def run_dataset(args: argparse.Namespace) -> int:
     Returns
     -------
     The exit code: 1 when a subject failed (also one that failed before on the same inputs), else 0.
+
+    Raises
+    ------
+    SystemExit
+        ``--trial`` or ``--annotations`` is given (they apply to one subject folder), before
+        anything runs.
     """
     from addb_viewer.progress import ProgressBar, table
     from addb_viewer.review_masks import review_digest, subject_masks

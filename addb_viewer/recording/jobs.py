@@ -109,9 +109,16 @@ def write_recording(
     annotations: dict[str, Any] | None = None,
     mesh_path: Sequence[str | os.PathLike[str]] | None = None,
 ) -> Path:
-    """Write ``trial`` as ``fmt`` (``"rrd"`` or ``"mcap"``) to ``output``; bone meshes
-    are looked up along ``mesh_path`` (default: the trial's own search path, see
-    :func:`addb_viewer.geometry.trial_search_path`)."""
+    """Write ``trial`` as ``fmt`` (``"rrd"`` or ``"mcap"``) to ``output``.
+
+    Bone meshes are looked up along ``mesh_path`` (default: the trial's own search path,
+    see :func:`addb_viewer.geometry.trial_search_path`).
+
+    Raises
+    ------
+    ValueError
+        ``fmt`` is neither ``"rrd"`` nor ``"mcap"``.
+    """
     if fmt == "rrd":
         from addb_viewer.recording.rerun_writer import write_rerun
 
