@@ -121,6 +121,11 @@ def analytical_baseline(
     Returns
     -------
     Prediction
+
+    Raises
+    ------
+    ValueError
+        ``contact`` is neither ``"measured"`` nor ``"kinematic"``.
     """
     from solver.dynamics.preprocess import derivatives
 

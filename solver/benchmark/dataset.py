@@ -233,6 +233,11 @@ def kinematic_coordinates(trial: ProcessedTrial) -> FloatArray:
     A trial read from a .b3d file with a kinematics pass carries that pass's coordinates as
     ``settings["kinematic_q"]`` (:mod:`solver.benchmark.b3d_trials`): they are the input, as
     in the paper.
+
+    Raises
+    ------
+    BenchmarkError
+        No observed marker on any frame (and no ``kinematic_q`` given), naming the trial.
     """
     given = trial.settings.get("kinematic_q") if isinstance(trial.settings, dict) else None
     if given is not None:
@@ -271,6 +276,11 @@ def foot_wrenches(
     foreign
         ``(T,)`` frames where a loaded plate is applied to no body or to a body that is not
         one of ``feet`` (more contact bodies than the benchmark's two feet).
+
+    Raises
+    ------
+    BenchmarkError
+        The model has no body of ``feet`` (naming the missing ones and the trial).
     """
     t = trial.n_frames
     nf = len(feet)
@@ -324,7 +334,15 @@ def benchmark_trial(
     margin_frames: int = MARGIN_FRAMES,
 ) -> BenchmarkTrial | Skipped:
     """The benchmark view of one processed trial (see the module docstring), or the reason
-    it is skipped (no dynamics, fewer than ``min_frames`` benchmark frames)."""
+    it is skipped (no dynamics, fewer than ``min_frames`` benchmark frames).
+
+    Raises
+    ------
+    BenchmarkError
+        ``inputs`` is not one of ``INPUTS``, ``feet`` is not two bodies of the model
+        (:func:`foot_wrenches`), or, with kinematic inputs, no marker is observed on any
+        frame (:func:`kinematic_coordinates`).
+    """
     if inputs not in INPUTS:
         raise BenchmarkError(f"inputs must be one of {INPUTS}, got {inputs!r}")
     if len(feet) != 2:

@@ -128,7 +128,13 @@ class FeatureSpec:
 
     @staticmethod
     def common(trials: Sequence[BenchmarkTrial]) -> FeatureSpec:
-        """The coordinates and bodies every trial's model has (in the first one's order)."""
+        """The coordinates and bodies every trial's model has (in the first one's order).
+
+        Raises
+        ------
+        BenchmarkError
+            ``trials`` is empty.
+        """
         if not trials:
             raise BenchmarkError("no trial to define the MLP's inputs")
         specs = [FeatureSpec.of_trial(t) for t in trials]
@@ -157,6 +163,11 @@ def frame_features(trial: BenchmarkTrial, spec: FeatureSpec, q: FloatArray | Non
         and angular acceleration, all in the pelvis frame.
     pelvis_rot
         ``(T, 3, 3)`` pelvis orientation (columns: pelvis axes in the ground frame).
+
+    Raises
+    ------
+    BenchmarkError
+        The trial's model lacks a coordinate of ``spec`` (naming them).
     """
     from solver.dynamics.preprocess import derivatives
 

@@ -71,7 +71,13 @@ class BenchmarkResult:
 
 
 def make_folds(dataset: Dataset, *, split: str, seed: int, train: Dataset | None) -> tuple[list[Split], str]:
-    """The splits of a protocol (see the module docstring) and its description."""
+    """The splits of a protocol (see the module docstring) and its description.
+
+    Raises
+    ------
+    BenchmarkError
+        ``train`` is None and ``split`` is neither ``"loso"`` nor ``"seeded"``.
+    """
     subjects = dataset.subjects
     if train is not None:
         fold = Split(tuple(train.subjects), (), tuple(subjects), name="given training subjects")

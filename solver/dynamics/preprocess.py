@@ -104,7 +104,13 @@ def nearest_frames(src_time: FloatArray, time: FloatArray) -> NDArray[np.intp]:
 
 
 def common_time(start: float, stop: float, rate_hz: float) -> FloatArray:
-    """Frame times from ``start`` to ``stop`` (inclusive when on the grid) at ``rate_hz``."""
+    """Frame times from ``start`` to ``stop`` (inclusive when on the grid) at ``rate_hz``.
+
+    Raises
+    ------
+    DynamicsError
+        ``stop`` is before ``start`` (no overlap in time).
+    """
     n = int(np.floor((stop - start) * rate_hz + 1e-9)) + 1
     if n < 1:
         raise DynamicsError(f"no overlap in time ({start:.3f} s to {stop:.3f} s)")
@@ -126,6 +132,11 @@ def derivatives(x: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
     xd, xdd
         ``(T, ...)`` each: (x[t+1] - x[t-1]) / 2dt and (x[t+1] - 2 x[t] + x[t-1]) / dt²
         inside; second-order one-sided formulas at both ends.
+
+    Raises
+    ------
+    DynamicsError
+        Fewer than 3 frames.
     """
     x = np.asarray(x, dtype=float)
     if x.shape[0] < 3:

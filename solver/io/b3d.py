@@ -200,7 +200,13 @@ class B3dHeader:
     custom_value_lengths: tuple[int, ...] = ()
 
     def trial_index(self, trial: int | str) -> int:
-        """Index of a trial given by index or name; ``KeyError`` naming the trials otherwise."""
+        """Index of a trial given by index or name.
+
+        Raises
+        ------
+        KeyError
+            An index out of range, or an unknown name (the message lists the trials).
+        """
         if isinstance(trial, (int, np.integer)) and not isinstance(trial, bool):
             if 0 <= int(trial) < len(self.trials):
                 return int(trial)

@@ -450,7 +450,13 @@ class McapRecording:
         return out
 
     def annotations(self) -> dict[str, Any]:
-        """The ``/annotations`` message: ``{"subject", "trial", "state", "settings"}``."""
+        """The ``/annotations`` message: ``{"subject", "trial", "state", "settings"}``.
+
+        Raises
+        ------
+        McapFormatError
+            No message on ``/annotations``, or its chunk or JSON is damaged.
+        """
         with self._reading("reading /annotations"):
             for _, _, message in self._reader.iter_messages(topics=[TOPIC_ANNOTATIONS]):
                 return json.loads(message.data)

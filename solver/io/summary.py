@@ -224,7 +224,13 @@ def _xml_root(p: Path) -> ET.Element:
 
 
 def model_counts(p: Path) -> dict[str, Any]:
-    """Bodies (ground excluded), coordinates and markers of an .osim file, by XML."""
+    """Bodies (ground excluded), coordinates and markers of an .osim file, by XML.
+
+    Raises
+    ------
+    XmlFormatError
+        The file is not well-formed XML, or holds no OpenSim ``<Model>``.
+    """
     root = _xml_root(p)
     model = root if root.tag == "Model" else root.find("Model")
     if model is None:

@@ -40,7 +40,13 @@ def _set(parent: ET.Element, tag: str, text: str) -> None:
 
 
 def function_element(function: fn.Function, name: str | None = "function") -> ET.Element:
-    """XML element of an OpenSim function (``name`` attribute as the 4.x layout uses)."""
+    """XML element of an OpenSim function (``name`` attribute as the 4.x layout uses).
+
+    Raises
+    ------
+    OsimModelError
+        ``function``, or the function a ``Multiplier`` scales, is of an unsupported type.
+    """
     attrs = {"name": name} if name else {}
     if isinstance(function, fn.Multiplier):
         el = ET.Element("MultiplierFunction", attrs)

@@ -306,7 +306,7 @@ class Skeleton:
             raise KeyError(f"model {self.osim.name} has no marker {exc.args[0]!r}") from None
 
     def body_index(self, name: str) -> int:
-        """Index of body ``name`` in :attr:`body_names`."""
+        """Index of body ``name`` in :attr:`body_names`; raises ``KeyError`` naming it."""
         try:
             return self._body_index[name]
         except KeyError:
