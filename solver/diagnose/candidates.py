@@ -129,7 +129,9 @@ class LinearAlternative:
         self.ref_costs = np.sum(rho0**2, axis=1)
 
     def solve(self, mask: BoolArray) -> FloatArray:
-        """Least-squares parameters on the frames in ``mask``."""
+        """``(k,)`` least-squares parameters theta on the frames in ``mask`` ``(T,)`` (k =
+        :attr:`n_params`; in the coordinates of ``basis`` when one was given), in the units
+        the columns of ``g`` are per."""
         g = self.g[mask].reshape(-1, self.n_params)
         r = self.rho0[mask].reshape(-1)
         if not g.size or not np.any(g):
@@ -149,12 +151,14 @@ class LinearAlternative:
         return self.rho0 + self.g @ theta
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
-        """Parameters in their units."""
+        """Parameters in their units from ``theta`` ``(k,)`` (in the coordinates of ``basis``
+        when one was given; taken back to the cause's own parameters first)."""
         full = theta if self.basis is None else self.basis @ theta
         return self._physical(full)
 
     def vector(self, theta: FloatArray) -> FloatArray:
-        """The reported parameter vector (for the spread across folds)."""
+        """``(n,)`` the reported parameter vector, :meth:`physical`'s ``value`` in its units
+        (n = 1 for a scalar value), from ``theta`` ``(k,)`` (for the spread across folds)."""
         out = self.physical(theta)
         return np.atleast_1d(np.asarray(out["value"], dtype=float))
 
@@ -199,7 +203,8 @@ class GridAlternative:
         return self.rows_at(float(theta[0]))
 
     def solve(self, mask: BoolArray) -> FloatArray:
-        """Grid minimum of the summed cost, refined by a parabola through its neighbours."""
+        """``(1,)`` the grid minimum of the cost summed over the frames in ``mask`` ``(T,)``,
+        refined by a parabola through its neighbours, in the grid's units (s for the delay)."""
         total = self.costs[mask].sum(axis=0)
         j = int(np.argmin(total))
         if 0 < j < self.grid.size - 1:
@@ -210,18 +215,20 @@ class GridAlternative:
         return np.array([self.grid[j]])
 
     def frame_costs(self, theta: FloatArray) -> FloatArray:
-        """Per-frame costs interpolated linearly between grid values."""
+        """``(T,)`` cost of each frame at the parameter value ``theta[0]`` (``theta`` ``(1,)``),
+        interpolated linearly between grid values."""
         x = float(np.clip(theta[0], self.grid[0], self.grid[-1]))
         j = int(np.clip(np.searchsorted(self.grid, x) - 1, 0, self.grid.size - 2))
         w = (x - self.grid[j]) / (self.grid[j + 1] - self.grid[j])
         return (1 - w) * self.costs[:, j] + w * self.costs[:, j + 1]
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
-        """Parameters in their units."""
+        """Parameters in their units from ``theta`` ``(1,)``, the grid's parameter."""
         return self._physical(float(theta[0]))
 
     def vector(self, theta: FloatArray) -> FloatArray:
-        """The reported parameter vector."""
+        """``(1,)`` the reported parameter vector, :meth:`physical`'s ``value`` (the grid's
+        parameter in its units, s for the delay), from ``theta`` ``(1,)``."""
         return np.atleast_1d(np.asarray(self.physical(theta)["value"], dtype=float))
 
 
@@ -243,7 +250,7 @@ class FixedAlternative:
         return self._rows
 
     def solve(self, mask: BoolArray) -> FloatArray:
-        """Nothing to fit globally."""
+        """Nothing to fit globally: ``(0,)`` whatever the frames in ``mask`` ``(T,)``."""
         return np.zeros(0)
 
     def frame_costs(self, theta: FloatArray) -> FloatArray:
@@ -251,11 +258,11 @@ class FixedAlternative:
         return self._costs
 
     def physical(self, theta: FloatArray) -> dict[str, Any]:
-        """The frames of U and the unmeasured force on them."""
+        """The frames of U and the unmeasured force on them (``theta`` ``(0,)``, unused)."""
         return dict(self._params)
 
     def vector(self, theta: FloatArray) -> FloatArray:
-        """No vector parameter."""
+        """No vector parameter: ``(0,)`` (``theta`` ``(0,)``, unused)."""
         return np.zeros(0)
 
 
@@ -338,7 +345,8 @@ GROW_BW = 0.1
 
 
 def unmeasured_frames(data: DiagnosisData) -> tuple[BoolArray, list[str]]:
-    """The frames U of ``unmeasured_force`` and the reason of each frame ("" outside U).
+    """The frames U of ``unmeasured_force``, ``(T,)``, and the reason of each frame (T
+    strings, "" outside U).
 
     Uses the residual at the *fitted* mass (so that a wrong stated mass does not count as
     a missing force) and the kinematic contact of :func:`solver.dynamics.contact.assign_contacts`.

@@ -169,7 +169,8 @@ def build_context(
 ) -> tuple[C.Context, Profile]:
     """The shared context of the candidates and the profile with U evaluated.
 
-    ``unmeasured`` gives the frames U and their reasons (default: found on ``data``).
+    ``unmeasured`` gives the frames U, ``(T,)``, and their reasons (T strings, "" outside
+    U; default: found on ``data``, :func:`solver.diagnose.candidates.unmeasured_frames`).
     """
     s = sigmas or Sigmas.of(data)
     u, reasons = C.unmeasured_frames(data) if unmeasured is None else unmeasured
@@ -206,8 +207,9 @@ def evaluate(
     """Cross-validate every alternative, each on its cause's folds (:class:`Folds`); returns
     the context, alternatives, evaluations and folds.
 
-    ``unmeasured``: the frames U and their reasons (default: found on ``data``); ``sigmas``:
-    the channels' standard deviations (default: :meth:`Sigmas.of` ``data``, the fit's).
+    ``unmeasured``: the frames U, ``(T,)``, and their reasons (T strings; default: found on
+    ``data``); ``sigmas``: the channels' standard deviations (default: :meth:`Sigmas.of`
+    ``data``, the fit's).
     """
     ctx, full = build_context(data, sigmas, unmeasured=unmeasured)
     alts = alternatives(ctx, full, options.causes)
@@ -239,7 +241,8 @@ def held_out_figures(ctx: C.Context, alt: C.Alternative, folds: np.ndarray, scor
 
 def entry_inputs(data: DiagnosisData, marker_time: FloatArray) -> EntryInputs:
     """What a cause needs to write its extension entry: the prepared trial, the raw marker
-    times and the rule that takes runs of the diagnosis' frames to the marker rate."""
+    times ``marker_time`` ``(T_markers,)``, s, and the rule that takes runs of the diagnosis'
+    frames to the marker rate."""
 
     def marker_frames(runs: Any) -> list[list[int]]:
         found = np.zeros(data.time.size, dtype=bool)
@@ -252,7 +255,8 @@ def entry_inputs(data: DiagnosisData, marker_time: FloatArray) -> EntryInputs:
 
 def extension_entry(ev: Evaluation, data: DiagnosisData, marker_time: FloatArray) -> dict[str, Any]:
     """The :mod:`solver.corrections` entry of an evaluation (what ``--apply`` saves): its
-    cause's :meth:`~solver.diagnose.causes.base.Cause.extension`.
+    cause's :meth:`~solver.diagnose.causes.base.Cause.extension`. ``marker_time``
+    ``(T_markers,)``: the raw trial's marker sample times, s.
 
     Raises
     ------

@@ -368,7 +368,9 @@ def root_wrench(sk: Skeleton, trial: ProcessedTrial) -> FloatArray:
 
 
 def group_wrenches(model: OsimModel, trial: ProcessedTrial) -> tuple[dict[str, FloatArray], dict[str, float]]:
-    """Per body group, the root wrench of its bodies alone (they sum to the whole body's)."""
+    """Per body group, ``(T, 6)`` the gravity + inertia root wrench of its bodies alone
+    (force N; moment about the pelvis origin N·m; ground frame; they sum to the whole
+    body's), and the group's mass, kg."""
     out = {}
     by_group: dict[str, list[str]] = {}
     for b in model.bodies:

@@ -178,7 +178,8 @@ class MotionProfile:
         return out
 
     def project(self, z: FloatArray) -> FloatArray:
-        """Profile rows ``(rows of A,)`` or ``(rows of A, k)``: the best motion step removed."""
+        """Profile rows ``(rows of A,)`` or ``(rows of A, k)`` (in standard deviations): the
+        best motion step removed; the same shape."""
         x = self._lu.solve(np.asarray(self.a.T @ z))
         return z - self.a @ x
 

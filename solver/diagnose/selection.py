@@ -177,7 +177,8 @@ class Evaluation:
 
 
 def cross_validate(alt: Alternative, folds: IntArray) -> Evaluation:
-    """Fit ``alt`` on K-1 folds, score on the held-out one, for every fold."""
+    """Fit ``alt`` on K-1 folds, score on the held-out one, for every fold (``folds``
+    ``(T,)``: fold of each frame, 0 to K-1)."""
     t = folds.size
     k = int(folds.max()) + 1
     ref = alt.ref_costs
@@ -453,7 +454,8 @@ def make_blocks(n_frames: int, dt: float, block_seconds: float = 0.2) -> IntArra
 
 
 def paired_blocks(best: Evaluation, other: Evaluation, blocks: IntArray) -> tuple[float, float]:
-    """Paired comparison of two alternatives over blocks of frames.
+    """Paired comparison of two alternatives over blocks of frames (``blocks`` ``(T,)``: block
+    index of each frame, :func:`make_blocks`).
 
     Returns
     -------

@@ -185,8 +185,9 @@ class Cause(ABC):
         return True
 
     def deviation(self, parameters: dict[str, Any]) -> FloatArray:
-        """The estimate's departure from "no effect", the vector whose norm over the norm of
-        its jackknife standard error is the t value (default: ``value``)."""
+        """``(n,)`` the estimate's departure from "no effect", in the units of ``value`` (n = 1
+        for a scalar value): the vector whose norm over the norm of its jackknife standard
+        error is the t value (default: ``value``)."""
         return np.atleast_1d(np.asarray(parameters["value"], dtype=float))
 
     # ------------------------------------------------------------------ extension
@@ -215,7 +216,19 @@ class Cause(ABC):
         """Before/after figures on held-out frames (each frame corrected with the parameters
         fitted without its fold): marker RMS (m), linear (N) and angular (N·m) residual RMS
         over ``frames`` (residuals: on the evaluated ones), from the translation-profiled
-        rows; before: the reference, after: the alternative's rows."""
+        rows; before: the reference, after: the alternative's rows.
+
+        Parameters
+        ----------
+        ctx
+            The trial's shared context.
+        alt
+            The alternative (one of this cause's).
+        folds
+            ``(T,)`` fold of each frame, 0 to K-1 (:meth:`solver.diagnose.selection.Folds.of`).
+        frames
+            ``(T,)`` frames scored.
+        """
         after = np.array(ctx.ref_rows)
         for f in range(int(folds.max()) + 1):
             test = folds == f

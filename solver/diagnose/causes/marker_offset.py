@@ -114,7 +114,8 @@ class MarkerOffset(Cause):
         return float(np.linalg.norm(parameters["visible_shift_m"]))
 
     def deviation(self, parameters: dict[str, Any]) -> FloatArray:
-        """The shift beyond the offset the kinematics stage already gave the model marker.
+        """``(3,)`` the shift beyond the offset the kinematics stage already gave the model
+        marker (``residual_shift_m``), m, in the marker's body frame.
 
         That is what the marker's own error shows and ``--apply`` corrects; the reported
         value adds that offset, a constant, so its jackknife error is the same. Judged by
@@ -183,8 +184,9 @@ class MarkerOffset(Cause):
         )
 
     def held_out_figures(self, ctx: Context, alt: Alternative, folds: np.ndarray, frames: BoolArray) -> dict[str, Any]:
-        """The marker's error moved by the lab-frame shift of each fold's parameters; the
-        residual rows stay the reference's."""
+        """:meth:`Cause.held_out_figures` (``folds`` ``(T,)``, ``frames`` ``(T,)``): the
+        marker's error moved by the lab-frame shift ``(T, 3)``, m, of each fold's parameters
+        (the ``(3,)`` body-frame shift, m); the residual rows stay the reference's."""
         d = ctx.data
         j = d.markers.names.index(alt.choice)
         lab = np.zeros((d.n_frames, 3))

@@ -66,7 +66,7 @@ class PlateForceGain(ForceCorrection):
         return abs(parameters["gain"] - 1.0)
 
     def deviation(self, parameters: dict[str, Any]) -> FloatArray:
-        """gain - 1 (no effect: a gain of 1)."""
+        """``(1,)`` gain - 1, dimensionless (no effect: a gain of 1)."""
         return np.atleast_1d(np.asarray(parameters["value"], dtype=float)) - 1.0
 
     def extension(self, parameters: dict[str, Any], inputs: EntryInputs) -> dict[str, Any]:

@@ -107,7 +107,9 @@ class SegmentMassDistribution(Cause):
         return "mass moved: " + ", ".join(f"{g} {v:+.2f} kg" for g, v in parameters["mass_change_kg"].items()) + legs
 
     def held_out_figures(self, ctx: Context, alt: Alternative, folds: np.ndarray, frames: BoolArray) -> dict[str, Any]:
-        """Figures from the whole-motion profile's rows (:meth:`MotionAlternative.figures`)."""
+        """:meth:`Cause.held_out_figures` (``folds`` ``(T,)``, ``frames`` ``(T,)``) from the
+        whole-motion profile's rows (:meth:`MotionAlternative.figures`), each fold's ``(1,)``
+        legs' change, kg, fitted without it."""
         assert isinstance(alt, MotionAlternative)
         after = np.array(alt.rho0)
         for f in range(int(folds.max()) + 1):

@@ -87,8 +87,9 @@ class UnmeasuredForce(Cause):
         return f"{parameters['n_frames']} frames ({spans}) look unmeasured"
 
     def held_out_figures(self, ctx: Context, alt: Alternative, folds: np.ndarray, frames: BoolArray) -> dict[str, Any]:
-        """Before: U counts in the residual terms (every frame not flagged evaluated); after:
-        U left out. No fold fit: U has no global parameters."""
+        """:meth:`Cause.held_out_figures` (``folds`` ``(T,)``, ``frames`` ``(T,)``). Before: U
+        counts in the residual terms (every frame not flagged evaluated); after: U left out.
+        No fold fit: U has no global parameters."""
         d = ctx.data
         prof = Profile(d, ~d.flagged, ctx.sigmas)
         before_rows = prof.project(prof.raw_rows(d.residual(), d.external()[2]))
