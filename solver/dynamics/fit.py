@@ -854,10 +854,25 @@ def mass_regression(
 ) -> tuple[FloatArray, FloatArray, list[int]]:
     """Root generalized forces as a linear function of per-joint mass factors.
 
+    Parameters
+    ----------
+    sk
+        Skeleton of the model at its current masses (a factor k of 1 keeps a joint's).
+    q, qd, qdd
+        ``(T, n)`` coordinates (rad or m), their velocities (rad/s or m/s) and accelerations
+        (rad/s² or m/s²).
+    wrenches
+        Per loaded body: (body name, ``(T, 6)`` [force N, moment about the ground origin
+        N·m], ground frame), as :attr:`FitTrialInput.wrenches`.
+    observed
+        ``(T,)`` frames whose external force is measured: the K frames regressed.
+
     Returns
     -------
     a, b
-        ``(6 K, J)`` and ``(6 K,)`` with tau_root = a @ k + b over the K observed frames.
+        ``(6 K, J)`` and ``(6 K,)`` with tau_root = a @ k + b over the K observed frames:
+        the six root coordinates' generalized forces (N·m rotational, N translational) for
+        the ``(J,)`` mass factors k.
     joints
         Pinocchio joint index of each of the J factors (joints that carry mass).
     """

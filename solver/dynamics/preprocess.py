@@ -104,7 +104,8 @@ def nearest_frames(src_time: FloatArray, time: FloatArray) -> NDArray[np.intp]:
 
 
 def common_time(start: float, stop: float, rate_hz: float) -> FloatArray:
-    """Frame times from ``start`` to ``stop`` (inclusive when on the grid) at ``rate_hz``.
+    """``(T,)`` frame times from ``start`` to ``stop`` s (inclusive when on the grid) at
+    ``rate_hz`` Hz, s.
 
     Raises
     ------
