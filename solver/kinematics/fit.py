@@ -153,7 +153,9 @@ class ScaleFitProblem:
         self.n_z = self.n_s + 3 * len(self.names)
 
     def build(self, scales: FloatArray, offsets: FloatArray) -> Skeleton:
-        """The skeleton for given group scales and marker offsets."""
+        """The skeleton for given group scales ``scales`` ``(3G,)`` (x, y, z factors of each
+        group, dimensionless) and marker offsets ``offsets`` ``(M, 3)`` (body-fixed, m, added
+        to the scaled generic locations)."""
         body_scales = self.groups.body_scales(scales)
         scaled = scale_model(self.generic, body_scales)
         moved = {

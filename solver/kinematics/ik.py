@@ -99,7 +99,8 @@ class IkSettings:
 
 
 def solver_bounds(skeleton: Skeleton) -> tuple[FloatArray, FloatArray]:
-    """Lower and upper bounds the solvers enforce: the range of clamped coordinates.
+    """Lower and upper bounds the solvers enforce: the range of clamped coordinates,
+    ``(n,)`` each, rad or m (infinite where a coordinate is not bounded).
 
     The root joint's coordinates (the body's position and heading in the lab) are never
     bounded: their ranges in OpenSim models (e.g. pelvis_tz within ±3 m, pelvis_rotation
@@ -556,7 +557,9 @@ def greedy_pose(solver: FrameSolver, y: FloatArray, q_root: FloatArray, grid: in
 
 
 def initial_pose(solver: FrameSolver, y: FloatArray) -> FloatArray:
-    """Coordinates of a first guess for one frame: root pose by rigid registration.
+    """``(n,)`` coordinates (rad or m) of a first guess for one frame: root pose by rigid
+    registration to ``y`` ``(M, 3)``, the observed positions, m, ground frame, NaN where
+    missing.
 
     The model's markers in its default pose are rigidly registered (Kabsch) to the
     observed ones (root-body markers if three or more are seen, else all markers); the
