@@ -274,7 +274,8 @@ class CoordinateMap:
             raise ValueError("chained coupler constraints (a dependent driving another) are not supported")
 
     def complete(self, q: FloatArray) -> FloatArray:
-        """q with every dependent coordinate replaced by its coupler value; (..., n)."""
+        """``(..., n)`` coordinates ``q`` (rad or m) with every dependent coordinate replaced
+        by its coupler value; the same shape."""
         x = np.array(q, dtype=float, copy=True)
         if self.dependent.size:
             g, _, _ = self._couplers.evaluate(q, order=0)

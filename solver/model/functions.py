@@ -111,11 +111,11 @@ class Multiplier(Function):
     scale: float
 
     def value(self, x: ArrayLike) -> FloatArray:
-        """``scale`` times ``inner`` at ``x``."""
+        """``scale`` times ``inner`` at ``x``, same shape as ``x``."""
         return self.scale * self.inner.value(x)
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
-        """``scale`` times ``inner``'s ``order``-th derivative at ``x``."""
+        """``scale`` times ``inner``'s ``order``-th derivative at ``x``, same shape as ``x``."""
         return self.scale * self.inner.derivative(x, order)
 
     def is_constant(self) -> bool:
@@ -253,8 +253,8 @@ class PiecewiseLinear(Function):
         return self.y[i] + (xa - self.x[i]) * self._slopes[i]
 
     def derivative(self, x: ArrayLike, order: int = 1) -> FloatArray:
-        """The slope of the segment holding ``x`` (order 1), or 0 (order 2); at an interior
-        knot, the slope of the segment to its right."""
+        """The slope of the segment holding ``x`` (order 1), or 0 (order 2), same shape as
+        ``x``; at an interior knot, the slope of the segment to its right."""
         xa = np.asarray(x, dtype=float)
         if order != 1:
             return np.zeros(xa.shape)

@@ -205,7 +205,8 @@ class OsimModel:
 
 
 def euler_xyz(angles: tuple[float, float, float] | FloatArray) -> FloatArray:
-    """Rotation matrix of body-fixed X-Y-Z Euler angles (rad): Rx(a) @ Ry(b) @ Rz(c)."""
+    """``(3, 3)`` rotation matrix of body-fixed X-Y-Z Euler angles ``(3,)`` (a, b, c), rad:
+    Rx(a) @ Ry(b) @ Rz(c)."""
     a, b, c = (float(v) for v in angles)
     ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
     rx = np.array([[1, 0, 0], [0, ca, -sa], [0, sa, ca]])

@@ -191,8 +191,9 @@ def write_osim(
     name
         Model name to write (default: unchanged).
     path_point_scales
-        Body scale factors to apply to muscle path points (the same as given to
-        :func:`solver.model.scaling.scale_model`); None leaves them unchanged.
+        Body name -> ``(3,)`` scale factors along the body's axes (unitless) to apply to
+        muscle path points (the same as given to :func:`solver.model.scaling.scale_model`);
+        None leaves them unchanged.
 
     Returns
     -------

@@ -299,7 +299,8 @@ class Skeleton:
             raise KeyError(f"model {self.osim.name} has no coordinate {name!r}") from None
 
     def marker_index(self, names: list[str] | tuple[str, ...]) -> IntArray:
-        """Indices of the named model markers; raises ``KeyError`` naming a missing one."""
+        """``(M,)`` indices of the M named model markers (in :attr:`marker_names`); raises
+        ``KeyError`` naming a missing one."""
         try:
             return np.array([self._marker_index[n] for n in names], dtype=np.intp)
         except KeyError as exc:
