@@ -806,7 +806,10 @@ def write_dynamics_files(folder: Path, name: str, td: TrialDynamics, model: Osim
 
 
 def plates_on_frames(forces: ForceRecording | None, time: np.ndarray) -> tuple[PlateData, ...]:
-    """Plate wrenches linearly interpolated onto the trial's frame times (no assignment)."""
+    """Plate wrenches linearly interpolated onto the trial's frame times ``time`` ``(T,)``, s
+    (no assignment): each plate's ``(T, 3)`` force (N), centre of pressure (m) and free
+    moment (N·m), as the recording gives them (NaN outside the recording; the centre of
+    pressure also where unloaded), applied to no body (-1 on every frame)."""
     if forces is None:
         return ()
     out = []

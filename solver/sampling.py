@@ -38,8 +38,8 @@ def frame_interval(time: ArrayLike, default: float | None = None, what: str = "t
 
 
 def frame_rate(time: ArrayLike, default: float | None = None, what: str = "time column") -> float:
-    """Frame rate of a time column, Hz: one over :func:`frame_interval` (``default``, in Hz,
-    when there are fewer than two frames).
+    """Frame rate of a time column ``time`` ``(T,)`` (frame times, s), Hz: one over
+    :func:`frame_interval` (``default``, in Hz, when there are fewer than two frames).
 
     Raises
     ------

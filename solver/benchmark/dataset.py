@@ -202,9 +202,10 @@ class Dataset:
 
 
 def torque_columns(trial: BenchmarkTrial) -> NDArray[np.intp]:
-    """Indices of the coordinates scored by the joint torque metric: every coordinate but
-    the six root coordinates (their generalized forces are residuals) and the dependent
-    (coupled) ones, whose force is carried by their independent coordinate."""
+    """``(n_scored,)`` indices, into the model's n coordinates, of the coordinates scored by
+    the joint torque metric: every coordinate but the six root coordinates (their
+    generalized forces are residuals) and the dependent (coupled) ones, whose force is
+    carried by their independent coordinate."""
     sk = skeleton_for(trial.model_path)
     root = set(sk.root_transform_axes())
     return np.array([i for i in range(sk.n) if i not in root and sk.is_independent[i]], dtype=np.intp)

@@ -447,7 +447,8 @@ def _plate(
 
 
 def estimate_rate(time: np.ndarray) -> float:
-    """Sampling rate, Hz, from a uniform time column: ``(T - 1) / (t[-1] - t[0])``.
+    """Sampling rate, Hz, from a uniform time column ``time`` ``(T,)``, s:
+    ``(T - 1) / (t[-1] - t[0])``.
 
     Rounded to the nearest integer when within 1e-6 of it (2000 Hz, not 1999.9999999).
     Returns NaN for fewer than two samples.
