@@ -181,8 +181,9 @@ def unmeasured_force(
 
 def subject_masks(subject_dir: str, out_dir: str) -> dict[str, BoolArray] | None:
     """:func:`unmeasured_force` of the subject's review record (where ``addb view`` keeps
-    it, :func:`addb_viewer.locations.annotations_path`), or None when it has no record or
-    no trial enters; the dataset runner's mask loader (``addb process DATASET_DIR``).
+    it, :func:`addb_viewer.locations.annotations_path`): trial name -> ``(T,)`` flags at the
+    trial's processed frames, or None when it has no record or no trial enters; the dataset
+    runner's mask loader (``addb process DATASET_DIR``).
 
     Raises
     ------
@@ -221,7 +222,8 @@ def masks_from_file(
     """``unmeasured_force`` from an ``--annotations`` file: a review record
     (:func:`unmeasured_force`) or an AddBiomechanics ``review.json`` of one trial (one entry
     per marker frame, resampled onto the processed frames): the subject's only trial, or
-    the one trial of ``trials`` (``--trial``).
+    the one trial of ``trials`` (``--trial``). Trial name -> ``(T,)`` flags at the trial's
+    processed frames.
 
     Raises
     ------

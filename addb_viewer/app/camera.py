@@ -59,7 +59,8 @@ def framing_point(pelvis: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def view_pose(view: str, look: NDArray[np.float64], *, distance: float = DISTANCE_M) -> CameraPose:
-    """The camera pose of ``view`` (one of :data:`VIEWS`) looking at ``look``.
+    """The camera pose of ``view`` (one of :data:`VIEWS`) looking at ``look`` ``(3,)``, m,
+    ground frame, from ``distance`` m.
 
     Raises
     ------

@@ -194,7 +194,9 @@ def unproposed_replaced(view: FlagView, unobserved: BoolArray, proposed: BoolArr
     plate, plate force with no foot on the plate: :mod:`solver.dynamics.stage`) that the
     next run fits as measured because the reviewer's flags replace the solver's choice
     (:func:`flags_replace_proposals`) and do not cover them; 0 when the fit shown already
-    took the reviewer's flags (``reasons``: results.json's ``unobserved_reasons``)."""
+    took the reviewer's flags (``reasons``: results.json's ``unobserved_reasons``).
+    ``unobserved``, ``proposed``: ``(T,)`` the fit's left-out frames and the solver's
+    proposals (the processed trial)."""
     if not flags_replace_proposals(view) or FLAGGED_REASON in reasons or unobserved.shape != view.flagged.shape:
         return 0
     return int((unobserved & ~proposed & ~view.flagged).sum())

@@ -96,7 +96,8 @@ class PageCameras:
         return pose
 
     def frame_page(self, client: Any, body_position: NDArray[np.float64], frame: int) -> None:
-        """Frame the trial in the current view on one page; when the trial does not fit its
+        """Frame the trial (``body_position`` ``(T, B, 3)`` body origins, m, ground frame, body
+        0 the pelvis) in the current view on one page; when the trial does not fit its
         canvas the page follows the pelvis instead (until a framing fits again)."""
         canvas = self.canvas(client)
         pose, fits = framed_view(self.view, body_position, canvas, frame)
@@ -108,8 +109,10 @@ class PageCameras:
         self._apply(client, pose, body_position[frame, 0, :])
 
     def resized(self, camera: Any, body_position: NDArray[np.float64] | None, frame: int) -> None:
-        """A page reported its camera: frame the trial again for it when its canvas changed
-        size since it was framed (the page opened, the window or a docked panel resized)."""
+        """A page reported its camera: frame the trial (``body_position`` ``(T, B, 3)`` body
+        origins, m, ground frame, or None without a trial) again for it when its canvas
+        changed size since it was framed (the page opened, the window or a docked panel
+        resized)."""
         size = (float(camera.image_width), float(camera.image_height))
         if body_position is None or self._framed_for.get(camera.client.client_id) == size:
             return

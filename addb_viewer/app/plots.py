@@ -216,7 +216,9 @@ class Chart:
         )
 
     def arrays(self) -> tuple[FloatArray, ...]:
-        """The chart's current data tuple (see :func:`chart_arrays`)."""
+        """The chart's current data tuple (see :func:`chart_arrays`): the times (s), each
+        line's values (in the chart's ``unit``), the flagged and proposed shades and the
+        cursor, each ``(n,)`` with n = 3T + 2."""
         return chart_arrays(
             self.time,
             [ln.values for ln in self.lines],

@@ -143,7 +143,8 @@ def frame_geometry(
     settings
         Thresholds and arrow scale.
     feet
-        :func:`plate_feet` of the trial (computed when not given).
+        ``(P, T)`` :func:`plate_feet` of the trial: the foot each plate's wrench is assigned
+        to per frame (computed when not given).
     """
     feet = plate_feet(trial) if feet is None else feet
     obs = trial.observed[k]

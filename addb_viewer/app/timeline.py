@@ -119,7 +119,8 @@ def kinematic_contact(
 
 def track_data(trial: ProcessedTrial, view: FlagView | None, hicks: BoolArray | None) -> TrackData:
     """The per-frame values of every track of ``trial`` (``view``: the review state,
-    None when there is no review record; ``hicks``: frames over the Hicks thresholds)."""
+    None when there is no review record; ``hicks``: ``(T,)`` frames over the Hicks
+    thresholds, or None)."""
     n = trial.n_frames
     none = np.zeros(n, bool)
     masks: dict[str, BoolArray] = {}

@@ -151,9 +151,10 @@ def _f(v: float) -> float | None:
 
 
 def frame_transforms(trial: ProcessedTrial, log_ns: np.ndarray) -> list[str]:
-    """One ``foxglove.FrameTransforms`` JSON message per frame: ``world`` -> each body
-    (translation m, rotation {x, y, z, w}) and ``z_up`` -> ``world`` (+90° about x, so
-    that Foxglove, which is Z-up, shows the Y-up lab upright with display frame ``z_up``)."""
+    """One ``foxglove.FrameTransforms`` JSON message per frame, stamped ``log_ns`` ``(T,)``
+    (each frame's log time, ns): ``world`` -> each body (translation m, rotation
+    {x, y, z, w}) and ``z_up`` -> ``world`` (+90° about x, so that Foxglove, which is Z-up,
+    shows the Y-up lab upright with display frame ``z_up``)."""
     pos = np.asarray(trial.body_position, dtype=np.float64).tolist()
     quat = np.asarray(trial.body_wxyz, dtype=np.float64).tolist()
     out = []
@@ -213,9 +214,10 @@ def _empty_entity(stamp: dict[str, int], ident: str) -> dict[str, Any]:
 
 
 def scene_updates(trial: ProcessedTrial, log_ns: np.ndarray, force_scale: float) -> list[str]:
-    """One ``foxglove.SceneUpdate`` JSON message per frame: an arrow per loaded plate
-    from the CoP along the GRF (``force_scale`` m per N), the plate outlines, and a
-    sphere at the centre of mass (display only; not read back)."""
+    """One ``foxglove.SceneUpdate`` JSON message per frame, stamped ``log_ns`` ``(T,)``
+    (each frame's log time, ns): an arrow per loaded plate from the CoP along the GRF
+    (``force_scale`` m per N), the plate outlines, and a sphere at the centre of mass
+    (display only; not read back)."""
     red = {"r": 0.86, "g": 0.16, "b": 0.16, "a": 1.0}
     plates = []
     for p in trial.plates:
