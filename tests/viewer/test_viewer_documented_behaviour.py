@@ -225,6 +225,30 @@ def _saved(page, pattern: str) -> None:
     page.get_by_text(re.compile(pattern)).first.wait_for(timeout=20_000)
 
 
+def _keyed_selection(page, start: int, stop: int) -> None:
+    """Select frames ``start``-``stop`` of the walk (237 frames) with the keys alone, the
+    playhead at ``start``: I, L pressed ``stop - start`` times, O; waits for the page to
+    show the playhead at ``stop`` and the selection."""
+    page.keyboard.press("i")
+    for _ in range(stop - start):
+        page.keyboard.press("l")
+    page.get_by_text(f"labA/walk · walk · frame {stop} / 237").wait_for(timeout=20_000)
+    page.keyboard.press("o")
+    n = stop - start + 1
+    page.get_by_text(re.compile(rf"^Selected: frames {start}–{stop} \({n} frames\)")).wait_for(timeout=20_000)
+
+
+def _edit_next_proposal(page, key: str, start: int, stop: int, verb: str) -> None:
+    """P to the next pending proposal (it must start at ``start``), frames ``start``-``stop``
+    selected with the keys, then ``key`` (Y accepts, Z rejects); waits for the page's saved
+    line naming ``verb`` ("accept" or "reject") and the frames."""
+    page.keyboard.press("p")
+    page.get_by_text(f"labA/walk · walk · frame {start} / 237").wait_for(timeout=20_000)
+    _keyed_selection(page, start, stop)
+    page.keyboard.press(key)
+    _saved(page, rf"✓ saved: {verb} proposals in frames {start}–{stop} on walk — e2e")
+
+
 @_browser_test
 def test_ctrl_k_lists_every_key_of_the_guide_with_its_command(served) -> None:
     """README: "Every key is listed in the command palette (Ctrl+K)": I, O, G, X, Y, Z, N, P,
@@ -269,30 +293,12 @@ def test_keys_jump_select_accept_reject_undo_and_redo_proposals_in_the_record(se
         try:
             page = _page(chromium, view.url)
             # the walk's pending proposals are frames 0-44 and 199-237: P from frame 0 goes to 199
-            page.keyboard.press("p")
-            page.get_by_text("labA/walk · walk · frame 199 / 237").wait_for(timeout=20_000)
-            page.keyboard.press("i")
-            for _ in range(4):
-                page.keyboard.press("l")
-            page.get_by_text("labA/walk · walk · frame 203 / 237").wait_for(timeout=20_000)
-            page.keyboard.press("o")
-            page.get_by_text(re.compile(r"^Selected: frames 199–203 \(5 frames\)")).wait_for(timeout=20_000)
-            page.keyboard.press("y")
-            _saved(page, r"✓ saved: accept proposals in frames 199–203 on walk — e2e")
+            _edit_next_proposal(page, "y", 199, 203, "accept")
             with _record(dataset, "labA/walk") as disk:
                 runs = [(r.start, r.stop, r.provenance.source, r.provenance.reviewer) for r in disk.flag_runs("walk")]
                 assert runs == [(199, 204, "proposal_accepted", "e2e")]
             # the next pending proposal now starts right after the accepted frames
-            page.keyboard.press("p")
-            page.get_by_text("labA/walk · walk · frame 204 / 237").wait_for(timeout=20_000)
-            page.keyboard.press("i")
-            page.keyboard.press("l")
-            page.keyboard.press("l")
-            page.get_by_text("labA/walk · walk · frame 206 / 237").wait_for(timeout=20_000)
-            page.keyboard.press("o")
-            page.get_by_text(re.compile(r"^Selected: frames 204–206 \(3 frames\)")).wait_for(timeout=20_000)
-            page.keyboard.press("z")
-            _saved(page, r"✓ saved: reject proposals in frames 204–206 on walk — e2e")
+            _edit_next_proposal(page, "z", 204, 206, "reject")
             with _record(dataset, "labA/walk") as disk:
                 notes = disk.notes("walk")
                 assert [(n.start, n.stop, n.provenance.reviewer) for n in notes] == [(204, 207, "e2e")]
@@ -326,11 +332,7 @@ def test_a_flag_keyed_for_the_chosen_foot_survives_addb_view_killed(served, data
             page.get_by_label("Foot", exact=True).click()
             page.get_by_role("option", name="left", exact=True).click()
             page.mouse.click(800, 900)  # the list had the focus: the 3D view gets it back
-            page.keyboard.press("i")
-            for _ in range(9):
-                page.keyboard.press("l")
-            page.get_by_text("labA/walk · walk · frame 9 / 237").wait_for(timeout=20_000)
-            page.keyboard.press("o")
+            _keyed_selection(page, 0, 9)
             page.keyboard.press("g")
             _saved(page, r"✓ saved: flag frames 0–9 \(left foot\) on walk — e2e")
             first.proc.kill()  # a crash: no store closed, nothing flushed at exit
