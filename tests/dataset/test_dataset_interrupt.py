@@ -29,11 +29,27 @@ REPO = Path(__file__).resolve().parents[2]
 TREE = {"labA/a_walk": "rajagopal2016_walk", "labA/b_run": "rajagopal2016_run"}
 
 
+#: ``python -m addb_viewer.cli ARGS`` with Python's own Ctrl-C handler, whatever the
+#: disposition inherited (:func:`_process`).
+_AS_FROM_A_TERMINAL = (
+    "import signal, sys\n"
+    "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+    "sys.argv[0] = 'addb'\n"
+    "from addb_viewer.cli import main\n"
+    "sys.exit(main())"
+)
+
+
 def _process(root: Path, out: Path, interrupt_after: str | None) -> tuple[int, str]:
     """``addb process root --out out --workers 1`` in its own process group; with
-    ``interrupt_after``, SIGINT to the whole group once a line of its output holds that text."""
+    ``interrupt_after``, SIGINT to the whole group once a line of its output holds that text.
+
+    The command starts with SIGINT's default disposition, as from a terminal: a test run
+    started in the background of a non-interactive shell (``bash .ci/run &``) ignores SIGINT,
+    and a command that inherits that rightly ignores Ctrl-C too (the run then ended as if
+    never interrupted, exit code 0)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "addb_viewer.cli", "process", str(root), "--out", str(out), "--workers", "1"]
+    cmd = [sys.executable, "-c", _AS_FROM_A_TERMINAL, "process", str(root), "--out", str(out), "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True)
     lines: list[str] = []
     assert proc.stdout is not None
