@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from addb_viewer.cli import main as cli
-from tests.conftest import SHARED_DATA, writable_copy
+from tests.conftest import SHARED_DATA, read_table_by_hand, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 SCALED = "rajagopal2016_walk_scaled.osim"
@@ -38,17 +38,6 @@ def _run(argv: list[str]) -> tuple[int, str, str]:
 
 def _results(out: Path, trial: str) -> dict:
     return json.loads((out / trial / "results.json").read_text())
-
-
-def _read_mot(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
-    """A .mot file read by hand (not addb's reader): header ``key=value`` lines, the column
-    names, the ``(T, K)`` values."""
-    lines = path.read_text().splitlines()
-    end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
-    header = dict(line.split("=", 1) for line in lines[:end] if "=" in line)
-    names = lines[end + 1].split("\t")
-    values = np.array([[float(v) for v in line.split("\t")] for line in lines[end + 2 :] if line.strip()])
-    return header, names, values
 
 
 def _model_markers(osim: Path) -> set[str]:
@@ -77,7 +66,7 @@ def test_kinematics_writes_the_scaled_model_and_each_trials_motion_and_results_s
     for trial in TRIALS:
         assert (out / trial / f"{trial}_ik.mot").is_file(), trial
         r = _results(out, trial)
-        header, names, values = _read_mot(out / trial / f"{trial}_ik.mot")
+        header, names, values = read_table_by_hand(out / trial / f"{trial}_ik.mot")
         assert names[0] == "time" and int(header["nRows"]) == values.shape[0] == r["n_frames"]
         assert rows[trial] == [trial, str(r["n_frames"]), f"{r['marker_rms_m'] * 100:.2f}", f"{r['marker_max_m'] * 100:.2f}", r["worst_marker"]]
         assert 0.005 < r["marker_rms_m"] < 0.03, (trial, r["marker_rms_m"])  # metres: a lab's cm-level fit, not mm or cm figures
@@ -97,7 +86,7 @@ def test_ik_mot_holds_degrees_and_metres_of_the_radian_coordinates_in_coordinate
 
     out, _ = full_run
     trial = load_processed(out, "walk")
-    header, names, values = _read_mot(out / "walk" / "walk_ik.mot")
+    header, names, values = read_table_by_hand(out / "walk" / "walk_ik.mot")
     assert header["inDegrees"] == "yes"
     coordinates = [(c.get("name"), c.findtext("motion_type")) for c in ET.parse(out / SCALED).getroot().iter("Coordinate")]
     assert names == ["time", *(n for n, _ in coordinates)]

@@ -26,7 +26,7 @@ from solver.constants import GRAVITY
 from solver.dynamics.stage import DynamicsOptions, TrialDynamics, run_dynamics
 from solver.pipeline import ProcessOptions, ProcessResult, process_subject
 from solver.results import ProcessedTrial, load_processed
-from tests.conftest import SHARED_DATA, writable_copy
+from tests.conftest import SHARED_DATA, read_table_by_hand, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 ORACLES = SHARED_DATA.parent / "oracles"
@@ -36,15 +36,6 @@ ORDER = 3
 #: The coordinates whose generalized force the walker knee's velocity term cannot reach:
 #: neither ancestors nor descendants of a knee (the trunk and the arms).
 FAR_FROM_THE_KNEES = ("lumbar", "arm_", "elbow_", "pro_sup", "wrist_")
-
-
-def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
-    """A .mot/.sto/.trc-free table read by hand: column names after ``endheader``, values."""
-    lines = path.read_text().splitlines()
-    end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
-    names = lines[end + 1].split("\t")
-    values = np.array([[float(v) for v in line.split()] for line in lines[end + 2 :] if line.strip()])
-    return names, values
 
 
 def _trc_times(path: Path) -> np.ndarray:
@@ -106,7 +97,7 @@ def test_processed_frames_are_100_hz_over_the_span_markers_and_plates_share(
     and end with them."""
     _, _, trial, results = walk
     markers = _trc_times(WALK / "trials" / "walk" / "markers.trc")
-    _, grf = _read_table(WALK / "trials" / "walk" / "grf.mot")
+    _, _, grf = read_table_by_hand(WALK / "trials" / "walk" / "grf.mot")
     expected = _grid(max(markers[0], grf[0, 0]), min(markers[-1], grf[-1, 0]))
     np.testing.assert_allclose(trial.time, expected, rtol=0, atol=1e-9)
     assert results["n_frames"] == expected.size and results["rate_hz"] == RATE_HZ
@@ -135,7 +126,7 @@ def test_plate_forces_are_lowpassed_at_30_hz_third_order_zero_phase_then_put_on_
     the raw grf.mot force (2000 Hz) filtered so by scipy, then interpolated onto the frames;
     a filter at 25 or 35 Hz, or none, is told apart by more than 0.1 N."""
     trial = walk[2]
-    names, raw = _read_table(WALK / "trials" / "walk" / "grf.mot")
+    _, names, raw = read_table_by_hand(WALK / "trials" / "walk" / "grf.mot")
     time = raw[:, 0]
     rate = 1.0 / float(np.median(np.diff(time)))
     assert rate == pytest.approx(2000.0)
@@ -195,8 +186,8 @@ def test_fitted_coordinates_follow_their_coupler_keep_locks_and_stop_at_bounds(
     sk = Skeleton(res.dynamics.model)
     assert list(sk.coordinate_names) == list(trial.coordinate_names)
     couplers = ET.parse(WALK / "unscaled_generic.osim").getroot().iter("CoordinateCouplerConstraint")
-    ik_names, ik = _read_table(out / "walk" / "walk_ik.mot")
-    sto_names, sto = _read_table(out / "walk" / "walk_id.sto")
+    _, ik_names, ik = read_table_by_hand(out / "walk" / "walk_ik.mot")
+    _, sto_names, sto = read_table_by_hand(out / "walk" / "walk_id.sto")
     checked = 0
     for c in couplers:
         dep, ind = c.findtext("dependent_coordinate_name").strip(), c.findtext("independent_coordinate_names").strip()
@@ -281,7 +272,7 @@ def test_id_sto_is_in_opensims_convention_and_trial_npz_holds_the_exact_torques(
     results.json's ``opensim_convention_max_diff``, above round-off; the coordinates the
     knees' velocity term cannot reach (trunk, arms) do not differ at all."""
     res, out, trial, results = walk
-    names, sto = _read_table(out / "walk" / "walk_id.sto")
+    _, names, sto = read_table_by_hand(out / "walk" / "walk_id.sto")
     kinds = {c.name: ("force" if c.motion_type == "translational" else "moment") for c in res.dynamics.model.coordinates}
     assert names[1:] == [f"{n}_{kinds[n]}" for n in trial.coordinate_names]
     np.testing.assert_allclose(sto[:, 0], trial.time, rtol=0, atol=1e-9)
