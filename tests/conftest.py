@@ -17,12 +17,8 @@ import shutil
 import sys
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING
 
 import pytest
-
-if TYPE_CHECKING:
-    import numpy as np
 
 #: Review apps made by the tests start no spare ("warm") solver child: each would cost about
 #: 1 s of CPU and 100 MB while idle, on a 2-core machine running two test workers. The
@@ -80,20 +76,6 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         print(f"\nerror: the tests changed files of {SHARED_DATA.parent} (read-only data): {shown}",
               file=sys.stderr)  # fmt: skip
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
-
-
-def read_table_by_hand(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
-    """An OpenSim table (.mot, .sto) read by hand, not by addb's reader, for tests that check
-    that reader's files: the header's ``key=value`` lines, the column names after
-    ``endheader``, and the ``(T, K)`` values."""
-    import numpy as np
-
-    lines = path.read_text().splitlines()
-    end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
-    header = dict(line.split("=", 1) for line in lines[:end] if "=" in line)
-    names = lines[end + 1].split("\t")
-    values = np.array([[float(v) for v in line.split()] for line in lines[end + 2 :] if line.strip()])
-    return header, names, values
 
 
 def writable_copy(src: Path, dst: Path, **copytree_kw: object) -> Path:

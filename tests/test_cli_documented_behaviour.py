@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from addb_viewer.cli import main as cli
-from tests.conftest import SHARED_DATA, read_table_by_hand, writable_copy
+from tests.conftest import SHARED_DATA, writable_copy
+from tests.opensim_tables import read_table_by_hand
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 SCALED = "rajagopal2016_walk_scaled.osim"

@@ -26,7 +26,8 @@ from solver.constants import GRAVITY
 from solver.dynamics.stage import DynamicsOptions, TrialDynamics, run_dynamics
 from solver.pipeline import ProcessOptions, ProcessResult, process_subject
 from solver.results import ProcessedTrial, load_processed
-from tests.conftest import SHARED_DATA, read_table_by_hand, writable_copy
+from tests.conftest import SHARED_DATA, writable_copy
+from tests.opensim_tables import read_table_by_hand
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 ORACLES = SHARED_DATA.parent / "oracles"
