@@ -1,8 +1,9 @@
 """``addb process DATASET_DIR --scheduler tcp://...`` on a real multi-process cluster: a
 ``dask scheduler`` and two ``dask worker`` processes started here on 127.0.0.1. The results
 equal a serial one-subject run's; then a worker running a subject is killed with SIGKILL
-on the first attempt: the subject is retried on another worker process and completes,
-and nothing half-written is left in the output tree."""
+on the first attempt: with the default ``--retries`` (1) the subject is retried on another
+worker process and completes, and nothing half-written is left in the output tree; with
+``--retries 0`` that subject alone fails, named as a worker death."""
 
 from __future__ import annotations
 
@@ -115,7 +116,7 @@ def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(schedule
     with Client(address, timeout="30s") as client:
         client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
         try:
-            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, "--retries", "1"])
+            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address])  # the default --retries
         finally:
             client.unregister_worker_plugin(KillOnFirstAttempt.name)
         client.wait_for_workers(2, timeout=120)  # the nanny restarted the killed worker
@@ -131,3 +132,35 @@ def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(schedule
     assert not no_work_folders(out), no_work_folders(out)
     assert not [p for p in out.rglob("*.tmp*")]
     shutil.rmtree(out)
+
+
+def test_with_no_retries_a_killed_worker_fails_its_subject_alone(scheduler, tree, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The same death with ``--retries 0``: the walk is recorded once as failed (a worker
+    death, one attempt), the other subject is processed, exit code 1; the retry of the test
+    above is therefore the default ``--retries`` at work, not the scheduler's."""
+    from distributed import Client
+
+    from tests.dataset.kill_plugin import KillOnFirstAttempt
+
+    address, _ = scheduler
+    marker = tmp_path / "killed.pid"
+    out = tmp_path / "out"
+    with Client(address, timeout="30s") as client:
+        client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
+        try:
+            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, "--retries", "0"])
+        finally:
+            client.unregister_worker_plugin(KillOnFirstAttempt.name)
+        client.wait_for_workers(2, timeout=120)
+    assert marker.exists(), "the plugin never killed a worker"
+    assert code == 1
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    rows = {s["rel"]: s for s in summary["subjects"]}
+    assert {rel: s["status"] for rel, s in rows.items()} == {WALK: "failed", KINEMATICS_ONLY: "kinematics_only"}
+    assert rows[WALK]["attempts"] == 1 and rows[WALK]["error"]["type"] == "WorkerDied"
+    assert "died 1 time(s)" in rows[WALK]["error"]["message"]
+    assert "retrying" not in capsys.readouterr().err
+    assert not (out / WALK / "manifest.json").exists()
+    assert not no_work_folders(out), no_work_folders(out)
+    assert not [p for p in out.rglob("*.tmp*")]

@@ -113,3 +113,39 @@ def test_a_foot_stands_on_its_plate_and_a_pelvis_named_as_a_foot_far_above_it() 
     assert feet.shape == (2,) and np.all(np.abs(feet) < 0.02), feet
     wrong = assign_contacts(skel, trial.q, plates, ("pelvis", "torso"), 85.07, 0.01).stance_height
     assert wrong[0] > 0.4 and wrong[1] > 0.9, wrong
+
+
+def test_a_plate_force_far_from_m_a_plus_g_is_proposed_with_its_mismatch() -> None:
+    """Halve the right plate's vertical force over about 0.2 s of its stance (the foot stays
+    loaded, so no "no plate force" reason): exactly those frames whose total vertical force
+    then differs from m(a_com,y + g) by more than ``force_mismatch_bw`` are proposed, each
+    with the reason "measured vertical force differs from m(a+g) by X BW" and X the
+    mismatch on that frame; the frames outside the window keep their proposals."""
+    from solver.dynamics.contact import MISMATCH_REASON, ContactSettings
+    from solver.masks import true_runs
+
+    skel, trial, plates = walk()
+    mass, dt = 85.07, 0.01
+    g = float(np.linalg.norm(skel.osim.gravity))
+    com_acc = np.gradient(np.gradient(skel.center_of_mass(trial.q), dt, axis=0), dt, axis=0)
+    before = assign_contacts(skel, trial.q, plates, FEET, mass, dt, com_acc)
+    r = next(i for i, p in enumerate(plates) if p.name == "r")
+    # the longest run of frames with the right foot's force above 0.8 body weight
+    start, stop = max(true_runs(plates[r].force[:, 1] > 0.8 * mass * g), key=lambda run: run[1] - run[0])
+    window = np.arange(start, stop)
+    assert len(window) >= 18
+    force = plates[r].force.copy()
+    force[window, 1] *= 0.5
+    changed = [p if i != r else type(p)(p.name, force, p.cop, p.free_moment) for i, p in enumerate(plates)]
+    after = assign_contacts(skel, trial.q, changed, FEET, mass, dt, com_acc)
+
+    measured = sum(np.nan_to_num(p.force[:, 1]) for p in changed)
+    mismatch = np.abs(measured - mass * (com_acc[:, 1] + g)) / (mass * g)
+    expected = mismatch[window] > ContactSettings().force_mismatch_bw
+    assert expected.sum() >= 15  # the halving is visible on most of the window
+    np.testing.assert_array_equal(after.proposed[window], before.proposed[window] | expected)
+    for j in window[expected & ~before.proposed[window]]:
+        assert after.reasons[j] == f"{MISMATCH_REASON} by {mismatch[j]:.2f} BW"
+        assert after.foot_loaded[0, j]  # still loaded: the force, not the contact, is wrong
+    outside = np.setdiff1d(np.arange(len(trial.q)), window)
+    np.testing.assert_array_equal(after.proposed[outside], before.proposed[outside])

@@ -10,6 +10,7 @@ processed once by ``addb process`` and copied for each test:
 * G flags for the foot chosen under Flags (after the Foot list, a click in the 3D view gives
   the keys back to the page), and the flag survives ``addb view`` killed (SIGKILL): the next
   ``addb view`` shows it in its timeline and Flags folder;
+* Space plays and stops from the 3D view, and a focused checkbox takes it instead;
 * Undo reaches only the edits made since the subject was opened (another subject starts a
   new history, also on coming back);
 * the pages of one ``addb view`` share one view: a trial opened on one page is open on every
@@ -375,5 +376,42 @@ def test_a_trial_opened_on_one_page_is_open_on_every_page(served) -> None:
             static = re.compile(r"^labB/run · static · frame \d+ / \d+")
             b.get_by_text(static).first.wait_for(timeout=60_000)
             a.get_by_text(static).first.wait_for(timeout=20_000)
+        finally:
+            chromium.close()
+
+
+@_browser_test
+def test_space_plays_from_the_3d_view_and_ticks_a_focused_checkbox_instead(served) -> None:
+    """README: "The keys act when the page has the focus: after clicking a checkbox (...),
+    click the 3D view before pressing them (a focused checkbox takes Space)". Space with the
+    Follow pelvis checkbox focused toggles that checkbox and the playhead stays at frame 0;
+    after a click in the 3D view Space starts the playback (the playhead moves) and stops it
+    (the playhead stays where it stopped)."""
+    sync_api = import_tool("playwright.sync_api", reason=PLAYWRIGHT_REASON)
+    view = served()
+    with sync_api.sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = _page(chromium, view.url)
+            follow = page.get_by_label("Follow pelvis", exact=True)
+            follow.click()
+            assert follow.is_checked()
+            page.keyboard.press(" ")
+            page.wait_for_function("""() => { const box = [...document.querySelectorAll('input[type=checkbox]')]
+                .find(b => b.labels && [...b.labels].some(l => l.textContent.trim() === 'Follow pelvis'));
+                return box !== undefined && !box.checked; }""", timeout=20_000)
+            page.wait_for_timeout(1500)  # a playback started by the Space would have moved the playhead by now
+            assert page.get_by_text(WALK_SHOWN).count() >= 1
+
+            page.mouse.click(800, 900)  # the 3D view: the keys act
+            page.keyboard.press(" ")
+            moving = re.compile(r"labA/walk · walk · frame ([1-9]\d*) / 237")
+            page.get_by_text(moving).first.wait_for(timeout=20_000)
+            page.keyboard.press(" ")
+            page.wait_for_timeout(1000)  # the stop reaches the server
+            stopped = page.get_by_text(moving).first.inner_text()
+            page.wait_for_timeout(1500)
+            assert page.get_by_text(moving).first.inner_text() == stopped
+            assert not follow.is_checked()
         finally:
             chromium.close()

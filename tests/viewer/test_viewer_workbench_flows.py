@@ -92,7 +92,8 @@ def test_opening_another_trial_of_the_subject_keeps_the_undo_history(dataset: Pa
 
 def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Path, make_app) -> None:
     """Flags edited before the workbench starts change the subject's review: the background
-    run processes it again, and the trial on screen shows the new result."""
+    run processes it again, and the trial on screen shows the new result, at the frame it
+    showed and with its in and out points."""
     _, _, subjects = dataset_subjects(dataset)
     walk = next(s for s in subjects if s.rel == "labA/walk")
     app = make_app(ReviewPaths.for_subject(walk.subject_dir, walk.out_dir), process_missing=False)
@@ -103,6 +104,7 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     app.selection_edit("Flag")
     assert "fitted with other flags" in app.panel.proposal_info.content  # not processed with them yet
     app.select(10, 20)  # the reviewer's in and out points survive the reload
+    app.seek(57)  # and so does the frame shown
     app.panel.comparison.content = "Reprocess result: walk (an earlier run's table)"
     bench = Workbench(app, dataset, workers=1)
     bench.current = ("labA/walk", "walk")
@@ -114,6 +116,7 @@ def test_a_trial_on_screen_is_reloaded_when_its_background_run_ends(dataset: Pat
     assert "reloaded" in app.panel.job_status.content, app.panel.job_status.content
     assert app.panel.comparison.content == ""  # the earlier table no longer describes the output
     assert app.playback.selection() == (10, 21)
+    assert app.playback.frame == 57
     # the timeline's "left out" track shows the flagged frames the fit left out (not proposals)
     assert app.tracks.masks["left out"][100:130].all() and not app.tracks.masks["proposal"][100:130].any()
     assert np.array_equal(app.tracks.masks["left out"], after.unobserved)
