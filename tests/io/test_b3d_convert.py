@@ -165,3 +165,68 @@ def test_a_pass_the_file_does_not_have_is_named_with_the_passes_it_has(tmp_path:
     err = capsys.readouterr().err
     assert f"SubjectFolderError ({B3D}): the file has one processing pass (pass 0), no pass 7 to take the model from" in err, err
     assert not (tmp_path / "s").exists()
+
+
+def _with_labels(f, k: int, runs: dict[tuple[int, int], str], path: Path) -> Path:
+    """``f`` written to ``path`` with trial ``k``'s missing-GRF labels set to ``runs``
+    ((start, stop) -> reason; every other frame ``notMissingGRF``)."""
+    info = f.header.trials[k]
+    reasons = ["notMissingGRF"] * info.n_frames
+    for (start, stop), reason in runs.items():
+        reasons[start:stop] = [reason] * (stop - start)
+    trials = list(f.header.trials)
+    trials[k] = dataclasses.replace(info, missing_grf=tuple(reasons))
+    write_b3d(path, dataclasses.replace(f.header, trials=tuple(trials)), [f.read_trial(j) for j in range(len(trials))])
+    return path
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "addb convert --force writes the file's labels over every flag of a trial (a reviewer's flags are cleared) "
+    "and adds its notes again beside the earlier conversion's; mended on the branch pending-host, which waits "
+    "for a host where its figures can be made again"))  # fmt: skip
+def test_force_replaces_the_earlier_import_and_keeps_the_reviewers_flags_and_notes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A converted subject reviewed (alice flags frames on both trials, one range over a
+    label of the file, and writes a note), then converted again with ``--force`` from a file
+    whose labels moved: the record's imported flags and notes are exactly the new file's,
+    alice's flags (foot, author) and note stay, and the command says it kept them. Converted
+    once more from a file without the labelled trial: that trial's import goes with its
+    folder, alice's flags on it stay."""
+    from annotations import AnnotationStore
+
+    f = open_b3d(B3D)
+    first, second = (t.name for t in f.header.trials)
+    old = _with_labels(f, 1, {(3, 9): "notOverForcePlate", (50, 52): "manualReview"}, tmp_path / "old.b3d")
+    new = _with_labels(f, 1, {(20, 25): "notOverForcePlate"}, tmp_path / "new.b3d")
+    out = tmp_path / "subject"
+    assert main(["convert", str(old), "--out", str(out)]) == 0
+    with AnnotationStore.open(out / "annotations.json", reviewer="alice") as store:
+        store.set_unmeasured(second, range(60, 70), foot="left")
+        store.set_unmeasured(second, range(4, 7), foot="right")  # over the file's label at 3-8
+        store.set_unmeasured(first, range(10, 20))
+        store.add_note(second, "alice: the left foot is off the plate", start=60, stop=70)
+    capsys.readouterr()
+    assert main(["convert", str(new), "--out", str(out), "--force"]) == 0
+    printed = capsys.readouterr().out
+    with AnnotationStore.open(out / "annotations.json", reviewer="checker") as store:
+        runs = [(r.start, r.stop, r.foot, r.provenance.source, r.provenance.reviewer) for r in store.flag_runs(second)]
+        assert runs == [
+            (4, 7, "right", "manual", "alice"),
+            (20, 25, None, "imported", "addb convert"),
+            (60, 70, "left", "manual", "alice"),
+        ]
+        assert [(r.start, r.stop) for r in store.flag_runs(first)] == [(10, 20)]
+        notes = sorted((n.start, n.stop, n.text, n.provenance.source) for n in store.notes(second))
+        assert notes == [
+            (20, 25, "AddBiomechanics: missing GRF (notOverForcePlate)", "imported"),
+            (60, 70, "alice: the left foot is off the plate", "manual"),
+        ]
+    kept = ", ".join(f"{name} {n}" for name, n in sorted({first: 10, second: 13}.items()))  # in the order of the names
+    assert f"kept the reviewers' own flags and notes in the review record (flagged frames: {kept})" in printed
+    one = tmp_path / "one_trial.b3d"
+    write_b3d(one, dataclasses.replace(f.header, trials=f.header.trials[:1]), [f.read_trial(0)])
+    assert main(["convert", str(one), "--out", str(out), "--force"]) == 0
+    with AnnotationStore.open(out / "annotations.json", reviewer="checker") as store:
+        assert [(r.start, r.stop, r.provenance.source) for r in store.flag_runs(second)] == [(4, 7, "manual"), (60, 70, "manual")]
+        assert [n.provenance.source for n in store.notes(second)] == ["manual"]
