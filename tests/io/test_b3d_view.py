@@ -67,3 +67,55 @@ def test_a_folder_of_b3d_files_opens_as_a_dataset(tmp_path: Path, monkeypatch: p
             for t in trials:
                 mask = store.mask(t.name, t.n_frames, kind="unmeasured_force")
                 np.testing.assert_array_equal(mask, expected[s.rel][t.name], err_msg=f"{s.rel} {t.name}")
+
+
+def _review_of(folder: Path, trial: str) -> tuple[list, list]:
+    from annotations import AnnotationStore
+
+    with AnnotationStore.open(folder / "annotations.json", reviewer="checker") as store:
+        flags = [(r.start, r.stop, r.provenance.source, r.provenance.reviewer) for r in store.flag_runs(trial)]
+        notes = [(n.start, n.stop, n.text) for n in store.notes(trial)]
+    return flags, notes
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a .b3d file changed since it was reviewed (its modification time) converts again into a new cache folder, "
+    "whose review record starts empty: the review is left behind in the earlier folder; mended on the branch "
+    "pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
+def test_a_changed_file_converts_again_with_its_review(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+    """``addb view FILE.b3d`` reviewed (alice flags frames and writes a note), then the file
+    touched (a copy made again, a download): the new conversion's review record holds
+    alice's flags and note. When the earlier conversion's trials had other frame counts the
+    record is not carried over, and the command names where the earlier review is."""
+    import json
+    import os
+    import shutil
+
+    from annotations import AnnotationStore
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    path = tmp_path / "s01.b3d"
+    shutil.copyfile(B3D, path)
+    first = b3d_subject(path)
+    trial = "walking1_segment_0"
+    with AnnotationStore.open(first / "annotations.json", reviewer="alice") as store:
+        store.set_unmeasured(trial, range(10, 20), foot="left")
+        store.add_note(trial, "alice: checked", start=10, stop=20)
+    reviewed = _review_of(first, trial)
+    assert reviewed == ([(10, 20, "manual", "alice")], [(10, 20, "alice: checked")])
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))
+    second = b3d_subject(path)
+    assert second != first
+    assert _review_of(second, trial) == reviewed
+    assert f"carried over the review of the earlier conversion ({first / 'annotations.json'})" in capsys.readouterr().out
+
+    source = json.loads((second / "b3d_source.json").read_text())
+    source["trials"][trial]["frames"] += 1  # as if that version of the file had another frame count
+    (second / "b3d_source.json").write_text(json.dumps(source))
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 2 * 10**10))
+    third = b3d_subject(path)
+    assert _review_of(third, trial) == ([], [])
+    printed = capsys.readouterr().out
+    assert f"not carried over: the review of the earlier conversion {second / 'annotations.json'}" in printed, printed
