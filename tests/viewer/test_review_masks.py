@@ -146,6 +146,45 @@ def test_an_annotations_path_with_no_record_is_refused_and_nothing_created(tmp_p
     assert seen.pop("process")["walk"][10:20].all()
 
 
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a review record given with --annotations that names none of the subject's trials is taken silently (the "
+    "subject processed without any flag), and trials of the record the subject lacks are not named; mended on "
+    "the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
+def test_a_record_of_another_subject_is_refused_and_unknown_trials_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+    """``addb process``/``addb diagnose SUBJECT --annotations RECORD`` with the record of
+    another subject (the walk's flags given for the run): exit 1 before the solver runs,
+    naming the record, its trials and the subject's. A record that names the subject's
+    trials and one more (a trial folder since removed) is taken, with a warning naming the
+    trial whose flags are not used."""
+    from addb_viewer.cli import main as cli
+
+    run = SHARED_DATA / "subjects" / "rajagopal2016_run"
+    record = tmp_path / "walk_review.json"
+    with AnnotationStore.open(record, reviewer="ana") as store:
+        store.set_unmeasured("walk", range(10, 20))
+    seen: dict = {}
+    _capture(monkeypatch, seen)
+    for argv in (["process", str(run), "--out", str(tmp_path / "out")],
+                 ["diagnose", str(run), "--trial", "run", "--out", str(tmp_path / "out")]):  # fmt: skip
+        assert cli([*argv, "--annotations", str(record)]) == 1, argv[0]
+        err = capsys.readouterr().err
+        assert f"addb {argv[0]}: SubjectFolderError ({record})" in err, err
+        assert "names the trial walk and none of this subject's (run, static)" in err, err
+        assert not (tmp_path / "out").exists()
+    assert seen == {}
+
+    with AnnotationStore.open(record, reviewer="ana") as store:
+        store.set_unmeasured("run", range(30, 40))
+    with pytest.raises(_Captured):
+        cli(["process", str(run), "--out", str(tmp_path / "p"), "--annotations", str(record)])
+    assert sorted(seen.pop("process")) == ["run"]
+    # the command line shows warnings as one line each on stderr
+    err = capsys.readouterr().err
+    assert "addb: warning: walk_review.json names trials that rajagopal2016_run does not have (walk); their flags are not used" in err, err
+
+
 def test_a_record_at_the_marker_rate_is_resampled_by_the_overlap_rule(camargo: Path) -> None:
     """A record on the marker frames (an older ``addb convert``'s, here 200 Hz): marker
     frames 1000-1099 ([5.0025, 5.5025) s) become processed frames 500-550 (frame 550 overlaps
