@@ -185,6 +185,28 @@ def test_a_record_of_another_subject_is_refused_and_unknown_trials_named(tmp_pat
     assert "addb: warning: walk_review.json names trials that rajagopal2016_run does not have (walk); their flags are not used" in err, err
 
 
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a subject's own review record whose flags lie on a trial the subject no longer has (its folder renamed) "
+    "loses their effect without a word in a dataset run; mended on the branch pending-host, which waits for a "
+    "host where its figures can be made again"))  # fmt: skip
+def test_review_work_on_a_trial_the_subject_no_longer_has_is_named(tmp_path: Path) -> None:
+    """The walk reviewed (frames 10-19 flagged), then its trial folder renamed ``walk_01``:
+    the dataset run's mask loader takes no flag and warns, naming the record and the trial;
+    a trial the record only knows the frames of (opened, not reviewed) is not named."""
+    walk = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
+    with AnnotationStore.open(walk, reviewer="ana") as store:
+        store.set_unmeasured("walk", range(10, 20))
+        store.set_trial_info("static", n_frames=287, rate_hz=100.0)
+    (walk / "trials" / "static").rename(walk / "trials" / "static_01")
+    (walk / "trials" / "walk").rename(walk / "trials" / "walk_01")
+    with pytest.warns(UserWarning) as caught:
+        assert subject_masks(str(walk), str(tmp_path / "out")) is None
+    assert [str(w.message) for w in caught] == [
+        "annotations.json holds review work on a trial this subject no longer has (walk): its flags are not used"
+    ]
+
+
 def test_a_record_at_the_marker_rate_is_resampled_by_the_overlap_rule(camargo: Path) -> None:
     """A record on the marker frames (an older ``addb convert``'s, here 200 Hz): marker
     frames 1000-1099 ([5.0025, 5.5025) s) become processed frames 500-550 (frame 550 overlaps
