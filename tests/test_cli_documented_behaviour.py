@@ -9,9 +9,7 @@ per run); every run writes below ``tmp_path``.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import io
 import json
 import shutil
 import xml.etree.ElementTree as ET
@@ -20,21 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addb_viewer.cli import main as cli
+from tests.cli_run import run_addb as _run
 from tests.conftest import SHARED_DATA, writable_copy
 from tests.opensim_tables import read_table_by_hand
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 SCALED = "rajagopal2016_walk_scaled.osim"
 TRIALS = ("static", "walk")
-
-
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    """``addb ARGV`` in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = cli(argv)
-    return code, out.getvalue(), err.getvalue()
 
 
 def _results(out: Path, trial: str) -> dict:

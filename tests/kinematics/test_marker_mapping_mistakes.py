@@ -6,14 +6,12 @@ scaling runs on every trial; a few seconds per run)."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 from pathlib import Path
 
 import pytest
 
-from addb_viewer.cli import main as cli
+from tests.cli_run import run_addb
 from tests.conftest import SHARED_DATA, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
@@ -25,10 +23,8 @@ PENDING = pytest.mark.xfail(strict=True, reason=(
 
 def _kinematics(subject: Path, out: Path) -> tuple[int, str]:
     """``addb kinematics SUBJECT --out OUT --trial static`` in this process: (exit code, stderr)."""
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        code = cli(["kinematics", str(subject), "--out", str(out), "--trial", "static"])
-    return code, err.getvalue()
+    code, _, err = run_addb(["kinematics", str(subject), "--out", str(out), "--trial", "static"])
+    return code, err
 
 
 @PENDING

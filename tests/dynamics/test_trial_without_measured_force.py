@@ -1,0 +1,54 @@
+"""A subject one of whose trials has force plates that never carry force (a plate switched
+off, an empty export): the subject is processed, the mass fitted on its other trial, and the
+trial without a measured frame is reported as such, never with numbers it does not have.
+
+The walk, with a second copy of its walk trial, ``walk_zero``, whose grf.mot holds zeros in
+every column but time.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from tests.cli_run import run_addb as _run
+from tests.conftest import SHARED_DATA, writable_copy
+
+pytestmark = pytest.mark.slow
+
+
+def _zero_forces(path: Path) -> None:
+    """Every column of the grf.mot ``path`` but time set to 0."""
+    lines = path.read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 1
+    rows = [line.split("\t") for line in lines[head + 1 :]]
+    path.write_text("\n".join([*lines[: head + 1], *("\t".join([r[0]] + ["0"] * (len(r) - 1)) for r in rows)]) + "\n")
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a trial whose plates never carry force is printed with residuals 'nan (nan)' and Hicks 'no' (results.json "
+    "has None), addb info prints an empty line for it, numpy's 'All-NaN slice encountered' reaches the user, and "
+    "nothing says the trial had no measured frame; mended on the branch pending-host, which waits for a host "
+    "where its figures can be made again"))  # fmt: skip
+def test_a_trial_whose_plates_never_carry_force_is_reported_without_numbers(tmp_path: Path) -> None:
+    subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
+    shutil.copytree(subject / "trials" / "walk", subject / "trials" / "walk_zero")
+    _zero_forces(subject / "trials" / "walk_zero" / "grf.mot")
+    out = tmp_path / "out"
+    code, printed, err = _run(["process", str(subject), "--out", str(out)])
+    assert code == 0, err
+    results = json.loads((out / "walk_zero" / "results.json").read_text())
+    assert results["n_observed_frames"] == 0 and results["hicks_linear_ok"] is None
+    row = next(line.split() for line in printed.splitlines() if line.startswith("walk_zero "))
+    assert row[1] == "0/238" and row[3:] == ["-", "-", "-", "-"], row  # trial, frames, marker RMS, then no numbers
+    assert "All-NaN" not in err and "nan" not in printed, err
+    assert ("addb: warning: trial walk_zero: no frame with measured force enters the fit (all 238 frames left out, "
+            "first for: measured vertical force differs from m(a+g)): it has no residuals or Hicks verdicts") in err, err  # fmt: skip
+    code, info, err = _run(["info", str(out)])
+    assert code == 0, err
+    lines = info.splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("  trial walk_zero:"))
+    assert lines[k + 1] == "    no frame with measured force entered the fit: no residuals or Hicks verdicts", lines[k : k + 2]
