@@ -253,3 +253,24 @@ def test_the_shared_marker_sets_are_not_warned_about(name: str, tmp_path: Path) 
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         process_kinematics(SHARED_DATA / "subjects" / name, tmp_path / "out")
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "markers and forces that overlap by fewer than ten frames are said not to overlap at all (the walk's six "
+    "marker frames lie inside its forces' span); mended on the branch pending-host, which waits for a host where "
+    "its figures can be made again"))  # fmt: skip
+def test_a_trial_too_short_for_the_dynamics_says_how_short(walk: Path, tmp_path: Path) -> None:
+    """The walk's markers cut to their first six frames (0.05 s, inside the forces' 2.39 s):
+    the trial is written with its kinematics, and its DynamicsError says how long the two
+    overlap and what the dynamics needs, not that they do not overlap."""
+    path = walk / "trials" / "walk" / "markers.trc"
+    lines = path.read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.split("\t")[0].strip().isdigit())
+    lines = [*lines[:first], *lines[first : first + 6]]
+    lines[2] = lines[2].replace("238", "6")
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DynamicsError) as err:
+        process_subject(walk, tmp_path / "out")
+    text = str(err.value)
+    assert "overlap" in text and "do not overlap" not in text, text
+    assert "markers (0.000-0.050 s) and forces (0.000-2.389 s) overlap by 0.050 s (6 frames at 100 Hz); the dynamics needs at least 10" in text, text
