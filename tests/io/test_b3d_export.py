@@ -141,6 +141,22 @@ def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path, caps
     assert (lab / "s01.b3d").read_bytes() == (dest / "lab_a" / "s01.b3d").read_bytes()
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "addb export of a dataset output tree without --format takes MCAP (the format of a name without suffix) and "
+    "says '--trial is required for --format mcap', a format the user did not give and a tree cannot take; mended "
+    "on the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
+def test_a_dataset_tree_exports_as_b3d_without_format(processed: Path, tmp_path: Path) -> None:
+    """A dataset output tree (the only format it exports to is .b3d) given with ``-o FOLDER``
+    and no ``--format``: the same files as with ``--format b3d``."""
+    tree = tmp_path / "tree"
+    shutil.copytree(processed, tree / "lab_a" / "s01")
+    (tree / "dataset_summary.json").write_text(json.dumps({"dataset": str(tmp_path / "dataset"),
+                                                           "subjects": [{"rel": "lab_a/s01", "status": "ok"}]}))  # fmt: skip
+    assert main(["export", str(tree), "--format", "b3d", "-o", str(tmp_path / "given")]) == 0
+    assert main(["export", str(tree), "-o", str(tmp_path / "inferred")]) == 0
+    assert (tmp_path / "inferred" / "lab_a" / "s01.b3d").read_bytes() == (tmp_path / "given" / "lab_a" / "s01.b3d").read_bytes()
+
+
 def test_benchmark_reads_b3d_like_our_output(processed: Path, tmp_path: Path) -> None:
     """The benchmark on the exported .b3d (its dynamics pass as ground truth) scores the
     same frames with the same ground truth as on addb's output folder."""
