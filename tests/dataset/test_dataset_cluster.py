@@ -105,22 +105,29 @@ def test_scheduler_run_equals_a_serial_run(scheduler, tree, serial_walk, tmp_pat
     assert assert_same_results(out / WALK, serial_walk) == 9 + 3
 
 
-def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(scheduler, tree, serial_walk, tmp_path: Path) -> None:
+def _run_killing_the_walks_first_worker(address: str, tree: Path, out: Path, marker: Path, *options: str) -> int:
+    """``addb process TREE --out OUT --scheduler ADDRESS OPTIONS`` with the worker that starts
+    the walk's first attempt killed (SIGKILL, its pid in ``marker``); returns the exit code
+    once the nanny has started that worker again."""
     from distributed import Client
 
     from tests.dataset.kill_plugin import KillOnFirstAttempt
 
-    address, _ = scheduler
-    marker = tmp_path / "killed.pid"
-    out = tmp_path / "out"
     with Client(address, timeout="30s") as client:
         client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
         try:
-            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address])  # the default --retries
+            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, *options])
         finally:
             client.unregister_worker_plugin(KillOnFirstAttempt.name)
         client.wait_for_workers(2, timeout=120)  # the nanny restarted the killed worker
     assert marker.exists(), "the plugin never killed a worker"
+    return code
+
+
+def test_killed_worker_is_retried_elsewhere_and_nothing_is_half_written(scheduler, tree, serial_walk, tmp_path: Path) -> None:
+    address, _ = scheduler
+    marker, out = tmp_path / "killed.pid", tmp_path / "out"
+    code = _run_killing_the_walks_first_worker(address, tree, out, marker)  # the default --retries
     killed_pid = int(marker.read_text())
     assert code == 0
     summary = json.loads((out / "dataset_summary.json").read_text())
@@ -139,21 +146,9 @@ def test_with_no_retries_a_killed_worker_fails_its_subject_alone(scheduler, tree
     """The same death with ``--retries 0``: the walk is recorded once as failed (a worker
     death, one attempt), the other subject is processed, exit code 1; the retry of the test
     above is therefore the default ``--retries`` at work, not the scheduler's."""
-    from distributed import Client
-
-    from tests.dataset.kill_plugin import KillOnFirstAttempt
-
     address, _ = scheduler
-    marker = tmp_path / "killed.pid"
-    out = tmp_path / "out"
-    with Client(address, timeout="30s") as client:
-        client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
-        try:
-            code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, "--retries", "0"])
-        finally:
-            client.unregister_worker_plugin(KillOnFirstAttempt.name)
-        client.wait_for_workers(2, timeout=120)
-    assert marker.exists(), "the plugin never killed a worker"
+    marker, out = tmp_path / "killed.pid", tmp_path / "out"
+    code = _run_killing_the_walks_first_worker(address, tree, out, marker, "--retries", "0")
     assert code == 1
     summary = json.loads((out / "dataset_summary.json").read_text())
     rows = {s["rel"]: s for s in summary["subjects"]}

@@ -146,7 +146,6 @@ def test_an_annotations_path_with_no_record_is_refused_and_nothing_created(tmp_p
     assert seen.pop("process")["walk"][10:20].all()
 
 
-
 @pytest.mark.xfail(strict=True, reason=(
     "a review record given with --annotations that names none of the subject's trials is taken silently (the "
     "subject processed without any flag), and trials of the record the subject lacks are not named; mended on "
@@ -183,7 +182,6 @@ def test_a_record_of_another_subject_is_refused_and_unknown_trials_named(tmp_pat
     # the command line shows warnings as one line each on stderr
     err = capsys.readouterr().err
     assert "addb: warning: walk_review.json names trials that rajagopal2016_run does not have (walk); their flags are not used" in err, err
-
 
 
 @pytest.mark.xfail(strict=True, reason=(
