@@ -10,13 +10,13 @@ its forces whole), one local worker.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
 
 from tests.cli_run import run_addb
 from tests.conftest import SHARED_DATA, writable_copy
+from tests.trial_edits import add_short_walk
 
 pytestmark = pytest.mark.slow
 REL = "labA/s01"
@@ -28,13 +28,7 @@ REL = "labA/s01"
     "the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_trial_the_dynamics_cannot_take_leaves_the_subject_processed(tmp_path: Path) -> None:
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "dataset" / REL)
-    short = subject / "trials" / "walk_short"
-    shutil.copytree(subject / "trials" / "walk", short)
-    lines = (short / "markers.trc").read_text().splitlines()
-    first = next(k for k, line in enumerate(lines) if line.split("\t")[0].strip().isdigit())
-    lines = [*lines[:first], *lines[first : first + 6]]
-    lines[2] = lines[2].replace("238", "6")
-    (short / "markers.trc").write_text("\n".join(lines) + "\n")
+    add_short_walk(subject)
     out = tmp_path / "out"
     code, _, err = run_addb(["process", str(tmp_path / "dataset"), "--out", str(out), "--workers", "1"])
     assert code == 0, err

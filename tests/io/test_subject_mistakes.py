@@ -19,6 +19,7 @@ from solver.errors import DynamicsError, SubjectFolderError
 from solver.io.subject import load_subject
 from solver.pipeline import process_kinematics, process_subject
 from tests.conftest import SHARED_DATA, writable_copy
+from tests.trial_edits import keep_first_marker_frames
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 
@@ -263,12 +264,7 @@ def test_a_trial_too_short_for_the_dynamics_says_how_short(walk: Path, tmp_path:
     """The walk's markers cut to their first six frames (0.05 s, inside the forces' 2.39 s):
     the trial is written with its kinematics, and its DynamicsError says how long the two
     overlap and what the dynamics needs, not that they do not overlap."""
-    path = walk / "trials" / "walk" / "markers.trc"
-    lines = path.read_text().splitlines()
-    first = next(k for k, line in enumerate(lines) if line.split("\t")[0].strip().isdigit())
-    lines = [*lines[:first], *lines[first : first + 6]]
-    lines[2] = lines[2].replace("238", "6")
-    path.write_text("\n".join(lines) + "\n")
+    keep_first_marker_frames(walk / "trials" / "walk" / "markers.trc", 6)
     with pytest.raises(DynamicsError) as err:
         process_subject(walk, tmp_path / "out")
     text = str(err.value)

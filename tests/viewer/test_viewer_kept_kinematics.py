@@ -8,7 +8,6 @@ processed by ``addb process SUBJECT_DIR`` into the subject's own output folder.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -17,6 +16,7 @@ from addb_viewer.app.paths import ReviewPaths
 from addb_viewer.app.queue import KINEMATICS_ONLY, QueueSubject, build_queue
 from tests.cli_run import run_addb
 from tests.conftest import SHARED_DATA, writable_copy
+from tests.trial_edits import add_short_walk
 
 pytestmark = pytest.mark.slow
 MESSAGE = "markers (0.000-0.050 s) and forces (0.000-2.389 s)"  # the start of the trial's dynamics error
@@ -26,13 +26,7 @@ MESSAGE = "markers (0.000-0.050 s) and forces (0.000-2.389 s)"  # the start of t
 def processed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """(subject folder, its output folder) with walk_short kept as kinematics."""
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path_factory.mktemp("s") / "walk")
-    short = subject / "trials" / "walk_short"
-    shutil.copytree(subject / "trials" / "walk", short)
-    lines = (short / "markers.trc").read_text().splitlines()
-    first = next(k for k, line in enumerate(lines) if line.split("\t")[0].strip().isdigit())
-    lines = [*lines[:first], *lines[first : first + 6]]
-    lines[2] = lines[2].replace("238", "6")
-    (short / "markers.trc").write_text("\n".join(lines) + "\n")
+    add_short_walk(subject)
     out = subject / "addb_out"
     code, _, err = run_addb(["process", str(subject), "--out", str(out)])
     assert code == 1 and "walk_short" in err and (out / "walk_short" / "results.json").is_file(), err
