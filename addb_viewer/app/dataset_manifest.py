@@ -18,18 +18,16 @@ the manifest describes.
 
 from __future__ import annotations
 
-import json
 import os
-from pathlib import Path
 from typing import Any
 
 from solver.dataset.manifest import (
-    MANIFEST_NAME,
     PROCESSED_STATUSES,
     KeyUnreadable,
     read_manifest,
     subject_key_now,
     subject_status,
+    write_manifest,
 )
 from solver.dataset.summary import subject_rows
 
@@ -70,8 +68,5 @@ def mark_reprocessed(subject_dir: str | os.PathLike[str], out_dir: str | os.Path
         "fitted_mass_kg": masses[0] if masses else stored.get("fitted_mass_kg"),
         "reprocessed_in_review_app": True,
     }
-    path = Path(out_dir) / MANIFEST_NAME
-    tmp = path.with_name(f".{MANIFEST_NAME}.tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True), encoding="utf-8")
-    os.replace(tmp, path)
+    write_manifest(out_dir, manifest)
     return True

@@ -146,10 +146,11 @@ def with_kept_kinematics(exc: Exception, out: Path) -> Exception:
 def _process_one(args: argparse.Namespace, process: Callable[[], Any]) -> Any:
     """Run ``process()`` (the one-subject pipeline into ``args.out``) holding the dataset
     output tree ``args.out`` lies in, if any (:func:`solver.dataset.lock.subject_output_lock`:
-    not while a dataset run writes it). Into a tree, a whole run (no ``--trial``, no
-    ``--annotations``) leaves the manifest a dataset run would, so that the next dataset
-    run skips the subject while nothing changed; another run removes the folder's manifest,
-    which no longer describes it (:mod:`solver.dataset.one_subject`). The run's warnings are
+    not while a dataset run writes it). Into a tree, a whole run (no ``--trial``; no
+    ``--annotations``, or the subject's own review record, which a dataset run reads) leaves
+    the manifest a dataset run would, so that the next dataset run skips the subject while
+    nothing changed; another run removes the folder's manifest, which no longer describes it
+    (:mod:`solver.dataset.one_subject`). The run's warnings are
     shown as usual, after it."""
     import time
     import warnings
@@ -165,8 +166,14 @@ def _process_one(args: argparse.Namespace, process: Callable[[], Any]) -> Any:
             subject_run_key,
         )
 
-        whole = not args.trial and not args.annotations
-        key = subject_run_key(args.subject, fit_settings(args.fit)) if whole else None
+        whole, review = not args.trial, None
+        if args.annotations:  # whole only with the record a dataset run reads: then keyed on its flags
+            from addb_viewer.review_masks import review_digest, review_record
+
+            record = review_record(str(args.subject), str(args.out))
+            whole = whole and record is not None and review_file(args.annotations).resolve() == record.resolve()
+            review = review_digest
+        key = subject_run_key(args.subject, args.out, fit_settings(args.fit), review) if whole else None
         t0 = time.perf_counter()
         caught: list[warnings.WarningMessage] = []
         try:

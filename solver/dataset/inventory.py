@@ -219,7 +219,7 @@ def _changes(
     stored = finished_manifest(target)
     if stored is None and (target / SUBJECT_RECORD).is_file():
         return [("its output holds no record of the inputs it was made from (written by addb kinematics, or by a "
-                 "one-subject addb process with --trial or --annotations)")]
+                 "one-subject addb process with --trial, or with a review file not the subject's own)")]
     if stored is None:
         return ["no finished output (cancelled, or its worker died)"]
     kept = stored["key"].get("annotations")

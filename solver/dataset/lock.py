@@ -76,10 +76,14 @@ def output_tree_lock(out_dir: str | Path) -> Iterator[None]:
         held = False
     key = Path(out_dir).resolve()
     if held:
-        f.seek(0)
-        f.truncate()
-        f.write(f"process {os.getpid()} on {socket.gethostname()}, started {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
-        f.flush()
+        try:
+            f.seek(0)
+            f.truncate()
+            f.write(f"process {os.getpid()} on {socket.gethostname()}, started {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+            f.flush()
+        except BaseException:  # a full disk: closing the file releases the lock now
+            f.close()
+            raise
         with _held_guard:
             _held[key] = [f, 1]
     try:

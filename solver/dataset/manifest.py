@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.files import links_back
-from solver.outputs import MANIFEST_NAME
+from solver.outputs import MANIFEST_NAME, write_json
 from solver.provenance import addb_version, code_digest
 
 SCHEMA = 1
@@ -212,6 +212,22 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) and isinstance(data.get("key"), dict) else None
+
+
+def write_manifest(out_dir: str | Path, manifest: dict[str, Any]) -> None:
+    """Put ``manifest`` into the subject's output folder ``out_dir`` (an existing folder) as
+    :data:`MANIFEST_NAME`, written to a hidden temporary file and renamed into place, so that
+    a reader (:func:`read_manifest`) or a crash meets the old manifest or the new, never half
+    of one.
+
+    Raises
+    ------
+    OSError
+        The folder cannot be written (the temporary file may be left; the old manifest stays).
+    """
+    tmp = Path(out_dir) / f".{MANIFEST_NAME}.tmp"
+    write_json(tmp, manifest)
+    os.replace(tmp, Path(out_dir) / MANIFEST_NAME)
 
 
 def finished_manifest(out_dir: str | Path) -> dict[str, Any] | None:

@@ -149,15 +149,13 @@ def _replace_dir(src: Path, dst: Path) -> None:
 def _record_failure(final: Path, log: Path, manifest: dict[str, Any]) -> None:
     """Put a failed subject's log and manifest into ``final`` (each file renamed into
     place), keeping whatever output an earlier run left there."""
-    from solver.dataset.manifest import MANIFEST_NAME
+    from solver.dataset.manifest import write_manifest
 
     final.mkdir(parents=True, exist_ok=True)
     tmp = final / f".{LOG_NAME}.tmp"
     shutil.copyfile(log, tmp)
     os.replace(tmp, final / LOG_NAME)
-    tmp = final / f".{MANIFEST_NAME}.tmp"
-    write_json(tmp, manifest)
-    os.replace(tmp, final / MANIFEST_NAME)
+    write_manifest(final, manifest)
 
 
 def run_subject(job: SubjectJob) -> dict[str, Any]:

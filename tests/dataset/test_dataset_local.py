@@ -7,6 +7,7 @@ a second run skips everything; editing one input file reprocesses that subject o
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -369,7 +370,7 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
     text = info()
     assert "    changed since that run: 1 subject (a new run processes it again)\n" in text, text
     assert (f"      {edited}: its output holds no record of the inputs it was made from (written by addb kinematics, "
-            "or by a one-subject addb process with --trial or --annotations)\n") in text, text
+            "or by a one-subject addb process with --trial, or with a review file not the subject's own)\n") in text, text
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
     assert f"    up to date: {len(everyone)} subjects" in info()
     part = out / edited.split("/")[0]  # a folder of the tree: addb info prints its totals
@@ -382,16 +383,18 @@ def test_info_of_the_dataset_folder_names_the_subjects_a_new_run_processes_again
 
 
 def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run_would(
-    first_run, tree: Path, capsys: pytest.CaptureFixture[str]
+    first_run, tree: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``addb process labA/s01 --out OUT/labA/s01`` left no manifest, so the next dataset run
     processed the subject again though nothing had changed. A whole run now writes the
     manifest a dataset run writes: the same key (files, code, settings, no review flags) and
     the same summary rows, so ``addb info`` calls it up to date and the dataset run skips it.
     Its ``--fit`` is in the key (another fit is "the settings changed"); so is the absence of
-    the reviewer's flags it did not apply (a subject with flags is processed again). A
-    ``--trial`` run, which merges into the folder, removes the manifest: the dataset run
-    processes the subject again."""
+    the reviewer's flags it did not apply (a subject with flags is processed again); given
+    the subject's own review record (``--annotations``, the record the dataset run reads),
+    its key holds that record's flags as the dataset run's does, and the dataset run skips
+    it. A ``--trial`` run, which merges into the folder, and a run with another review file
+    remove the manifest: the dataset run processes the subject again."""
     from annotations import AnnotationStore
 
     out = first_run[0]
@@ -432,11 +435,25 @@ def test_a_whole_one_subject_run_into_the_tree_leaves_the_manifest_a_dataset_run
         store.set_unmeasured("walk", range(100, 110))  # as the test of the flags left it (or runs alone)
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
     assert _statuses(out)[rel] == "ok" and "one_subject_run" not in read_manifest(out / rel)
-    assert read_manifest(out / walk)["key"]["annotations"] is not None
+    with_flags = read_manifest(out / walk)["key"]
+    assert with_flags["annotations"] is not None
     assert cli(["process", str(tree / walk), "--out", str(out / walk)]) == 0
     assert read_manifest(out / walk)["key"]["annotations"] is None
     text = info()
     assert f"    changed since that run: 1 subject (a new run processes it again)\n      {walk}: the review's flags changed\n" in text, text
+    # with the subject's own record, the one the dataset run reads: the same key as the dataset run's
+    assert cli(["process", str(tree / walk), "--out", str(out / walk), "--annotations", str(tree / walk)]) == 0
+    mine = read_manifest(out / walk)
+    assert mine["key"] == with_flags and mine["one_subject_run"] is True
+    assert f"    up to date: {len(everyone)} subjects" in info()
+    assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1
+    assert _statuses(out)[walk] == "skipped", _statuses(out)
+    # with another review file (a copy of that record): not what a dataset run applies
+    copy = tmp_path / "flags.json"
+    shutil.copyfile(tree / walk / "annotations.json", copy)
+    assert cli(["process", str(tree / walk), "--out", str(out / walk), "--annotations", str(copy)]) == 0
+    assert read_manifest(out / walk) is None
+    assert f"      {walk}: its output holds no record of the inputs it was made from" in info()
     assert cli(["process", str(tree), "--out", str(out), "--workers", "1"]) == 1  # as the module's tree was
     assert _statuses(out)[walk] == "ok"
     assert f"    up to date: {len(everyone)} subjects" in info()

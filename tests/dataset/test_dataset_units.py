@@ -328,6 +328,29 @@ def test_a_writer_that_joins_this_process_hold_keeps_the_tree_until_it_ends(tmp_
     assert free()
 
 
+def test_a_hold_that_cannot_write_its_holder_frees_the_tree_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A hold whose holder line could not be written (a full disk) kept its lock file open,
+    and so the tree locked, for as long as the error's traceback lived (here: the
+    ``pytest.raises`` record). It is now closed before the error leaves, so the tree is free."""
+    import socket
+
+    from solver.dataset.lock import LOCK_NAME, output_tree_lock
+
+    out = tmp_path / "OUT"
+    out.mkdir()
+
+    def no_space() -> str:
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(socket, "gethostname", no_space)  # fails while the holder's line is written
+        with pytest.raises(OSError, match="No space left") as failed, output_tree_lock(out):
+            pass
+    assert failed.value.errno == 28  # the record (and its traceback) still lives here
+    with output_tree_lock(out):  # raised DatasetError ("another addb run ...") before
+        assert "process " in (out / LOCK_NAME).read_text()
+
+
 @pytest.mark.parametrize("command", ["process", "kinematics"])
 def test_a_one_subject_run_into_a_dataset_output_tree_holds_the_tree(command: str, tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
