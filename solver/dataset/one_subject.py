@@ -15,7 +15,8 @@ did not apply them).
 A run of some trials (``--trial``), or with another review file, is not what a dataset run
 does, so it leaves no manifest; a ``--trial`` run merges into the folder, where the earlier
 run's manifest would otherwise still describe the whole output, so that manifest is removed
-(:func:`forget_subject_run`)"""
+(:func:`forget_subject_run`).
+"""
 
 from __future__ import annotations
 
