@@ -185,8 +185,13 @@ def _local_cluster(options: DatasetOptions) -> Any:
 
     import dask
     from distributed import LocalCluster
+    from distributed.system import MEMORY_LIMIT
 
     n = options.workers or os.cpu_count() or 1
+    # Dask's own "auto" gives each worker the RAM over the machine's cores, not over the
+    # workers: with --workers 1 on 8 cores the one worker had an eighth (paused, then
+    # restarted, on a large subject); with more workers than cores their limits exceeded the RAM
+    memory_limit = MEMORY_LIMIT // n if options.memory_limit == "auto" else options.memory_limit
     # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold)
     settings = {"distributed.scheduler.allowed-failures": 0, f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}": None}
     main = threading.current_thread() is threading.main_thread()  # signal handlers: the main thread only
@@ -197,7 +202,7 @@ def _local_cluster(options: DatasetOptions) -> Any:
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
-                memory_limit=options.memory_limit,
+                memory_limit=memory_limit,
                 dashboard_address=":0",  # any free port: two runs on one machine do not collide
                 silence_logs=logging.ERROR,
             )
