@@ -12,6 +12,12 @@ one resampling rule (:func:`solver.masks.resample_mask`). Until 2026-11-24 they 
 on the file's frames: for a file at another rate than 100 Hz the app then read them, and
 wrote the reviewer's own flags, on the wrong frames. A trial without force plates keeps the
 file's frames (it has no processed frames to flag).
+
+A conversion over an earlier one (``--force``) replaces what the earlier conversion imported,
+not the reviewers' work: the imported flags and notes (provenance ``imported``) are those of
+the new file, and the flags and notes a reviewer made are kept, also on trials the new file
+no longer has. Until 2026-11-30 the file's labels were written over every flag of the trial
+(a reviewer's flags cleared) and its notes added again beside the earlier ones.
 """
 
 from __future__ import annotations
@@ -24,6 +30,11 @@ from typing import Any
 def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Path:
     """Store a converted subject's missing-GRF labels as its review record.
 
+    What an earlier conversion imported into the record is replaced (for the trials of
+    ``converted``, and cleared for the trial folders it removed); the flags and notes of
+    other provenance (the reviewers') are kept, a reviewer's flag taking precedence over the
+    file's label on the same frame.
+
     Parameters
     ----------
     converted
@@ -35,6 +46,12 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
     -------
     Path
         The review record (where :mod:`addb_viewer.locations` says the subject's record lives).
+
+    Raises
+    ------
+    annotations.AnnotationError
+        A flag or activity of the record lies past the end of a trial of the new file (the
+        record does not belong to these trials).
     """
     import numpy as np
 
@@ -57,11 +74,32 @@ def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Pa
             rate = frame_rate(time, default=t.rate_hz)
             store.set_trial_info(t.name, n_frames=int(time.size), rate_hz=rate)
             missing = resample_mask(reasons != "notMissingGRF", file_time, time)
-            store.set_mask(t.name, missing, kind="unmeasured_force", source="imported", overwrite=True)
+            _drop_imported(store, t.name)
+            own = store.mask(t.name, int(time.size))  # what is left: the reviewers' flags
+            # the reviewers' flags keep their foot and author; the file's labels fill the rest
+            store.set_mask(t.name, missing | own, kind="unmeasured_force", source="imported", overwrite=False)
             for reason in sorted(set(t.missing_grf) - {"notMissingGRF"}):
                 for start, stop in true_runs(resample_mask(reasons == reason, file_time, time)):
-                    store.add_note(t.name, f"AddBiomechanics: missing GRF ({reason})", start=start, stop=stop, source="imported")
+                    store.add_note(t.name, f"{IMPORTED_NOTE} ({reason})", start=start, stop=stop, source="imported")
+        for name in converted.removed:  # trials the new file lacks: the earlier import goes with their folders
+            _drop_imported(store, name)
     return path
+
+
+#: Start of the text of the notes a conversion writes, one per run of one missing-GRF reason.
+IMPORTED_NOTE = "AddBiomechanics: missing GRF"
+
+
+def _drop_imported(store: Any, trial: str) -> None:
+    """Clear what an earlier conversion imported into ``trial`` of the review record
+    ``store``: its ``unmeasured_force`` flags of provenance ``imported`` and its notes
+    (provenance ``imported``, text :data:`IMPORTED_NOTE`); the reviewers' flags and notes stay."""
+    imported = [r for r in store.flag_runs(trial) if r.provenance.source == "imported"]
+    if imported:
+        store.set_unmeasured(trial, [f for r in imported for f in range(r.start, r.stop)], False, source="imported")
+    for note in store.notes(trial):
+        if note.provenance.source == "imported" and note.text.startswith(IMPORTED_NOTE):
+            store.remove_note(trial, note.id)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,9 +135,27 @@ def run(args: argparse.Namespace) -> int:
             f"  kept trial folders of the earlier conversion that this file does not have, as they hold other files "
             f"(addb process solves them with this subject; remove them if they do not belong to it): {', '.join(converted.kept)}"
         )
+    kept = _reviewers_flags(record)
+    if kept:
+        listed = ", ".join(f"{trial} {n}" for trial, n in kept.items())
+        print(f"  kept the reviewers' own flags and notes in the review record (flagged frames: {listed})")
     print(f"wrote {converted.path} (review record {record})")
     print(f"next: addb process {converted.path} --out OUT --annotations {record}")
     return 0
+
+
+def _reviewers_flags(record: Path) -> dict[str, int]:
+    """Trial -> frames flagged in the review record ``record`` by a reviewer (provenance
+    other than ``imported``), for the trials that have any."""
+    from annotations import AnnotationStore
+
+    counts: dict[str, int] = {}
+    with AnnotationStore.open(record, reviewer="addb convert") as store:
+        for trial in store.trials():
+            n = sum(r.stop - r.start for r in store.flag_runs(trial) if r.provenance.source != "imported")
+            if n:
+                counts[trial] = n
+    return counts
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -121,7 +177,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help=(
             "write over the subject already in --out (its model, _subject.json and the file's trials; trial folders an "
-            "earlier conversion wrote that this file does not have are removed, other trial folders are kept)"
+            "earlier conversion wrote that this file does not have are removed, other trial folders are kept; in the "
+            "review record the file's labels replace the earlier conversion's, and the reviewers' flags and notes are kept)"
         ),
     )
     p.set_defaults(handler=run)

@@ -180,10 +180,6 @@ def _with_labels(f, k: int, runs: dict[tuple[int, int], str], path: Path) -> Pat
     return path
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "addb convert --force writes the file's labels over every flag of a trial (a reviewer's flags are cleared) "
-    "and adds its notes again beside the earlier conversion's; mended on the branch pending-host, which waits "
-    "for a host where its figures can be made again"))  # fmt: skip
 def test_force_replaces_the_earlier_import_and_keeps_the_reviewers_flags_and_notes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
