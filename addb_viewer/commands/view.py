@@ -42,7 +42,9 @@ def b3d_subject(path: Path) -> Path:
 
     ``$XDG_CACHE_HOME/addb/b3d/<stem>-<hash>`` (the hash is of the resolved path, size and
     modification time, so a changed file converts again); the file's missing-GRF labels
-    become the folder's review record (``addb convert``).
+    become the folder's review record (``addb convert``). A file converted again brings
+    the review of its latest earlier conversion (:func:`_carry_over_review`): the reviewers'
+    flags and notes stay with the file, not with one version of it.
     """
     import hashlib
 
@@ -56,8 +58,54 @@ def b3d_subject(path: Path) -> Path:
     folder = cache_root() / "b3d" / f"{path.stem}-{hashlib.sha1(key.encode()).hexdigest()[:10]}"
     if not (folder / SUBJECT_JSON).is_file():
         print(f"addb view: converting {path} to {folder}", flush=True)
-        write_review_record(b3d_to_subject(path, folder, overwrite=True))
+        converted = b3d_to_subject(path, folder, overwrite=True)
+        _carry_over_review(path, folder)
+        write_review_record(converted)
     return folder
+
+
+def _carry_over_review(path: Path, folder: Path) -> None:
+    """Copy into the new cached subject ``folder`` of the .b3d file ``path`` the review record
+    of the latest earlier conversion of the same file (the cached folder beside it whose
+    ``b3d_source.json`` names the same resolved path and whose record changed last), when
+    every trial the two conversions share has the same frames; else leave it and say where
+    it is. :func:`addb_viewer.commands.convert.write_review_record` then replaces what the
+    earlier conversion imported and keeps the reviewers' work."""
+    import json
+    import shutil
+
+    from addb_viewer.locations import ANNOTATIONS_NAME
+    from annotations import AnnotationStore
+
+    def source(of: Path) -> dict | None:
+        try:
+            data = json.loads((of / "b3d_source.json").read_text())
+        except (OSError, ValueError):
+            return None
+        return data if isinstance(data, dict) and isinstance(data.get("trials"), dict) else None
+
+    new = source(folder)
+    if new is None:
+        return
+    earlier = [f for f in folder.parent.glob(f"{path.stem}-*") if f != folder and (f / ANNOTATIONS_NAME).is_file()
+               and (s := source(f)) is not None and s.get("b3d") == new.get("b3d")]  # fmt: skip
+    if not earlier:
+        return
+    latest = max(earlier, key=lambda f: (f / ANNOTATIONS_NAME).stat().st_mtime_ns)
+    old = source(latest) or {}
+    frames = {name: t.get("frames") for name, t in old["trials"].items() if isinstance(t, dict)}
+    differ = [name for name, t in new["trials"].items() if name in frames and frames[name] != t.get("frames")]
+    record = latest / ANNOTATIONS_NAME
+    if differ:
+        print(f"addb view: not carried over: the review of the earlier conversion {record} (its trials "
+              f"{', '.join(sorted(differ))} had other frames than this version of the file)", flush=True)  # fmt: skip
+        return
+    with AnnotationStore.open(record, reviewer="addb view"):
+        pass  # replays its journal into the record file (a writer may have left it behind)
+    for name in (ANNOTATIONS_NAME, Path(ANNOTATIONS_NAME).with_suffix(".journal").name):  # the record and its history
+        if (latest / name).is_file():
+            shutil.copyfile(latest / name, folder / name)
+    print(f"addb view: carried over the review of the earlier conversion ({record})", flush=True)
 
 
 def b3d_dataset(folder: Path) -> Path:

@@ -78,10 +78,6 @@ def _review_of(folder: Path, trial: str) -> tuple[list, list]:
     return flags, notes
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a .b3d file changed since it was reviewed (its modification time) converts again into a new cache folder, "
-    "whose review record starts empty: the review is left behind in the earlier folder; mended on the branch "
-    "pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_changed_file_converts_again_with_its_review(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
     """``addb view FILE.b3d`` reviewed (alice flags frames and writes a note), then the file
