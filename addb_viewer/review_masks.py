@@ -217,7 +217,8 @@ def is_addb_review(path: str | os.PathLike[str]) -> bool:
 
 
 def masks_from_file(
-    path: str | os.PathLike[str], subject_dir: str | os.PathLike[str], *, reviewer: str, trials: tuple[str, ...] | None = None
+    path: str | os.PathLike[str], subject_dir: str | os.PathLike[str], *, reviewer: str, trials: tuple[str, ...] | None = None,
+    given: bool = True,
 ) -> dict[str, BoolArray]:
     """``unmeasured_force`` from an ``--annotations`` file: a review record
     (:func:`unmeasured_force`) or an AddBiomechanics ``review.json`` of one trial (one entry
@@ -225,11 +226,16 @@ def masks_from_file(
     the one trial of ``trials`` (``--trial``). Trial name -> ``(T,)`` flags at the trial's
     processed frames.
 
+    A record the user ``given`` (``--annotations``, not the subject's own) must name one of
+    the subject's trials when it names any: another subject's record is refused, and the
+    trials of the record the subject lacks are named in a warning (their flags are not used).
+
     Raises
     ------
     solver.errors.SubjectFolderError
         A ``review.json`` given for a subject with more than one trial and not one trial
-        in ``trials`` (or a trial the subject lacks).
+        in ``trials`` (or a trial the subject lacks); a ``given`` record that names trials,
+        none of them the subject's (naming both lists).
     solver.errors.FileFormatError
         A damaged ``review.json``, or one with fewer entries than the trial's marker frames.
     annotations.AnnotationError
@@ -262,7 +268,32 @@ def masks_from_file(
         mask = read_review(path, n_frames=markers.n_frames)
         return {name: resample_mask(mask, np.asarray(markers.time), time)}
     with AnnotationStore.open(path, reviewer=reviewer) as store:
+        if given:
+            _check_record_trials(store.trials(), Path(path), Path(subject_dir))
         return unmeasured_force(store, subject_dir)
+
+
+def _check_record_trials(named: list[str], path: Path, subject_dir: Path) -> None:
+    """Refuse the review record ``path`` given for ``subject_dir`` when it names trials and
+    none of the subject's (another subject's record); warn naming those the subject lacks."""
+    import warnings
+
+    from solver.errors import SubjectFolderError
+    from solver.io.subject import load_subject
+
+    have = sorted(t.name for t in load_subject(subject_dir).trials)
+    unknown = [t for t in named if t not in have]
+    if not unknown:
+        return
+    if len(unknown) == len(named):
+        listed = f"the trial{'s' if len(named) > 1 else ''} {', '.join(named)}"
+        raise SubjectFolderError(
+            f"names {listed} and none of this subject's ({', '.join(have)}): it is the review record of another "
+            f"subject, or of this one before its trials were renamed; give the subject's own record",
+            path=path,
+        )
+    warnings.warn(f"{path.name} names trials that {subject_dir.name} does not have ({', '.join(unknown)}); their "
+                  "flags are not used", stacklevel=2)  # fmt: skip
 
 
 def import_addb_review(

@@ -105,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else default_output_dir(subject)
     # --annotations replaces the subject's record (which is then not read) and must exist
     record = review_file(args.annotations) if args.annotations else annotations_path(subject, out)
-    masks = masks_from_file(record, subject, reviewer="addb diagnose", trials=(args.trial,)) if record.is_file() else {}
+    masks = masks_from_file(record, subject, reviewer="addb diagnose", trials=(args.trial,),
+                            given=bool(args.annotations)) if record.is_file() else {}  # fmt: skip
     progress = ProgressBar(sys.stderr)
     with each_warning_once():
         if args.trial not in processed_trials(out):
