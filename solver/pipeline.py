@@ -35,7 +35,7 @@ from solver.io.external_loads import ExternalForce, ExternalLoads, write_externa
 from solver.io.mot import write_coordinates, write_forces, write_table
 from solver.io.subject import Subject, Trial, load_subject, load_trial
 from solver.io.types import ForcePlate, ForceRecording, Table
-from solver.kinematics.observations import find_marker_settings
+from solver.kinematics.observations import MarkerSettings, find_marker_settings, mapping_mistakes
 from solver.kinematics.result import KinematicsResult, TrialKinematics
 from solver.kinematics.stage import KinematicsOptions, run_ik, run_kinematics
 from solver.model.osim import OsimModel, read_osim
@@ -124,12 +124,14 @@ def subject_kinematics(
     if scaled_model is not None:
         loaded = load_trials(subject, trials)
         model = read_osim(scaled_model)
+        _warn_mapping_mistakes(markers, model, loaded)
         load_seconds = time.perf_counter() - t0
         kin = run_ik(model, [(t.name, t.markers) for t in loaded], mapping=markers.mapping, options=opts, progress=progress)
         warn_marker_mismatch(kin)
         return SubjectKinematics(subject, loaded, kin, load_seconds)
     loaded = load_trials(subject)
     generic = read_osim(subject.model_path)
+    _warn_mapping_mistakes(markers, generic, loaded)
     if markers.attach_unmatched:
         opts = replace(opts, attach_unmatched=True)
     load_seconds = time.perf_counter() - t0
@@ -143,6 +145,16 @@ def subject_kinematics(
     )
     warn_marker_mismatch(kin)
     return SubjectKinematics(subject, loaded, kin, load_seconds)
+
+
+def _warn_mapping_mistakes(markers: MarkerSettings, model: OsimModel, loaded: Sequence[Trial]) -> None:
+    """Warn (UserWarning) of each mistake of the subject's marker mapping that leaves a
+    marker out of the fit (:func:`solver.kinematics.observations.mapping_mistakes`)."""
+    import warnings
+
+    trials = [(t.name, t.markers.names) for t in loaded]
+    for message in mapping_mistakes(markers, [m.name for m in model.markers], trials):
+        warnings.warn(message, stacklevel=3)
 
 
 #: A trial is warned about (:func:`warn_marker_mismatch`) when it matches fewer than this

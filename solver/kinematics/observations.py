@@ -85,6 +85,51 @@ def find_marker_settings(subject_dir: str | Path) -> MarkerSettings:
     return MarkerSettings({})
 
 
+def mapping_mistakes(
+    settings: MarkerSettings, model_marker_names: Sequence[str], trials: Sequence[tuple[str, Sequence[str]]]
+) -> list[str]:
+    """What in a subject's marker mapping leaves markers of its trials out of the fit, as
+    messages for the user (empty when nothing does).
+
+    Parameters
+    ----------
+    settings
+        The subject's marker settings (:func:`find_marker_settings`).
+    model_marker_names
+        The model's marker names.
+    trials
+        ``(trial name, its marker column names)`` for each trial.
+
+    Returns
+    -------
+    One message per mapping entry whose lab marker a trial has and whose model marker the
+    model lacks (the lab marker is left out, or attached as its own with
+    ``attach_unmatched``), then one per trial and model marker that two or more of the
+    trial's columns stand for (:func:`match_markers` takes the first).
+    """
+    where = Path(settings.source).name if settings.source else "the marker mapping"
+    model = set(model_marker_names)
+    present = {name for _, names in trials for name in names}
+    out = []
+    for lab, target in settings.mapping.items():
+        if lab in present and target not in model:
+            fate = ("is attached as a marker of its own (attach_unmatched)" if settings.attach_unmatched
+                    else "is left out of the fit")  # fmt: skip
+            out.append(f"{where} maps {lab} to {target}, which is not a marker of the model: {lab} {fate}")
+    for trial, names in trials:
+        columns: dict[str, list[str]] = {}
+        for name in names:
+            target = settings.mapping.get(name, name)
+            if target in model:
+                columns.setdefault(target, []).append(name)
+        for target, labs in columns.items():
+            if len(labs) > 1:
+                via = f" ({where})" if any(lab in settings.mapping for lab in labs) else ""
+                out.append(f"trial {trial}: the columns {' and '.join(labs)} both stand for the model marker {target}{via}; "
+                           f"the fit uses {labs[0]}, the first, and leaves {', '.join(labs[1:])} out")  # fmt: skip
+    return out
+
+
 @dataclass(frozen=True)
 class MarkerMatch:
     """How one trial's markers relate to the model's.

@@ -15,10 +15,6 @@ from tests.cli_run import run_addb
 from tests.conftest import SHARED_DATA, writable_copy
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
-PENDING = pytest.mark.xfail(strict=True, reason=(
-    "a marker mapping entry naming no model marker, and two trial columns for one model marker, leave markers "
-    "out of the fit without a word (only results.json's markers_ignored lists them); mended on the branch "
-    "pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 
 
 def _kinematics(subject: Path, out: Path) -> tuple[int, str]:
@@ -27,7 +23,6 @@ def _kinematics(subject: Path, out: Path) -> tuple[int, str]:
     return code, err
 
 
-@PENDING
 def test_a_mapping_to_a_marker_the_model_lacks_is_named(tmp_path: Path) -> None:
     """``R.ASIS: R_ASIS`` (the model calls it R.ASIS): the run goes on without R.ASIS and the
     warning names the entry and the file; an entry for a marker no trial has is not named
@@ -42,7 +37,6 @@ def test_a_mapping_to_a_marker_the_model_lacks_is_named(tmp_path: Path) -> None:
     assert "R.ASIS" in results["markers_ignored"] and "R.ASIS" not in results["markers_used"]
 
 
-@PENDING
 def test_two_columns_for_one_model_marker_are_named(tmp_path: Path) -> None:
     """``R.ASIS: L.ASIS`` while the file also has L.ASIS: both columns stand for the model's
     L.ASIS; the fit takes the first (R.ASIS, as before) and the warning names the trial, both
