@@ -183,7 +183,8 @@ def subject_masks(subject_dir: str, out_dir: str) -> dict[str, BoolArray] | None
     """:func:`unmeasured_force` of the subject's review record (where ``addb view`` keeps
     it, :func:`addb_viewer.locations.annotations_path`): trial name -> ``(T,)`` flags at the
     trial's processed frames, or None when it has no record or no trial enters; the dataset
-    runner's mask loader (``addb process DATASET_DIR``).
+    runner's mask loader (``addb process DATASET_DIR``). Review work on trials the subject no
+    longer has is named in a warning.
 
     Raises
     ------
@@ -196,7 +197,24 @@ def subject_masks(subject_dir: str, out_dir: str) -> dict[str, BoolArray] | None
     if path is None:
         return None
     with AnnotationStore.open(path, reviewer="addb process") as store:
+        _warn_orphaned_review(store, path, subject_dir)
         return unmeasured_force(store, subject_dir) or None
+
+
+def _warn_orphaned_review(store: AnnotationStore, path: Path, subject_dir: str) -> None:
+    """Warn (UserWarning) naming the trials of the subject's own record ``store`` (at ``path``)
+    that hold review work (flags, a reviewed mark or notes) and that the subject no longer
+    has (a trial folder renamed or removed since): their flags are not used."""
+    import warnings
+
+    from solver.io.subject import load_subject
+
+    have = {t.name for t in load_subject(subject_dir).trials}
+    orphans = [t for t in store.trials() if t not in have and (_selected(store, t) or store.notes(t))]
+    if orphans:
+        many = len(orphans) > 1
+        warnings.warn(f"{path.name} holds review work on {'trials' if many else 'a trial'} this subject no longer has "
+                      f"({', '.join(orphans)}): {'their' if many else 'its'} flags are not used", stacklevel=3)  # fmt: skip
 
 
 def is_addb_review(path: str | os.PathLike[str]) -> bool:
