@@ -691,6 +691,8 @@ def _process_subject(
                 processed = build_processed(sk, trial, model_path=str(model_file), metrics=metrics)
             else:
                 write_dynamics_files(folder, trial.name, td, model, rotational)
+                if not td.metrics["n_observed_frames"]:
+                    _warn_no_measured_frame(trial.name, td)
                 metrics.update(td.metrics)
                 metrics["opensim_convention_max_diff"] = float(np.abs(td.tau_opensim - td.tau).max())
                 metrics["rate_hz"] = dyn.settings["rate_hz"]
@@ -734,6 +736,19 @@ class ProcessResult:
     kinematics: SubjectKinematics
     dynamics: DynamicsResult | None
     out_dir: Path
+
+
+def _warn_no_measured_frame(name: str, td: TrialDynamics) -> None:
+    """Warn (UserWarning) that trial ``name``, which has force plates, has no frame with
+    measured force in the fit, naming the first frame's reason for leaving it out: its
+    residuals and Hicks verdicts are not defined (results.json holds None)."""
+    import warnings
+
+    from solver.dynamics.contact import reason_kind
+
+    why = next((reason_kind(r) for r in td.reasons if r), "flagged")
+    warnings.warn(f"trial {name}: no frame with measured force enters the fit (all {td.time.size} frames left out, "
+                  f"first for: {why}): it has no residuals or Hicks verdicts", stacklevel=3)  # fmt: skip
 
 
 def _trial_dynamics(dyn: DynamicsResult | None, name: str) -> TrialDynamics | None:
@@ -791,8 +806,9 @@ def write_dynamics_files(folder: Path, name: str, td: TrialDynamics, model: Osim
         Table(tuple(f"{n}_{kinds[n]}" for n in names), td.tau_opensim, td.time, {"name": f"{name} inverse dynamics"}),
         kind="sto",
     )
-    plane = float(np.nanmedian(np.concatenate([p.cop[:, 1] for p in td.plates] or [np.zeros(1)])))
-    plane = plane if np.isfinite(plane) else 0.0
+    heights = np.concatenate([p.cop[:, 1] for p in td.plates] or [np.zeros(1)])
+    heights = heights[np.isfinite(heights)]  # no centre of pressure where a plate carries no force
+    plane = float(np.median(heights)) if heights.size else 0.0
     plates, forces = [], []
     for w in td.wrenches:
         m_o = np.cross(w.point, w.force) + w.moment

@@ -238,6 +238,8 @@ def run(args: argparse.Namespace) -> int:
             d = next((x for x in result.dynamics.trials if x.name == t.name), None)
         if d is None:
             rows.append([t.name, str(t.q.shape[0]), f"{t.marker_rms * 100:.2f}", "-", "-", "-", "-"])
+        elif not d.metrics["n_observed_frames"]:  # no residual, no verdict: nothing was measured
+            rows.append([t.name, f"0/{d.time.size}", f"{d.metrics['marker_rms_m'] * 100:.2f}", "-", "-", "-", "-"])
         else:
             m = d.metrics
             ang = m["angular_residual_rms_BWh"]

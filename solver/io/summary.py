@@ -417,6 +417,8 @@ def _trial_lines(trials: list[dict[str, Any]]) -> list[str]:
         if t.get("hicks_linear_ok") is not None:
             angular = f", angular {verdict[t['hicks_angular_ok']]}" if t.get("hicks_angular_ok") is not None else ""
             parts.append(f"Hicks: linear {verdict[t['hicks_linear_ok']]}{angular}")
+        if not parts and t.get("n_observed_frames") == 0:
+            parts.append("no frame with measured force entered the fit: no residuals or Hicks verdicts")
         lines += [head, "    " + "; ".join(parts)]
     return lines
 

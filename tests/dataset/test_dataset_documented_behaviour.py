@@ -280,11 +280,6 @@ def test_the_local_cluster_has_a_worker_per_core_with_one_thread_and_its_share_o
     assert worker["nthreads"] == 1 and worker["memory_limit"] == 10**9
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the memory limit 'auto' is passed on to Dask's nanny, which divides the RAM by the machine's cores, not by "
-    "--workers: with --workers 1 on a two-core machine the one worker gets half the RAM, with --workers 3 each of "
-    "three gets half (1.5 x the RAM in all); mended on the branch pending-host, which waits for a host where its "
-    "figures can be made again"))  # fmt: skip
 def test_the_default_memory_limit_divides_the_ram_among_the_workers_asked_for() -> None:
     """README, Cores: a memory limit each (``--memory-limit``, default the RAM divided among
     them), with a ``--workers`` other than the cores (``addb process --help``: "default: RAM /

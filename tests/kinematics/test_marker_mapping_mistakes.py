@@ -9,8 +9,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
 from tests.cli_run import run_addb
 from tests.conftest import SHARED_DATA, writable_copy
 
