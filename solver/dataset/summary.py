@@ -171,7 +171,8 @@ def dataset_totals(subjects: list[dict[str, Any]]) -> dict[str, Any]:
         ``hours_with_measured_force``, ``contact_share`` (class -> fraction of measured
         frames), ``clinical_grade_share`` (fraction of measured frames), marker RMS
         per trial (mean and median, m), the summed residual histograms with their bin
-        edges, and the share of dynamics trials meeting each Hicks threshold.
+        edges, and the share of dynamics trials meeting each Hicks threshold (among those
+        with a verdict).
     """
     by_status: dict[str, int] = {}
     for s in subjects:
@@ -198,15 +199,21 @@ def dataset_totals(subjects: list[dict[str, Any]]) -> dict[str, Any]:
         "clinical_grade_share": sum(clinical) / clinical_measured if clinical_measured else None,
         "marker_rms_mean_m": float(np.mean(rms)) if rms else None,
         "marker_rms_median_m": float(np.median(rms)) if rms else None,
-        "hicks_linear_share": (sum(bool(r["hicks_linear_ok"]) for r in dyn) / len(dyn)) if dyn else None,
-        "hicks_angular_share": (
-            sum(bool(r["hicks_angular_ok"]) for r in dyn) / len(dyn) if dyn else None
-        ),
+        "hicks_linear_share": _share_within(dyn, "hicks_linear_ok"),
+        "hicks_angular_share": _share_within(dyn, "hicks_angular_ok"),
         "residual_force_bins_BW": list(RESIDUAL_BINS_BW),
         "residual_force_hist_BW": _sum_hist(dyn, "residual_force_hist_BW", len(RESIDUAL_BINS_BW)),
         "residual_moment_bins_BWh": list(RESIDUAL_BINS_BWH),
         "residual_moment_hist_BWh": _sum_hist(dyn, "residual_moment_hist_BWh", len(RESIDUAL_BINS_BWH)),
     }
+
+
+def _share_within(rows: list[dict[str, Any]], verdict: str) -> float | None:
+    """The share of ``rows`` whose Hicks ``verdict`` is True among those that have one (a
+    trial without a frame with measured force, or without a height for the moment, has
+    none); None when no row has one."""
+    judged = [bool(r[verdict]) for r in rows if r.get(verdict) is not None]
+    return sum(judged) / len(judged) if judged else None
 
 
 #: The source of a subject at the top of the dataset folder (no folder above it).

@@ -31,11 +31,6 @@ def _zero_forces(path: Path) -> None:
     path.write_text("\n".join([*lines[: head + 1], *("\t".join([r[0]] + ["0"] * (len(r) - 1)) for r in rows)]) + "\n")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a trial whose plates never carry force is printed with residuals 'nan (nan)' and Hicks 'no' (results.json "
-    "has None), addb info prints an empty line for it, numpy's 'All-NaN slice encountered' reaches the user, and "
-    "nothing says the trial had no measured frame; a dataset's share of trials within Hicks' thresholds counts it "
-    "as over them; mended on the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_trial_whose_plates_never_carry_force_is_reported_without_numbers(tmp_path: Path) -> None:
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
     shutil.copytree(subject / "trials" / "walk", subject / "trials" / "walk_zero")
