@@ -231,7 +231,7 @@ def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
     if steps.size:
         k = steps[0] + 1
         raise TrcFormatError(
-            f"time {time[k]!r} s does not increase (previous row: {time[k - 1]!r} s)",
+            f"time {float(time[k])!r} s does not increase (previous row: {float(time[k - 1])!r} s)",
             path=path,
             line=numbers[k],
         )

@@ -314,9 +314,6 @@ def test_truncated_inside_a_row(tmp_path: Path, grf_lines: list[str]) -> None:
     _expect(_damaged(tmp_path, lines), 501, "expected 19 values")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the message gives the times as numpy writes them (\"time np.float64(1.0) s does not increase\"); mended on the "
-    "branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_repeated_time_is_named_in_seconds_as_the_file_writes_it(tmp_path: Path, grf_lines: list[str]) -> None:
     """A row written twice: the error names the line and the two times as plain numbers of
     seconds."""

@@ -263,9 +263,6 @@ def test_time_going_backwards(tmp_path: Path, small_trc: list[str]) -> None:
     _expect(_damaged(tmp_path, lines), 41, "does not increase")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the message gives the times as numpy writes them (\"time np.float64(1.0) s does not increase\"); mended on the "
-    "branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_repeated_time_is_named_in_seconds_as_the_file_writes_it(tmp_path: Path, small_trc: list[str]) -> None:
     """A frame written twice (a lab export's repeated row, NumFrames mended): the error names
     the line and the two times as plain numbers of seconds."""
