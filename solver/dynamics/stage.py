@@ -199,11 +199,13 @@ def trial_frames(markers: MarkerTrajectories, forces: ForceRecording, rate: floa
     start = max(float(markers.time[0]), float(forces.time[0]))
     stop = min(float(markers.time[-1]), float(forces.time[-1]))
     if stop - start < 10.0 / rate:
-        raise DynamicsError(
-            f"markers ({markers.time[0]:.3f}-{markers.time[-1]:.3f} s) and forces ({forces.time[0]:.3f}-{forces.time[-1]:.3f} s) "
-            "do not overlap in time",
-            where=f"trial {trial}",
-        )
+        spans = (f"markers ({markers.time[0]:.3f}-{markers.time[-1]:.3f} s) and forces "
+                 f"({forces.time[0]:.3f}-{forces.time[-1]:.3f} s)")  # fmt: skip
+        if stop <= start:
+            raise DynamicsError(f"{spans} do not overlap in time", where=f"trial {trial}")
+        n = common_time(start, stop, rate).size
+        raise DynamicsError(f"{spans} overlap by {stop - start:.3f} s ({n} frames at {rate:g} Hz); the dynamics needs at "
+                            "least 10", where=f"trial {trial}")  # fmt: skip
     return common_time(start, stop, rate)
 
 

@@ -256,10 +256,6 @@ def test_the_shared_marker_sets_are_not_warned_about(name: str, tmp_path: Path) 
         process_kinematics(SHARED_DATA / "subjects" / name, tmp_path / "out")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "markers and forces that overlap by fewer than ten frames are said not to overlap at all (the walk's six "
-    "marker frames lie inside its forces' span); mended on the branch pending-host, which waits for a host where "
-    "its figures can be made again"))  # fmt: skip
 def test_a_trial_too_short_for_the_dynamics_says_how_short(walk: Path, tmp_path: Path) -> None:
     """The walk's markers cut to their first six frames (0.05 s, inside the forces' 2.39 s):
     the trial is written with its kinematics, and its DynamicsError says how long the two
