@@ -300,6 +300,7 @@ def _json(p: Path) -> dict[str, Any]:
             "path": str(p),
             "mass_kg": raw.get("massKg"),
             "height_m": raw.get("heightM"),
+            "foot_bodies": raw.get("footBodyNames"),
         }
     raise FileFormatError(
         f"unknown JSON file; expected a review file with {REVIEW_KEY!r}, a subject JSON or a trial's results.json",
@@ -592,6 +593,11 @@ def format_summary(d: dict[str, Any]) -> str:
         lines += _trial_lines(d["trials"])
     if kind == "review":
         lines.append(f"  frames: {d['review_frames']}, missing GRF: {d['missing_grf_frames']}")
+    if kind == "subject_json":  # the values as written (addb info SUBJECT_DIR checks them)
+        height = f"height {d['height_m']} m" if d["height_m"] is not None else "no height"
+        lines.append(f"  mass {d['mass_kg']} kg, {height}")
+        if isinstance(d.get("foot_bodies"), list):
+            lines.append(f"  feet: {', '.join(map(str, d['foot_bodies']))}")
     if kind == "subject":
         height = f"{_fmt(d['height_m'])} m" if d["height_m"] else "unknown height"
         m = d["model"]

@@ -210,9 +210,6 @@ def test_every_shared_file_is_summarized(path: Path) -> None:
         assert d["kind"] == "forces" and len(d["plates"]) >= 2
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "addb info of a subject JSON prints its kind alone (the summary read its mass and height and the text left "
-    "them out); mended on the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 @pytest.mark.parametrize("path", sorted([*DATA.rglob("_subject.json"), *DATA.rglob("addb_subject.json")]),
                          ids=lambda p: str(p.relative_to(DATA)))  # fmt: skip
 def test_a_subject_json_is_summarized_with_its_values(path: Path) -> None:
