@@ -106,6 +106,14 @@ def export_b3d(args: argparse.Namespace) -> int:
     return 0
 
 
+def _format_without_suffix(src: Path) -> str:
+    """The format of an output name without suffix: b3d for a dataset output tree or a folder
+    of one (the only format it exports to), else mcap."""
+    from solver.dataset.discover import tree_subjects
+
+    return "b3d" if tree_subjects(src) is not None else "mcap"
+
+
 def run(args: argparse.Namespace) -> int:
     """``addb export ... --format mcap|b3d``: a trial as MCAP, or a processed subject (one file per
     subject of a dataset output tree) as .b3d.
@@ -115,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     The exit code: 0 when every file was written.
 
     Bad input raises, as in every subcommand (:mod:`addb_viewer.commands`); an output name
-    whose suffix is not .mcap, .rrd or .b3d (no suffix: MCAP), or that disagrees with
+    whose suffix is not .mcap, .rrd or .b3d (no suffix: MCAP, or .b3d files for a dataset output tree), or that disagrees with
     ``--format``, is refused before anything is processed.
     """
     from addb_viewer.recording.jobs import FORMATS
@@ -129,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                 f"addb export: cannot tell the format from -o {args.output} (a {suffix} file); "
                 f"name it {', '.join(by_suffix)} or give --format"
             )
-        fmt = by_suffix.get(suffix, "mcap")
+        fmt = by_suffix.get(suffix) or _format_without_suffix(Path(args.subject))
     elif by_suffix.get(suffix, fmt) != fmt:  # it wrote the --format under the other format's suffix
         raise SystemExit(f"addb export: --format {fmt}, but -o {args.output} names a {by_suffix[suffix]} file; give one that agrees")
     if fmt == "b3d":
@@ -175,7 +183,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--format",
         choices=("mcap", "rrd", "b3d"),
-        help="file format (default: from the output suffix .mcap, .rrd or .b3d; mcap when it has none)",
+        help="file format (default: from the output suffix .mcap, .rrd or .b3d; when it has none, b3d for a dataset "
+        "output tree and mcap otherwise)",
     )
     p.add_argument("-o", "--output", required=True, help="the file to write (a folder for a dataset tree)")
     p.add_argument(

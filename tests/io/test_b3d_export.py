@@ -141,10 +141,6 @@ def test_dataset_tree_one_file_per_subject(processed: Path, tmp_path: Path, caps
     assert (lab / "s01.b3d").read_bytes() == (dest / "lab_a" / "s01.b3d").read_bytes()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "addb export of a dataset output tree without --format takes MCAP (the format of a name without suffix) and "
-    "says '--trial is required for --format mcap', a format the user did not give and a tree cannot take; mended "
-    "on the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_dataset_tree_exports_as_b3d_without_format(processed: Path, tmp_path: Path) -> None:
     """A dataset output tree (the only format it exports to is .b3d) given with ``-o FOLDER``
     and no ``--format``: the same files as with ``--format b3d``."""
