@@ -17,6 +17,7 @@ reaches the runner, which then retries the subject on another worker.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from solver.errors import AddbError
-from solver.outputs import replace_folder, write_json
+from solver.outputs import SUBJECT_RECORD, replace_folder, write_json
 
 LOG_NAME = "process.log"
 #: Dask event topic of the subjects' progress (``{"rel", "message", "fraction"}``).
@@ -175,7 +176,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     """
     from solver.dataset.manifest import MANIFEST_NAME, subject_status
     from solver.dataset.summary import subject_rows
-    from solver.pipeline import options_for_fit, process_subject
+    from solver.pipeline import options_for_fit
 
     t0 = time.perf_counter()
     final = Path(job.out_dir)
@@ -193,17 +194,11 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
             if unmeasured_force:
                 log(f"reviewer flags used for {', '.join(sorted(unmeasured_force))}")
             fit = str((job.key.get("settings") or {}).get("fit", "default"))
-            result = process_subject(job.subject_dir, work / "out", options=options_for_fit(fit), unmeasured_force=unmeasured_force, progress=log)
+            masses = _processed(job.subject_dir, work / "out", options_for_fit(fit), unmeasured_force, log)
         outcome["warnings"] = _log_warnings(log, caught)
         rows = subject_rows(work / "out")
         status = subject_status(rows)
-        outcome.update(
-            status=status,
-            trials=rows,
-            mass_kg=result.kinematics.subject.mass_kg,
-            fitted_mass_kg=result.dynamics.mass_kg if result.dynamics is not None else None,
-            seconds=time.perf_counter() - t0,
-        )
+        outcome.update(status=status, trials=rows, **masses, seconds=time.perf_counter() - t0)
         log(f"done: {status}, {sum(r['frames'] for r in rows)} frames in {outcome['seconds']:.1f} s")
         log.close()
         os.replace(work / LOG_NAME, work / "out" / LOG_NAME)
@@ -224,6 +219,29 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         shutil.rmtree(work, ignore_errors=True)
     outcome["worker_peak_rss_mb"] = _peak_rss_mb()
     return outcome
+
+
+def _processed(subject_dir: str, out: Path, options: Any, unmeasured_force: Any, log: Callable[[str], None]) -> dict[str, Any]:
+    """:func:`solver.pipeline.process_subject` of the subject into ``out``; returns its
+    ``mass_kg`` (given) and ``fitted_mass_kg``. A trial whose recordings the dynamics stage
+    could not take is kept as ``addb process SUBJECT_DIR`` keeps it (its kinematics, its
+    error in its results.json, the other trials processed): a warning naming it, not a
+    failure of the subject. Any other error propagates."""
+    from solver.errors import DynamicsError
+    from solver.pipeline import process_subject
+
+    try:
+        result = process_subject(subject_dir, out, options=options, unmeasured_force=unmeasured_force, progress=log)
+    except DynamicsError as exc:
+        if not exc.kept_trials:
+            raise
+        for name, error in exc.kept_trials:
+            warnings.warn(f"trial {name}: {error.message}; its kinematics were kept without dynamics (results.json: "
+                          "dynamics_error), the other trials were processed", stacklevel=2)  # fmt: skip
+        written = json.loads((out / SUBJECT_RECORD).read_text())
+        return {"mass_kg": written.get("mass_kg"), "fitted_mass_kg": written.get("fitted_mass_kg")}
+    return {"mass_kg": result.kinematics.subject.mass_kg,
+            "fitted_mass_kg": result.dynamics.mass_kg if result.dynamics is not None else None}  # fmt: skip
 
 
 def _log_warnings(log: Callable[[str], None], caught: list[warnings.WarningMessage]) -> list[str]:

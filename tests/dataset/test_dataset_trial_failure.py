@@ -22,10 +22,6 @@ pytestmark = pytest.mark.slow
 REL = "labA/s01"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a dataset run fails the whole subject when one trial's dynamics fail, and drops the output process_subject "
-    "wrote (the other trials' dynamics, that trial's kinematics), which addb process SUBJECT_DIR keeps; mended on "
-    "the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_trial_the_dynamics_cannot_take_leaves_the_subject_processed(tmp_path: Path) -> None:
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "dataset" / REL)
     add_short_walk(subject)
