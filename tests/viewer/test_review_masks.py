@@ -146,10 +146,6 @@ def test_an_annotations_path_with_no_record_is_refused_and_nothing_created(tmp_p
     assert seen.pop("process")["walk"][10:20].all()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a review record given with --annotations that names none of the subject's trials is taken silently (the "
-    "subject processed without any flag), and trials of the record the subject lacks are not named; mended on "
-    "the branch pending-host, which waits for a host where its figures can be made again"))  # fmt: skip
 def test_a_record_of_another_subject_is_refused_and_unknown_trials_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                         capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
     """``addb process``/``addb diagnose SUBJECT --annotations RECORD`` with the record of
@@ -184,10 +180,6 @@ def test_a_record_of_another_subject_is_refused_and_unknown_trials_named(tmp_pat
     assert "addb: warning: walk_review.json names trials that rajagopal2016_run does not have (walk); their flags are not used" in err, err
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a subject's own review record whose flags lie on a trial the subject no longer has (its folder renamed) "
-    "loses their effect without a word in a dataset run; mended on the branch pending-host, which waits for a "
-    "host where its figures can be made again"))  # fmt: skip
 def test_review_work_on_a_trial_the_subject_no_longer_has_is_named(tmp_path: Path) -> None:
     """The walk reviewed (frames 10-19 flagged), then its trial folder renamed ``walk_01``:
     the dataset run's mask loader takes no flag and warns, naming the record and the trial;
