@@ -72,7 +72,9 @@ class QueueRow:
         :data:`NOT_PROCESSED`, :data:`PROCESSING`, :data:`FAILED`, :data:`PROCESSED` or
         :data:`KINEMATICS_ONLY`.
     detail
-        The error of a failed subject, or the progress message of a running one ("" else).
+        The error of a failed subject, the progress message of a running one, or, for a
+        trial kept with its kinematics because its dynamics failed, "dynamics failed: "
+        and the error ("" else).
     review
         :data:`UNREVIEWED`, :data:`IN_REVIEW`, :data:`REVIEWED` or :data:`RECORD_UNREADABLE`.
     reviewer
@@ -303,12 +305,20 @@ def _results_row(res: Path) -> dict[str, Any] | None:
         "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
         "measured_frames": m.get("n_observed_frames", 0), "marker_rms_m": m.get("marker_rms_m"),
         "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
+        "dynamics_error": dynamics_error_of(m),
     }  # fmt: skip
+
+
+def dynamics_error_of(metrics: Mapping[str, Any]) -> str | None:
+    """The message of a trial's ``dynamics_error`` (results.json of a trial written with its
+    kinematics because the dynamics stage could not take its recordings), or None."""
+    error = metrics.get("dynamics_error")
+    return str(error.get("message")) if isinstance(error, Mapping) and error.get("message") else None
 
 
 #: The figures of a manifest's trial row that a later Reprocess (which rewrites the trial's
 #: results.json, not the dataset run's manifest) replaces.
-_REPROCESSED = ("status", "measured_frames", "marker_rms_m", "hicks_linear_ok", "hicks_angular_ok")
+_REPROCESSED = ("status", "measured_frames", "marker_rms_m", "hicks_linear_ok", "hicks_angular_ok", "dynamics_error")
 
 
 def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any]]]:
@@ -359,8 +369,10 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
             # a subject processed again keeps its trials, reviews and figures (its earlier
             # output stays until the new one is in place), marked as processing
             processing = PROCESSING if subject.rel in running else PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY
+            failed = r.get("dynamics_error")
+            detail = running.get(subject.rel) or (f"dynamics failed: {failed}" if failed else "")
             out.append(QueueRow(
-                subject, r["trial"], processing, running.get(subject.rel, ""), review, reviewer,
+                subject, r["trial"], processing, detail, review, reviewer,
                 _pending(r, snap) if snaps is not None else None, int(r.get("frames") or 0), int(r.get("measured_frames") or 0),
                 r.get("marker_rms_m"), r.get("hicks_linear_ok"), r.get("hicks_angular_ok"),
             ))  # fmt: skip

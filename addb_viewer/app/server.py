@@ -46,6 +46,7 @@ from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
+from addb_viewer.app.queue import dynamics_error_of
 from addb_viewer.app.reprocess import Reprocessor, SecondThought
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
@@ -538,6 +539,8 @@ class ReviewApp:
             parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
         elif not t.plates:
             parts.append("no force plates in this trial: kinematics only (no residuals)")
+        elif failed := dynamics_error_of(t.metrics):
+            parts.append(f"kinematics only: its dynamics failed: {failed}")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")
         # kept STATUS_MIN_LINES lines high: it wraps to four to six lines from frame to frame,

@@ -109,6 +109,9 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
         "duration_s": n / rate if rate else None,
     }
     row.update({k: m.get(k) for k in _METRICS})
+    error = m.get("dynamics_error")
+    if isinstance(error, dict) and error.get("message"):  # kept with its kinematics: the dynamics failed
+        row["dynamics_error"] = str(error["message"])
     from solver.masks import true_runs
 
     row["proposed_ranges"] = [list(r) for r in true_runs(np.asarray(trial.proposed, dtype=bool))]

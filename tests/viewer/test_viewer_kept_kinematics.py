@@ -33,14 +33,8 @@ def processed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return subject, out
 
 
-PENDING = pytest.mark.xfail(strict=True, reason=(
-    "a trial kept with its kinematics after its dynamics failed is shown as 'kinematics only' in the queue and, "
-    "open, as 'no dynamics yet (residuals appear after a Reprocess ...)', which a Reprocess cannot give; its "
-    "error is nowhere in the app; mended on the branch pending-host, which waits for a host where its figures "
-    "can be made again"))  # fmt: skip
 
 
-@PENDING
 def test_the_queue_row_says_the_trials_dynamics_failed(processed: tuple[Path, Path]) -> None:
     subject, out = processed
     rows = {r.trial: r for r in build_queue((QueueSubject("labA/walk", subject, out),))}
@@ -49,7 +43,6 @@ def test_the_queue_row_says_the_trials_dynamics_failed(processed: tuple[Path, Pa
     assert short.processing == KINEMATICS_ONLY and short.detail.startswith(f"dynamics failed: {MESSAGE}"), short.detail
 
 
-@PENDING
 def test_the_open_trial_says_its_dynamics_failed_not_that_a_reprocess_brings_them(processed: tuple[Path, Path], make_app) -> None:
     subject, out = processed
     app = make_app(ReviewPaths.for_subject(subject, out), process_missing=False)
