@@ -27,3 +27,12 @@ def add_short_walk(subject: Path, n: int = 6) -> Path:
     shutil.copytree(subject / "trials" / "walk", short)
     keep_first_marker_frames(short / "markers.trc", n)
     return short
+
+
+def zero_forces(grf: Path) -> None:
+    """Set every column of the grf.mot ``grf`` but time to 0 (plates switched off, an empty
+    export: no frame carries force)."""
+    lines = grf.read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 1
+    rows = [line.split("\t") for line in lines[head + 1 :]]
+    grf.write_text("\n".join([*lines[: head + 1], *("\t".join([r[0]] + ["0"] * (len(r) - 1)) for r in rows)]) + "\n")

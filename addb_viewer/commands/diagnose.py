@@ -56,15 +56,33 @@ def each_warning_once() -> Iterator[None]:
         yield
 
 
-def _dynamics_error(out: Path, trial: str) -> dict | None:
-    """The ``dynamics_error`` of ``OUT/<trial>/results.json`` (a trial the dynamics stage
-    could not take, written with its kinematics only: :func:`solver.pipeline.process_subject`),
-    or None."""
+def _results(out: Path, trial: str) -> dict:
+    """``OUT/<trial>/results.json`` as a dict (empty when it cannot be read: the diagnosis
+    then reads the output as it always does, and fails there with its own error)."""
     try:
-        error = json.loads((out / trial / "results.json").read_text()).get("dynamics_error")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return error if isinstance(error, dict) else None
+        results = json.loads((out / trial / "results.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return results if isinstance(results, dict) else {}
+
+
+def _nothing_to_diagnose(out: Path, trial: str) -> str | None:
+    """Why the processed trial ``OUT/<trial>`` has nothing to diagnose, or None: it was written
+    with its kinematics only (its ``dynamics_error``: a trial the dynamics stage could not
+    take, :func:`solver.pipeline.process_subject`), or no frame with measured force entered
+    its fit (``n_observed_frames`` 0: plates that never carry force, or every frame flagged),
+    so that it has no residuals to explain."""
+    results = _results(out, trial)
+    failed = results.get("dynamics_error")
+    if isinstance(failed, dict):
+        return (f"trial {trial!r} was processed without dynamics: {failed.get('message')} "
+                f"({failed.get('path') or 'its recordings'}); nothing to diagnose (process the subject again once that "
+                "is mended)")  # fmt: skip
+    if results.get("n_observed_frames") == 0:
+        frames = results.get("n_frames")
+        return (f"trial {trial!r} has no frame with measured force in its fit (all {frames} frames left out: plates "
+                "that never carry force, or every frame flagged), so no residuals to explain; nothing to diagnose")  # fmt: skip
+    return None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -117,13 +135,9 @@ def run(args: argparse.Namespace) -> int:
                 process_subject(subject, out, unmeasured_force=masks or None, progress=lambda m, f: progress(m, 0.8 * f))
             except DynamicsError as exc:
                 raise with_kept_kinematics(exc, out) from None
-        failed = _dynamics_error(out, args.trial)
-        if failed is not None:  # written without dynamics by an earlier `addb process`
-            raise DiagnosisError(
-                f"trial {args.trial!r} was processed without dynamics: {failed.get('message')} "
-                f"({failed.get('path') or 'its recordings'}); nothing to diagnose (process the subject again once that is mended)",
-                path=out / args.trial / "results.json",
-            )
+        why = _nothing_to_diagnose(out, args.trial)
+        if why is not None:
+            raise DiagnosisError(why, path=out / args.trial / "results.json")
         diag = diagnose_trial(
             subject,
             args.trial,

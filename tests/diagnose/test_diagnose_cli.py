@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from solver.results import load_processed
 from tests.conftest import SHARED_DATA
 from tests.diagnose.effects import copy_subject, hide_body_mass
 from tests.diagnose.harness import diagnose_json
+from tests.trial_edits import zero_forces
 
 pytestmark = pytest.mark.slow
 
@@ -273,6 +275,26 @@ def test_bad_input_gives_clear_errors(walk: tuple[Path, dict]) -> None:
         assert code == 1 and "addb_extensions.json" in err
     finally:
         (subject / "addb_extensions.json").unlink()
+
+
+def test_a_trial_without_a_measured_frame_has_nothing_to_diagnose(tmp_path: Path) -> None:
+    """A trial whose plates never carry force is processed without residuals; its diagnosis
+    says so, naming the trial and its results.json, and writes no diagnosis (it failed in
+    the judged fit's rerun with the mass fit's message, after testing every cause)."""
+    subject = copy_subject(WALK, tmp_path / "walk")
+    shutil.copytree(subject / "trials" / "walk", subject / "trials" / "walk_zero")
+    zero_forces(subject / "trials" / "walk_zero" / "grf.mot")
+    out = tmp_path / "out"
+    code, err = _run(str(subject), "--trial", "walk_zero", "--out", str(out))
+    assert code == 1, err
+    results = json.loads((out / "walk_zero" / "results.json").read_text())
+    assert results["n_observed_frames"] == 0, results  # processed first, without measured frames
+    errors = [line for line in err.splitlines() if line.startswith("addb diagnose:")]
+    assert len(errors) == 1 and errors[0].startswith(f"addb diagnose: DiagnosisError ({out / 'walk_zero' / 'results.json'})"), err
+    assert "trial 'walk_zero' has no frame with measured force in its fit (all 238 frames left out" in errors[0], errors
+    assert errors[0].endswith("nothing to diagnose"), errors
+    assert "testing candidate causes" not in err, err  # refused before the diagnosis, not after it
+    assert not (out / "walk_zero" / "diagnosis.json").exists()
 
 
 def test_apply_on_a_read_only_subject_is_refused_before_the_diagnosis(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

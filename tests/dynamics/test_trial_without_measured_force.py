@@ -19,22 +19,15 @@ from solver.dataset.summary import dataset_totals, trial_row
 from solver.results import load_processed
 from tests.cli_run import run_addb as _run
 from tests.conftest import SHARED_DATA, writable_copy
+from tests.trial_edits import zero_forces
 
 pytestmark = pytest.mark.slow
-
-
-def _zero_forces(path: Path) -> None:
-    """Every column of the grf.mot ``path`` but time set to 0."""
-    lines = path.read_text().splitlines()
-    head = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 1
-    rows = [line.split("\t") for line in lines[head + 1 :]]
-    path.write_text("\n".join([*lines[: head + 1], *("\t".join([r[0]] + ["0"] * (len(r) - 1)) for r in rows)]) + "\n")
 
 
 def test_a_trial_whose_plates_never_carry_force_is_reported_without_numbers(tmp_path: Path) -> None:
     subject = writable_copy(SHARED_DATA / "subjects" / "rajagopal2016_walk", tmp_path / "walk")
     shutil.copytree(subject / "trials" / "walk", subject / "trials" / "walk_zero")
-    _zero_forces(subject / "trials" / "walk_zero" / "grf.mot")
+    zero_forces(subject / "trials" / "walk_zero" / "grf.mot")
     out = tmp_path / "out"
     code, printed, err = _run(["process", str(subject), "--out", str(out)])
     assert code == 0, err
