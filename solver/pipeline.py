@@ -23,6 +23,7 @@ import shutil
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -112,18 +113,23 @@ def subject_kinematics(
     *,
     scaled_model: str | Path | None = None,
     trials: Sequence[str] | None = None,
+    check_model: Callable[[OsimModel, Sequence[Trial]], None] | None = None,
 ) -> SubjectKinematics:
     """Load a subject's trials and run the kinematics stage on all of them.
 
     With ``scaled_model`` (an .osim already scaled to the subject) scaling is skipped and
     only inverse kinematics runs (:func:`solver.kinematics.stage.run_ik`), on the trials
-    named in ``trials`` (None: all); without it every trial is read, as scaling uses all."""
+    named in ``trials`` (None: all); without it every trial is read, as scaling uses all.
+    ``check_model`` is called with the model and the loaded trials before the stage runs
+    (what it raises is raised before any fit: the dynamics' checks of the model)."""
     t0 = time.perf_counter()
     markers = find_marker_settings(subject.path)
     opts = options or KinematicsOptions()
     if scaled_model is not None:
         loaded = load_trials(subject, trials)
         model = read_osim(scaled_model)
+        if check_model is not None:
+            check_model(model, loaded)
         _warn_mapping_mistakes(markers, model, loaded)
         load_seconds = time.perf_counter() - t0
         kin = run_ik(model, [(t.name, t.markers) for t in loaded], mapping=markers.mapping, options=opts, progress=progress)
@@ -131,6 +137,8 @@ def subject_kinematics(
         return SubjectKinematics(subject, loaded, kin, load_seconds)
     loaded = load_trials(subject)
     generic = read_osim(subject.model_path)
+    if check_model is not None:
+        check_model(generic, loaded)
     _warn_mapping_mistakes(markers, generic, loaded)
     if markers.attach_unmatched:
         opts = replace(opts, attach_unmatched=True)
@@ -645,7 +653,8 @@ def _process_subject(
             if warm_start:
                 start_q = previous_solutions(out_dir, [t.name for t in sk.kinematics.trials])
     if sk is None:
-        sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f))
+        check = None if subject.disable_dynamics else partial(_check_feet, subject.foot_body_names)
+        sk = subject_kinematics(subject, opts.kinematics, lambda m, f: say(m, 0.4 * f), check_model=check)
     t_kin = time.perf_counter()
     load_s = t_kin - t0 if dynamics_only else sk.load_seconds  # from the cache: loading is all it took
     dyn = None
@@ -727,6 +736,16 @@ def _process_subject(
         error.kept_trials = tuple(failed.items())
         raise error
     return ProcessResult(sk, dyn, out_path)
+
+
+def _check_feet(foot_bodies: Sequence[str], model: OsimModel, loaded: Sequence[Trial]) -> None:
+    """Before the kinematics of a subject whose dynamics will run: its ``footBodyNames``
+    must be bodies of its model when a trial has force plates (else the dynamics stage
+    would refuse them after the whole kinematics stage)."""
+    if any(t.forces is not None and t.forces.plates for t in loaded):
+        from solver.dynamics.stage import check_foot_bodies
+
+        check_foot_bodies(model, foot_bodies)
 
 
 @dataclass(frozen=True)

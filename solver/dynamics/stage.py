@@ -235,6 +235,22 @@ class _Prepared:
     reasons: list[str]
 
 
+def check_foot_bodies(model: OsimModel, foot_bodies: Sequence[str]) -> None:
+    """Check that every body named in ``footBodyNames`` is a body of ``model``.
+
+    Raises
+    ------
+    DynamicsError
+        A name that is not one of the model's bodies, naming the model file and listing its
+        bodies.
+    """
+    unknown = [foot for foot in foot_bodies if foot not in model.body_names]
+    if unknown:
+        names = ", ".join(repr(foot) for foot in unknown)
+        raise DynamicsError(f"foot {'bodies' if len(unknown) > 1 else 'body'} {names} (footBodyNames in _subject.json) "
+                            f"not in the model; its bodies: {', '.join(model.body_names)}", path=model.source)  # fmt: skip
+
+
 def run_dynamics(
     kinematics: KinematicsResult,
     trials: Sequence[tuple[str, MarkerTrajectories, ForceRecording | None]],
@@ -314,9 +330,7 @@ def run_dynamics(
     if not with_forces:
         return None
     model = kinematics.model
-    for foot in foot_bodies:
-        if foot not in model.body_names:
-            raise DynamicsError(f"foot body {foot!r} (footBodyNames) is not a body of the model", path=model.source)
+    check_foot_bodies(model, foot_bodies)
     sk = Skeleton(model)
     g = float(np.linalg.norm(model.gravity))
     bw = mass_kg * g

@@ -1,6 +1,6 @@
 """Mistakes a user makes in a subject folder get a clear error or warning, not a numpy
 traceback or a silently wrong result: a hand-edited ``addb_extensions.json``, an empty
-``footBodyNames``, a mass or height in the wrong unit, forces that no frame can use, a
+``footBodyNames`` or one naming no body of the model, a mass or height in the wrong unit, forces that no frame can use, a
 wrong ``massKg``, a marker file in the wrong unit, force plates without a centre of
 pressure under load.
 """
@@ -155,6 +155,24 @@ def test_the_shared_subjects_are_not_warned_about(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         process_subject(WALK, tmp_path / "out")
+
+
+def test_an_unknown_foot_body_is_refused_before_the_kinematics(walk: Path, tmp_path: Path) -> None:
+    """A footBodyNames entry that is not a body of the model (a typo, another model's name) is
+    refused before the kinematics stage runs, listing the model's bodies (it was found after
+    the whole kinematics, naming the body only); without force plates it is not read."""
+    _set(walk, footBodyNames=["calcn_r", "foot_l"])
+    said: list[str] = []
+    with pytest.raises(DynamicsError) as err:
+        process_subject(walk, tmp_path / "out", progress=lambda message, fraction: said.append(message))
+    message = str(err.value)
+    assert "foot body 'foot_l' (footBodyNames in _subject.json) not in the model; its bodies: pelvis, femur_r, " in message, message
+    assert "calcn_l" in message and "'calcn_r'" not in message, message
+    assert said == [], said  # no stage began
+    assert not (tmp_path / "out").exists()
+    (walk / "trials" / "walk" / "grf.mot").unlink()  # no force plates: the feet are not read
+    process_subject(walk, tmp_path / "no_forces")
+    assert (tmp_path / "no_forces" / "walk" / "walk_ik.mot").is_file()
 
 
 def test_foot_bodies_that_do_not_stand_on_the_plates_are_warned_about(walk: Path, tmp_path: Path) -> None:
