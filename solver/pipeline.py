@@ -119,7 +119,8 @@ def subject_kinematics(
 
     With ``scaled_model`` (an .osim already scaled to the subject) scaling is skipped and
     only inverse kinematics runs (:func:`solver.kinematics.stage.run_ik`), on the trials
-    named in ``trials`` (None: all); without it every trial is read, as scaling uses all.
+    named in ``trials`` (None: all); without it every trial is read, as scaling uses all,
+    and the final inverse kinematics runs on the trials of ``trials`` (None: all).
     ``check_model`` is called with the model and the loaded trials before the stage runs
     (what it raises is raised before any fit: the dynamics' checks of the model)."""
     t0 = time.perf_counter()
@@ -150,6 +151,7 @@ def subject_kinematics(
         mapping=markers.mapping,
         options=opts,
         progress=progress,
+        ik_trials=trials,
     )
     warn_marker_mismatch(kin)
     return SubjectKinematics(subject, loaded, kin, load_seconds)

@@ -17,7 +17,7 @@ InverseKinematicsTool's job).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -167,8 +167,9 @@ def run_kinematics(
     mapping: Mapping[str, str] | None = None,
     options: KinematicsOptions | None = None,
     progress: Progress | None = None,
+    ik_trials: Collection[str] | None = None,
 ) -> KinematicsResult:
-    """Scale ``generic`` to the subject and solve IK for every trial.
+    """Scale ``generic`` to the subject and solve IK for every trial (or those of ``ik_trials``).
 
     Parameters
     ----------
@@ -184,10 +185,14 @@ def run_kinematics(
         Stage options.
     progress
         Called with (message, fraction done) as the stage advances.
+    ik_trials
+        Names of the trials whose motion is wanted: the scale fit uses every trial, the
+        final IK runs on these only (None: every trial).
 
     Returns
     -------
     KinematicsResult
+        Its ``trials`` are those of ``ik_trials``, in the order of ``trials``.
 
     Raises
     ------
@@ -269,8 +274,10 @@ def run_kinematics(
     t3 = time.perf_counter()
     sk = fit.skeleton
     results = []
-    for k, ((name, markers), match) in enumerate(zip(trials, matches)):
-        say(f"inverse kinematics: {name}", 0.4 + 0.6 * k / len(trials))
+    solved = [k for k, (name, _) in enumerate(trials) if ik_trials is None or name in ik_trials]
+    for i, k in enumerate(solved):
+        (name, markers), match = trials[k], matches[k]
+        say(f"inverse kinematics: {name}", 0.4 + 0.6 * i / len(solved))
         names = [n for n in (*match.model_markers, *match.unmatched) if n in in_fit]
         w = np.array([weights[union.index(n)] for n in names])
         unmatched_k = tuple(n for n in match.unmatched if n not in attached)

@@ -1,7 +1,8 @@
 """``addb kinematics --model SCALED.osim``: inverse kinematics alone with a model already
 scaled (OpenSim's InverseKinematicsTool's job). On the model an earlier full run scaled and
 wrote, it gives that run's coordinates and marker errors, reads only the trials asked for,
-and names bad input."""
+and names bad input. Without --model, ``--trial`` solves only the trials asked for after the
+scaling, which every trial enters."""
 
 from __future__ import annotations
 
@@ -69,3 +70,22 @@ def test_ik_alone_with_a_model_of_other_markers_names_the_trial(full_run: Path, 
     with pytest.raises(MarkerMismatchError, match="walk"):
         process_kinematics(WALK, tmp_path / "out", options=ProcessOptions(trials=("walk",)), scaled_model=other)
     assert not (tmp_path / "out").exists()
+
+
+def test_scaling_with_one_trial_asked_for_solves_that_trials_motion_only(full_run: Path, tmp_path: Path) -> None:
+    """``addb kinematics --trial walk`` (scaling, no --model): every trial enters the scale
+    fit, so the scaled model is the full run's, byte for byte; only the walk's inverse
+    kinematics runs after it (the static trial's was solved and thrown away), and its motion
+    is the full run's."""
+    said: list[str] = []
+    out = tmp_path / "walk_only"
+    process_kinematics(WALK, out, options=ProcessOptions(trials=("walk",)), progress=lambda m, f: said.append(m))
+    assert "inverse kinematics: walk" in said and "inverse kinematics: static" not in said, said
+    assert (out / SCALED).read_bytes() == (full_run / SCALED).read_bytes()
+    assert sorted(p.name for p in out.iterdir()) == sorted([SCALED, "subject.json", "walk"])
+    names_a, a = _coordinates(full_run, "walk")
+    names_b, b = _coordinates(out, "walk")
+    assert names_a == names_b and np.array_equal(a, b)
+    full = json.loads((full_run / "walk" / "results.json").read_text())
+    mine = json.loads((out / "walk" / "results.json").read_text())
+    assert mine["marker_rms_m"] == full["marker_rms_m"] and mine["markers_used"] == full["markers_used"]
