@@ -1,8 +1,8 @@
 """Mistakes a user makes in a subject folder get a clear error or warning, not a numpy
 traceback or a silently wrong result: a hand-edited ``addb_extensions.json``, an empty
-``footBodyNames`` or one naming no body of the model, a mass or height in the wrong unit, forces that no frame can use, a
-wrong ``massKg``, a marker file in the wrong unit, force plates without a centre of
-pressure under load.
+``footBodyNames`` or one naming no body of the model, a mass or height in the wrong unit,
+forces that no frame can use, a wrong ``massKg``, a marker file in the wrong unit, force
+plates without a centre of pressure under load.
 """
 
 from __future__ import annotations
