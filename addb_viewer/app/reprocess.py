@@ -21,6 +21,7 @@ import json
 import threading
 import time
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -344,6 +345,10 @@ class Reprocessor:
         if waited is not None and waited[0].is_set():
             self._say(f"{label}: cancelled before it started.")
             return
+        if waited is not None:  # it waited for the plan: the flags as they are now, not as when it was pressed
+            spec = replace(spec, unmeasured_force=self._masks())
+            if kind == "process" and spec.dynamics_only:
+                self._review = self._review_digest()
         if waited is None and self.running:
             self._say("A solver run is already in progress; cancel it first.")
             return
@@ -384,7 +389,8 @@ class Reprocessor:
         dataset), then ``start()`` the run pressed for (a Reprocess pressed in that window
         was refused and had to be pressed again). Meanwhile the run counts as in progress
         (:attr:`running`), the Reprocess button waits and Cancel (or opening another subject)
-        drops it. ``start(waiter)`` runs in the thread. Called holding ``self._lock``."""
+        drops it; it takes the reviewer's flags as they are when it starts (frames flagged
+        while it waits enter it). ``start(waiter)`` runs in the thread. Called holding ``self._lock``."""
         stop = threading.Event()
         p = self.app.panel
         p.reprocess.disabled = True

@@ -320,6 +320,50 @@ def _tree_free(tree: Path) -> bool:
         return False
 
 
+_STARTED_SPECS: list = []  # the specs _SpecJob was made with (the test empties it first)
+
+
+class _SpecJob(_HeldJob):
+    """A held job that keeps the spec it was made with, in :data:`_STARTED_SPECS`."""
+
+    def __init__(self, spec: object, work: object, *, on_progress: object, on_done) -> None:
+        super().__init__(spec, work, on_progress=on_progress, on_done=on_done)
+        _STARTED_SPECS.append(spec)
+
+
+def test_a_run_waiting_for_the_background_plan_takes_the_flags_as_they_are_when_it_starts(
+    dataset: Path, make_app, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A Reprocess pressed while the page's background run has not said what it processes
+    waits for that; frames flagged meanwhile (the page stays open for review) enter the run
+    that starts (it took the flags of the moment it was pressed)."""
+    from addb_viewer.app import reprocess
+    from solver.dataset.lock import output_tree_lock
+
+    monkeypatch.setattr(reprocess, "SolverJob", _SpecJob)
+    _STARTED_SPECS.clear()
+    monkeypatch.setattr(reprocess, "PLAN_POLL_S", 0.02)
+    app, bench = _bench(dataset, make_app)
+    app.edit("accept all", lambda ed, _k, _f: ed.accept())  # no pending proposal to confirm
+    tree = dataset / "addb_out"
+    with output_tree_lock(tree):  # the page's own background run holds the tree
+        bench.processing_done.clear()
+        assert app.background_run() == "starting"
+        app.jobs.reprocess("walk")
+        assert app.jobs.running and app.jobs.job is None, app.panel.job_status.content
+        before = set(_flagged(app))
+        lo = next(k for k in range(238 - 7) if not before & set(range(k, k + 7)))  # 7 frames not flagged yet
+        app.edit("flag", lambda ed, _k, _f: ed.flag_range(lo, lo + 7, "left"))  # flagged while it waits (end exclusive)
+        with bench._lock:
+            bench._planned = True  # the plan leaves this subject out: the run goes
+        wait_for(lambda: app.jobs.job is not None, timeout=10.0, what="the waiting run to start")
+        (spec,) = _STARTED_SPECS
+        taken = np.flatnonzero(spec.unmeasured_force["walk"]).tolist()
+        assert set(range(lo, lo + 7)) <= set(taken) and set(taken) == set(_flagged(app)), (lo, taken, _flagged(app))
+        app.jobs.job.end()
+    bench.processing_done.set()
+
+
 def test_a_solver_run_from_the_page_holds_the_output_tree(dataset: Path, make_app, monkeypatch: pytest.MonkeyPatch) -> None:
     """A Reprocess (or diagnosis) from the page writes the subject's folder in the dataset's
     output tree: it holds the tree's lock as ``addb process SUBJECT --out OUT/labA/s01`` does
