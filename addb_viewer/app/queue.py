@@ -34,6 +34,7 @@ import numpy as np
 from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
+from solver.dataset.summary import dynamics_error_message
 from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
 from solver.outputs import SUMMARY_NAME, read_summary
@@ -305,15 +306,8 @@ def _results_row(res: Path) -> dict[str, Any] | None:
         "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
         "measured_frames": m.get("n_observed_frames", 0), "marker_rms_m": m.get("marker_rms_m"),
         "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
-        "dynamics_error": dynamics_error_of(m),
+        "dynamics_error": dynamics_error_message(m),
     }  # fmt: skip
-
-
-def dynamics_error_of(metrics: Mapping[str, Any]) -> str | None:
-    """The message of a trial's ``dynamics_error`` (results.json of a trial written with its
-    kinematics because the dynamics stage could not take its recordings), or None."""
-    error = metrics.get("dynamics_error")
-    return str(error.get("message")) if isinstance(error, Mapping) and error.get("message") else None
 
 
 #: The figures of a manifest's trial row that a later Reprocess (which rewrites the trial's

@@ -46,7 +46,6 @@ from addb_viewer.app.page_cameras import PageCameras
 from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
-from addb_viewer.app.queue import dynamics_error_of
 from addb_viewer.app.reprocess import Reprocessor, SecondThought
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
@@ -54,6 +53,7 @@ from addb_viewer.app.summary import hicks_exceeded
 from addb_viewer.app.timeline import TrackData, frames_text, timeline_html, track_data
 from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
+from solver.dataset.summary import dynamics_error_message
 from solver.errors import AddbError
 from solver.results import ProcessedTrial, load_processed, processed_trials
 
@@ -539,7 +539,7 @@ class ReviewApp:
             parts.append(f"residual {f:.0f} N, {m:.0f} N·m{over}")
         elif not t.plates:
             parts.append("no force plates in this trial: kinematics only (no residuals)")
-        elif failed := dynamics_error_of(t.metrics):
+        elif failed := dynamics_error_message(t.metrics):
             parts.append(f"kinematics only: its dynamics failed: {failed}")
         else:
             parts.append("no dynamics yet (residuals appear after a Reprocess with the dynamics stage)")

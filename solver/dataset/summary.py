@@ -24,6 +24,7 @@ the dynamics fit trusts):
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +84,13 @@ def contact_frames(trial: ProcessedTrial, measured: np.ndarray) -> dict[str, int
     }
 
 
+def dynamics_error_message(metrics: Mapping[str, Any]) -> str | None:
+    """The message of a trial's ``dynamics_error`` (results.json of a trial written with its
+    kinematics because the dynamics stage could not take its recordings), or None."""
+    error = metrics.get("dynamics_error")
+    return str(error.get("message")) if isinstance(error, Mapping) and error.get("message") else None
+
+
 def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
     """The summary row of one processed trial.
 
@@ -109,9 +117,9 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
         "duration_s": n / rate if rate else None,
     }
     row.update({k: m.get(k) for k in _METRICS})
-    error = m.get("dynamics_error")
-    if isinstance(error, dict) and error.get("message"):  # kept with its kinematics: the dynamics failed
-        row["dynamics_error"] = str(error["message"])
+    error = dynamics_error_message(m)
+    if error is not None:  # kept with its kinematics: the dynamics failed
+        row["dynamics_error"] = error
     from solver.masks import true_runs
 
     row["proposed_ranges"] = [list(r) for r in true_runs(np.asarray(trial.proposed, dtype=bool))]
