@@ -201,16 +201,23 @@ def subject_masks(subject_dir: str, out_dir: str) -> dict[str, BoolArray] | None
         return unmeasured_force(store, subject_dir) or None
 
 
+def _trials_lacking(named: list[str], subject_dir: str | os.PathLike[str]) -> tuple[list[str], list[str]]:
+    """The subject's trial names (sorted), and those of the record's trials ``named`` that
+    the subject does not have (in their order)."""
+    from solver.io.subject import load_subject
+
+    have = sorted(t.name for t in load_subject(subject_dir).trials)
+    return have, [t for t in named if t not in have]
+
+
 def _warn_orphaned_review(store: AnnotationStore, path: Path, subject_dir: str) -> None:
     """Warn (UserWarning) naming the trials of the subject's own record ``store`` (at ``path``)
     that hold review work (flags, a reviewed mark or notes) and that the subject no longer
     has (a trial folder renamed or removed since): their flags are not used."""
     import warnings
 
-    from solver.io.subject import load_subject
-
-    have = {t.name for t in load_subject(subject_dir).trials}
-    orphans = [t for t in store.trials() if t not in have and (_selected(store, t) or store.notes(t))]
+    _, lacking = _trials_lacking(store.trials(), subject_dir)
+    orphans = [t for t in lacking if _selected(store, t) or store.notes(t)]
     if orphans:
         many = len(orphans) > 1
         warnings.warn(f"{path.name} holds review work on {'trials' if many else 'a trial'} this subject no longer has "
@@ -297,10 +304,8 @@ def _check_record_trials(named: list[str], path: Path, subject_dir: Path) -> Non
     import warnings
 
     from solver.errors import SubjectFolderError
-    from solver.io.subject import load_subject
 
-    have = sorted(t.name for t in load_subject(subject_dir).trials)
-    unknown = [t for t in named if t not in have]
+    have, unknown = _trials_lacking(named, subject_dir)
     if not unknown:
         return
     if len(unknown) == len(named):
