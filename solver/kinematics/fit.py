@@ -240,11 +240,7 @@ def _linearize(
     n_m = len(problem.names)
     w_seen = problem.sqrt_w[None, :] * problem.seen  # (F, M) weights, 0 where unseen
     y = np.nan_to_num(problem.obs)
-    pos = np.empty((n_f, n_m, 3))
-    jq = np.empty((n_f, n_m, 3, nf))
-    for f in range(n_f):
-        pos[f], jfull = sk.marker_jacobian(q[f], midx)
-        jq[f] = jfull[:, :, free]
+    pos, jq = sk.marker_jacobians(q, midx, free)  # (F, M, 3), (F, M, 3, nf): batched
     ww = w_seen[:, :, None]
     r = ww * (pos - y)  # (F, M, 3)
     jq *= ww[..., None]
