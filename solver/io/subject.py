@@ -407,6 +407,47 @@ def _trials(folder: Path) -> tuple[TrialFiles, ...]:
     return tuple(out)
 
 
+def unapplied_range_note(subject: Subject, trial: str, time: Sequence[float]) -> str | None:
+    """What to tell the user when ``_subject.json`` cuts ``trial`` with ``trialRanges``
+    (AddBiomechanics' ``{trial: [start, end]}``, seconds), a key addb does not apply: the
+    trial is processed whole (README, "The subject folder").
+
+    Parameters
+    ----------
+    subject
+        The subject (its ``raw`` JSON is read).
+    trial
+        The trial's name.
+    time
+        ``(T,)`` the trial's marker frame times, s.
+
+    Returns
+    -------
+    The note (naming the file, the range, the trial's span and the frames outside the
+    range), or None when the key names no range for the trial or the range holds every
+    frame. An entry that is not two numbers is named as such (the AddBiomechanics engine
+    would refuse it).
+    """
+    ranges = subject.raw.get("trialRanges")
+    if not isinstance(ranges, dict) or trial not in ranges:
+        return None
+    where = f"{subject.path / SUBJECT_JSON}: trialRanges gives trial {trial}"
+    entry = ranges[trial]
+    ok = isinstance(entry, list | tuple) and len(entry) == 2 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in entry)
+    if not ok:
+        return f"{where} {entry!r}, not [start, end] in seconds; addb does not apply trialRanges and processes the whole trial"
+    start, end = float(entry[0]), float(entry[1])
+    times = [float(t) for t in time]
+    outside = sum(1 for t in times if not start <= t <= end)
+    if not times or outside == 0:
+        return None
+    return (
+        f"{where} [{start!r}, {end!r}] s; addb does not apply trialRanges and processes the whole trial "
+        f"({times[0]:.2f}-{times[-1]:.2f} s), the {outside} of its {len(times)} marker frames outside the range "
+        "included (cut the trial's files to leave them out)"
+    )
+
+
 def load_trial(files: TrialFiles) -> Trial:
     """Read a trial's markers and forces.
 

@@ -26,7 +26,7 @@ from solver.io.external_loads import read_external_loads
 from solver.io.mot import estimate_rate, is_force_table, read_forces, read_table
 from solver.io.review import KEY as REVIEW_KEY
 from solver.io.review import read_review
-from solver.io.subject import SUBJECT_JSON, load_subject, load_trial
+from solver.io.subject import SUBJECT_JSON, load_subject, load_trial, unapplied_range_note
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.masks import true_runs
@@ -319,6 +319,9 @@ def _subject(p: Path) -> dict[str, Any]:
         else:
             entry.update(_forces_summary(trial.forces, subject.mass_kg))
         trials.append(entry)
+        note = unapplied_range_note(subject, trial.name, trial.markers.time)
+        if note is not None:  # a note of the summary (summarize), not a warning of processing
+            warnings.warn(note, UserWarning, stacklevel=2)
     return {
         "kind": "subject",
         "path": str(p),

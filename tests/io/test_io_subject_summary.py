@@ -365,3 +365,48 @@ def test_cli_info_bad_input_is_one_line(shared_data: Path, tmp_path: Path, damag
 def test_markers_have_no_nan_where_the_file_has_numbers(shared_data: Path) -> None:
     trial = load_trial(load_subject(shared_data / "subjects/opencap_uhlrich2023").trial("DJ1"))
     assert not np.isnan(trial.markers.positions).any()
+
+
+def _trc_times(path: Path) -> list[float]:
+    """The Time column of a TRC file, read here by splitting its data rows (not addb's reader)."""
+    rows = path.read_text().splitlines()[6:]
+    return [float(r.split("\t")[1]) for r in rows if r.strip()]
+
+
+def test_trial_ranges_that_addb_does_not_apply_are_a_note_of_the_summary(tmp_path: Path) -> None:
+    """README, The subject folder: ``trialRanges`` is not applied. ``addb info`` says so for
+    the walk, whose entry [0.45, 2.0] s would cut the trial, with the frames it would leave
+    out counted from the TRC's Time column; a range that holds every frame, a trial the key
+    does not name and a subject without the key give no note; a malformed entry is named."""
+    walk = DATA / "subjects" / "rajagopal2016_walk"
+    times = _trc_times(walk / "trials" / "walk" / "markers.trc")
+    outside = sum(1 for t in times if not 0.45 <= t <= 2.0)
+    assert 0 < outside < len(times) == 238
+    d = summarize(walk)
+    note = (
+        f"{walk / '_subject.json'}: trialRanges gives trial walk [0.45, 2.0] s; addb does not apply trialRanges and "
+        f"processes the whole trial ({times[0]:.2f}-{times[-1]:.2f} s), the {outside} of its 238 marker frames "
+        "outside the range included (cut the trial's files to leave them out)"
+    )
+    assert d["notes"] == [note]
+    assert f"  note: {note}" in format_summary(d).splitlines()
+
+    copy = tmp_path / "walk"
+    shutil.copytree(walk, copy)
+    raw = json.loads((walk / "_subject.json").read_text())
+    for ranges, expected in (
+        ({"walk": [times[0], times[-1]]}, None),  # every frame inside
+        ({"static": [0.5, 1.0]}, "static"),  # the other trial
+        ({"walk": ["0.45", 2.0]}, "['0.45', 2.0], not [start, end] in seconds"),
+        (None, None),
+    ):
+        raw.pop("trialRanges", None)
+        if ranges is not None:
+            raw["trialRanges"] = ranges
+        (copy / "_subject.json").chmod(0o644)
+        (copy / "_subject.json").write_text(json.dumps(raw))
+        notes = summarize(copy).get("notes", [])
+        if expected is None:
+            assert notes == [], ranges
+        else:
+            assert len(notes) == 1 and expected in notes[0], (ranges, notes)
