@@ -370,7 +370,8 @@ FIGURES: tuple[Figure, ...] = (
         f"(cd /tmp && PYTHONPATH={AGAINST_TREE} $R/.venv/bin/addb process $R/../shared/data/subjects/$s --out /tmp/addb_against_before/$s >/dev/null) && "
         ".venv/bin/addb process ../shared/data/subjects/$s --out /tmp/addb_against_after/$s --fit rounds >/dev/null; done && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_against_before /tmp/addb_against_after && "
-        "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after && echo 'every other file byte-identical'",
+        "{ diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_against_before /tmp/addb_against_after "
+        "&& echo 'every other file byte-identical' || echo 'the files listed differ'; }",
         "accuracy", 1.0),
     Figure(
         "input-checks-exactness", RESULTS,
@@ -381,7 +382,8 @@ FIGURES: tuple[Figure, ...] = (
         f"(cd /tmp && PYTHONPATH={CHECKS_TREE} $R/.venv/bin/addb process /tmp/addb_checks/subjects/$s --out /tmp/addb_checks/before_$f/$s --fit $f >/dev/null 2>&1) && "
         ".venv/bin/addb process /tmp/addb_checks/subjects/$s --out /tmp/addb_checks/after_$f/$s --fit $f >/dev/null 2>&1; done && echo \"--fit $f\" && "
         f"{PY} tests/benchmarks/compare_process_outputs.py /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f && "
-        "diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f && echo 'every other file byte-identical'; done",
+        "{ diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f "
+        "&& echo 'every other file byte-identical' || echo 'the files listed differ'; }; done",
         "accuracy", 3.0),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
     Figure("dataset-client", RESULTS, f"{PY} tests/benchmarks/bench_dataset_client.py", "timing", 1.5, fence=False),
