@@ -27,7 +27,7 @@ from solver.dynamics.stage import DynamicsOptions, TrialDynamics, run_dynamics
 from solver.pipeline import ProcessOptions, ProcessResult, process_subject
 from solver.results import ProcessedTrial, load_processed
 from tests.conftest import SHARED_DATA, writable_copy
-from tests.opensim_tables import read_table_by_hand
+from tests.opensim_tables import read_table_by_hand, trc_times_by_hand
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 ORACLES = SHARED_DATA.parent / "oracles"
@@ -37,12 +37,6 @@ ORDER = 3
 #: The coordinates whose generalized force the walker knee's velocity term cannot reach:
 #: neither ancestors nor descendants of a knee (the trunk and the arms).
 FAR_FROM_THE_KNEES = ("lumbar", "arm_", "elbow_", "pro_sup", "wrist_")
-
-
-def _trc_times(path: Path) -> np.ndarray:
-    """The Time column of a TRC file, s (read by hand: rows after the two header rows)."""
-    rows = [line.split("\t") for line in path.read_text().splitlines()[5:] if line.strip()]
-    return np.array([float(r[1]) for r in rows if r[0].strip().isdigit()])
 
 
 def _grid(start: float, stop: float) -> np.ndarray:
@@ -97,7 +91,7 @@ def test_processed_frames_are_100_hz_over_the_span_markers_and_plates_share(
     force file is cut to 0.3025-2.0 s the frames start with the plates, off the marker grid,
     and end with them."""
     _, _, trial, results = walk
-    markers = _trc_times(WALK / "trials" / "walk" / "markers.trc")
+    markers = trc_times_by_hand(WALK / "trials" / "walk" / "markers.trc")
     _, _, grf = read_table_by_hand(WALK / "trials" / "walk" / "grf.mot")
     expected = _grid(max(markers[0], grf[0, 0]), min(markers[-1], grf[-1, 0]))
     np.testing.assert_allclose(trial.time, expected, rtol=0, atol=1e-9)

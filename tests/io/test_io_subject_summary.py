@@ -17,7 +17,8 @@ import pytest
 from solver.errors import FileFormatError, SubjectFolderError, TrcFormatError
 from solver.io.subject import load_subject, load_trial
 from solver.io.summary import format_summary, summarize
-from tests.conftest import OPENSIM_REASON, import_tool
+from tests.conftest import OPENSIM_REASON, import_tool, writable_copy
+from tests.opensim_tables import trc_times_by_hand
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 SUBJECTS = sorted(p for p in (DATA / "subjects").iterdir() if p.is_dir())
@@ -367,20 +368,14 @@ def test_markers_have_no_nan_where_the_file_has_numbers(shared_data: Path) -> No
     assert not np.isnan(trial.markers.positions).any()
 
 
-def _trc_times(path: Path) -> list[float]:
-    """The Time column of a TRC file, read here by splitting its data rows (not addb's reader)."""
-    rows = path.read_text().splitlines()[6:]
-    return [float(r.split("\t")[1]) for r in rows if r.strip()]
-
-
 def test_trial_ranges_that_addb_does_not_apply_are_a_note_of_the_summary(tmp_path: Path) -> None:
     """README, The subject folder: ``trialRanges`` is not applied. ``addb info`` says so for
     the walk, whose entry [0.45, 2.0] s would cut the trial, with the frames it would leave
     out counted from the TRC's Time column; a range that holds every frame, a trial the key
     does not name and a subject without the key give no note; a malformed entry is named."""
     walk = DATA / "subjects" / "rajagopal2016_walk"
-    times = _trc_times(walk / "trials" / "walk" / "markers.trc")
-    outside = sum(1 for t in times if not 0.45 <= t <= 2.0)
+    times = trc_times_by_hand(walk / "trials" / "walk" / "markers.trc")
+    outside = int(np.count_nonzero((times < 0.45) | (times > 2.0)))
     assert 0 < outside < len(times) == 238
     d = summarize(walk)
     note = (
@@ -391,8 +386,7 @@ def test_trial_ranges_that_addb_does_not_apply_are_a_note_of_the_summary(tmp_pat
     assert d["notes"] == [note]
     assert f"  note: {note}" in format_summary(d).splitlines()
 
-    copy = tmp_path / "walk"
-    shutil.copytree(walk, copy)
+    copy = writable_copy(walk, tmp_path / "walk")
     raw = json.loads((walk / "_subject.json").read_text())
     for ranges, expected in (
         ({"walk": [times[0], times[-1]]}, None),  # every frame inside
@@ -403,7 +397,6 @@ def test_trial_ranges_that_addb_does_not_apply_are_a_note_of_the_summary(tmp_pat
         raw.pop("trialRanges", None)
         if ranges is not None:
             raw["trialRanges"] = ranges
-        (copy / "_subject.json").chmod(0o644)
         (copy / "_subject.json").write_text(json.dumps(raw))
         notes = summarize(copy).get("notes", [])
         if expected is None:
