@@ -347,7 +347,15 @@ class TrialScene:
 
 
 def _set_arrows(handle: viser.ArrowsHandle, arrows: FloatArray, colors: NDArray[np.uint8], show: bool) -> None:
+    """Show ``arrows`` ``(N, 2, 3)`` (start and end, m) in ``colors`` ``(N, 3)`` on ``handle``.
+
+    The page applies the points and the colours as two updates (within one atomic group
+    still two renders), so when the number of arrows changes the colours go to one colour
+    for all first, ``(3,)``, valid for any number of arrows: per-arrow colours of the old
+    count beside the new points made the page log "Invalid batched_colors length"."""
     if len(arrows):
+        if len(arrows) != len(handle.points):
+            handle.colors = colors[0]
         handle.points = arrows
         handle.colors = colors
     handle.visible = show and len(arrows) > 0

@@ -135,3 +135,36 @@ def test_foot_of_body() -> None:
     assert [foot_of_body(b) for b in ("calcn_l", "toes_r", "pelvis", "LeftFoot", "r_foot")] == [
         "left", "right", "", "left", "right",
     ]
+
+
+def test_arrow_colours_match_the_arrows_at_every_update(demo_paths, make_app) -> None:
+    """Stepping through the walk, the plate arrows' count changes (one foot, two, none):
+    each single update of the handle leaves colours the page accepts beside the points it
+    has, one per arrow or one for all (a mismatch made the page log "Invalid
+    batched_colors length")."""
+    from addb_viewer.app import scene as scene_module
+
+    app = make_app(demo_paths)
+    states: list[tuple[int, int]] = []  # (arrows, colour rows) after each update
+
+    class Recording:
+        def __init__(self, handle: viser.ArrowsHandle) -> None:
+            self.__dict__["handle"] = handle
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.handle, name)
+
+        def __setattr__(self, name: str, value: object) -> None:
+            setattr(self.handle, name, value)
+            if name in ("points", "colors"):
+                colours = np.asarray(self.handle.colors)
+                states.append((len(self.handle.points), 1 if colours.ndim == 1 else len(colours)))
+
+    real = scene_module._set_arrows
+    counts = []
+    for k in range(app.trial.n_frames):
+        geometry = frame_geometry(app.trial, k, app.settings)
+        counts.append(len(geometry.plate_arrows))
+        real(Recording(app.scene.plate_arrows), geometry.plate_arrows, geometry.plate_colors, True)
+    assert {0, 1, 2} <= set(counts)  # the count does change along the walk
+    assert states and all(colours in (1, arrows) for arrows, colours in states), [s for s in states if s[1] not in (1, s[0])][:5]
