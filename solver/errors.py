@@ -132,6 +132,13 @@ class OutputFolderError(AddbError):
     is a file, it is (or holds) the input folder, or it holds other files."""
 
 
+class ProcessedTrialError(AddbError, ValueError):
+    """An output folder's ``<trial>/trial.npz`` cannot be read as a processed trial: it is
+    damaged (an interrupted copy or sync) or of another schema version
+    (:func:`solver.results.load_processed`). A ``ValueError`` too, as it was before it had
+    a class of its own."""
+
+
 class B3dFormatError(FileFormatError):
     """An AddBiomechanics binary subject file (.b3d) is damaged, truncated or of an unknown version.
 

@@ -11,6 +11,7 @@ processed by the dynamics stage (no force plates, or kinematics only).
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from solver.errors import ProcessedTrialError
 from solver.sampling import frame_rate
 
 FloatArray = NDArray[np.float64]
@@ -217,14 +219,31 @@ def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
     ------
     FileNotFoundError
         The trial was not processed into ``folder``.
-    ValueError
-        The file is not a processed trial of a known schema version.
+    ProcessedTrialError
+        (a ``ValueError``) naming the file: it is not a processed trial of a known schema
+        version, or it is damaged (truncated, not a zip archive, an array missing).
     """
     base = Path(folder) / trial
+    try:
+        return _load_processed(Path(folder), base)
+    except (zipfile.BadZipFile, EOFError, KeyError, json.JSONDecodeError) as exc:
+        raise ProcessedTrialError(
+            f"cannot be read as a processed trial ({type(exc).__name__}: {exc}); the file is damaged (an interrupted "
+            "copy or sync?): process the subject again",
+            path=base / "trial.npz",
+        ) from None
+    except ValueError as exc:
+        if isinstance(exc, ProcessedTrialError):
+            raise
+        raise ProcessedTrialError(f"cannot be read as a processed trial: {exc}", path=base / "trial.npz") from None
+
+
+def _load_processed(folder: Path, base: Path) -> ProcessedTrial:
+    """:func:`load_processed` of ``base`` (``folder/<trial>``), its errors not yet named."""
     with np.load(base / "trial.npz", allow_pickle=False) as data:
         header = json.loads(str(data["header"]))
         if header.get("schema") != "addb.processed_trial" or header.get("version") != SCHEMA_VERSION:
-            raise ValueError(f"{base / 'trial.npz'}: not a processed trial of schema version {SCHEMA_VERSION}")
+            raise ProcessedTrialError(f"not a processed trial of schema version {SCHEMA_VERSION}", path=base / "trial.npz")
         arrays = {k: data[k] for k in _ARRAYS}
         plates = tuple(
             PlateData(
@@ -238,7 +257,11 @@ def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
             for i, name in enumerate(header["plates"])
         )
     metrics_path = base / "results.json"
-    metrics = json.loads(metrics_path.read_text()) if metrics_path.exists() else {}
+    try:
+        metrics = json.loads(metrics_path.read_text()) if metrics_path.exists() else {}
+    except json.JSONDecodeError as exc:
+        raise ProcessedTrialError(f"not valid JSON: {exc.msg}; the file is damaged: process the subject again",
+                                  path=metrics_path, line=exc.lineno) from None  # fmt: skip
     return ProcessedTrial(
         subject=header["subject"],
         trial=header["trial"],

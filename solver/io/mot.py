@@ -29,7 +29,14 @@ import numpy as np
 
 from solver.errors import MotFormatError
 from solver.io._numbers import format_degrees, format_float, parse_degrees
-from solver.io._text import TokenError, flatten, parse_floats, read_lines
+from solver.io._text import (
+    TokenError,
+    check_time,
+    flatten,
+    parse_floats,
+    read_lines,
+    warn_frame_gaps,
+)
 from solver.io.force_columns import (
     IncompletePlateError,
     PlateColumns,
@@ -92,6 +99,11 @@ def read_table(path: str | Path) -> Table:
         wrong number of values, text in a number field, a row count different from
         ``nRows``/``datarows`` (truncated file), a column count different from
         ``nColumns``/``datacolumns``, a time that does not increase.
+
+    Warns
+    -----
+    UserWarning
+        Rows missing from the time column (:func:`solver.io._text.warn_frame_gaps`).
     """
     return _read(path, degree_columns=())
 
@@ -196,7 +208,8 @@ def _read(
                     TokenError(exc.index * width + j, exc.token), width, numbers, names, path
                 ) from None
     time = values[:, 0].copy()
-    _check_time(time, numbers, path)
+    check_time(time, numbers, path, MotFormatError)
+    warn_frame_gaps(time, numbers, path)
     return Table(tuple(names[1:]), values[:, 1:], time, header, str(path))
 
 
@@ -336,21 +349,6 @@ def _token_error(
     )
 
 
-def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
-    bad = np.flatnonzero(~np.isfinite(time))
-    if bad.size:
-        raise MotFormatError("the time is not a finite number", path=path, line=numbers[bad[0]])
-    with np.errstate(over="ignore"):  # 1e308 - -1e308 is inf, still an increase
-        steps = np.flatnonzero(np.diff(time) <= 0)
-    if steps.size:
-        k = int(steps[0]) + 1
-        raise MotFormatError(
-            f"time {float(time[k])!r} s does not increase (previous row: {float(time[k - 1])!r} s)",
-            path=path,
-            line=numbers[k],
-        )
-
-
 # --------------------------------------------------------------------------- forces
 
 
@@ -395,12 +393,19 @@ def read_forces(path: str | Path, *, moment_reference: Reference = "auto") -> Fo
     Raises
     ------
     MotFormatError
-        As :func:`read_table`; no force-plate columns; a plate with part of a force
+        As :func:`read_table`; fewer than two data rows; no force-plate columns; a plate with part of a force
         or CoP triple; with ``"auto"``, moment columns that are about no fixed point.
     """
     if moment_reference not in ("auto", "cop", "origin"):
         raise ValueError(f"moment_reference={moment_reference!r}; expected auto, cop or origin")
     table = read_table(path)
+    if table.time.size < 2:
+        raise MotFormatError(
+            f"{table.time.size} data row{'s' * (table.time.size != 1)} after the header; force plates need at least two "
+            "(one per sample)",
+            path=path,
+            where="data rows",
+        )
     try:
         groups = group_plates(table.column_names)
     except IncompletePlateError as exc:

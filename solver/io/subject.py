@@ -29,6 +29,7 @@ from solver.errors import FileFormatError, SubjectFolderError, listed
 from solver.files import folders_to_search
 from solver.io.c3d import read_c3d
 from solver.io.mot import read_forces
+from solver.io.spikes import without_spikes
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
 from solver.outputs import TRIAL_RESULTS, output_marker, output_tree_above, read_summary, tree_part
@@ -288,9 +289,12 @@ def load_subject(path: str | Path) -> Subject:
         ``_subject.json`` missing); ``_subject.json`` not valid JSON (with its
         line), not an object, or without a positive ``massKg`` (naming the file and
         the key); a ``massKg`` over :data:`MOST_KG` or ``heightM`` over :data:`MOST_M` (a
-        unit error); a malformed ``heightM``, ``footBodyNames`` (or an empty list) or ``disableDynamics``;
+        unit error); a malformed ``heightM``, ``footBodyNames`` (or an empty list, or one
+        naming a body twice) or ``disableDynamics``;
         no ``unscaled_generic.osim``; no ``trials`` folder or no trial in it; a trial
-        folder without ``markers.trc``/``markers.c3d`` or with both.
+        folder without ``markers.trc``/``markers.c3d`` or with both, or with a force file
+        under another name than ``grf.mot`` (:func:`_force_file`). A byte-order mark at the
+        start of ``_subject.json`` is dropped.
     """
     folder = Path(path)
     if not folder.exists():
@@ -323,7 +327,7 @@ def load_subject(path: str | Path) -> Subject:
 def _read_json(path: Path) -> dict[str, Any]:
     """The subject's ``_subject.json`` (:func:`check_subject_folder` found it) as an object."""
     try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
+        raw = json.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark (Windows editors) is dropped
     except UnicodeDecodeError:
         raise SubjectFolderError("not UTF-8 text", path=path) from None
     except json.JSONDecodeError as exc:
@@ -372,6 +376,13 @@ def _foot_bodies(raw: dict[str, Any], path: Path) -> tuple[str, ...]:
             path=path,
             where="footBodyNames",
         )
+    repeated = sorted({v for v in value if value.count(v) > 1})
+    if repeated:
+        raise SubjectFolderError(
+            f"footBodyNames={value!r} names {', '.join(repeated)} more than once; expected each foot body once",
+            path=path,
+            where="footBodyNames",
+        )
     return tuple(value)
 
 
@@ -400,11 +411,35 @@ def _trials(folder: Path) -> tuple[TrialFiles, ...]:
             raise SubjectFolderError(
                 "no markers.trc or markers.c3d in the trial folder", path=trial
             )
-        grf = trial / "grf.mot"
-        out.append(TrialFiles(trial.name, markers, grf if grf.is_file() else None))
+        out.append(TrialFiles(trial.name, markers, _force_file(trial)))
     if not out:
         raise SubjectFolderError("no trial folders; expected trials/<name>/", path=trials_dir)
     return tuple(out)
+
+
+def _force_file(trial: Path) -> Path | None:
+    """The trial's ``grf.mot``, or None when the trial has no force file.
+
+    Raises
+    ------
+    SubjectFolderError
+        ``grf.mot`` is not a file (a folder), or the trial holds a force file under
+        another name (``GRF.mot``, ``grf.sto``: a stem ``grf`` in any case, a ``.mot`` or
+        ``.sto`` suffix), which would otherwise leave the trial without forces unsaid.
+    """
+    grf = trial / "grf.mot"
+    if grf.is_file():
+        return grf
+    if grf.exists():
+        raise SubjectFolderError("grf.mot is not a file; expected the force plates' table", path=grf)
+    near = sorted(p.name for p in trial.iterdir() if p.stem.lower() == "grf" and p.suffix.lower() in (".mot", ".sto"))
+    if near:
+        raise SubjectFolderError(
+            f"found {', '.join(near)} but addb reads the force plates from grf.mot (that name, lower case); rename it, "
+            "or move it out of the trial folder to process the trial without forces",
+            path=trial,
+        )
+    return None
 
 
 def unapplied_range_note(subject: Subject, trial: str, time: Sequence[float]) -> str | None:
@@ -454,8 +489,9 @@ def load_trial(files: TrialFiles) -> Trial:
     Returns
     -------
     Trial
-        Markers from the TRC/C3D; forces from ``grf.mot`` when present, else from the
-        C3D platforms, else None (kinematics-only).
+        Markers from the TRC/C3D, each single-frame spike read as missing with a
+        warning (:func:`solver.io.spikes.without_spikes`); forces from ``grf.mot`` when
+        present, else from the C3D platforms, else None (kinematics-only).
 
     Raises
     ------
@@ -467,4 +503,4 @@ def load_trial(files: TrialFiles) -> Trial:
     else:
         markers, c3d_forces = read_trc(files.markers_path), None
     forces = read_forces(files.forces_path) if files.forces_path is not None else c3d_forces
-    return Trial(files.name, markers, forces)
+    return Trial(files.name, without_spikes(markers), forces)

@@ -26,6 +26,7 @@ from solver.io.external_loads import read_external_loads
 from solver.io.mot import estimate_rate, is_force_table, read_forces, read_table
 from solver.io.review import KEY as REVIEW_KEY
 from solver.io.review import read_review
+from solver.io.spikes import without_spikes
 from solver.io.subject import SUBJECT_JSON, load_subject, load_trial, unapplied_range_note
 from solver.io.trc import read_trc
 from solver.io.types import ForceRecording, MarkerTrajectories
@@ -175,7 +176,7 @@ def _forces_summary(f: ForceRecording, mass_kg: float | None) -> dict[str, Any]:
 
 
 def _trc(p: Path) -> dict[str, Any]:
-    return {"kind": "trc", "path": str(p), **_markers_summary(read_trc(p))}
+    return {"kind": "trc", "path": str(p), **_markers_summary(without_spikes(read_trc(p)))}
 
 
 def _table(p: Path) -> dict[str, Any]:
@@ -209,7 +210,7 @@ def _rate(t: np.ndarray) -> float | None:
 
 def _c3d(p: Path) -> dict[str, Any]:
     markers, forces = read_c3d(p)
-    out = {"kind": "c3d", "path": str(p), **_markers_summary(markers)}
+    out = {"kind": "c3d", "path": str(p), **_markers_summary(without_spikes(markers))}
     if forces is not None:
         out.update(_forces_summary(forces, None))
     return out

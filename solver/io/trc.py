@@ -14,7 +14,10 @@ with spaces or extra tabs; trailing tabs on any line; marker names separated by 
 two or three tabs; a missing ``X1 Y1 Z1`` line; blank lines before, between or after
 the data rows; frame numbers not starting at 1; an empty cell (or ``nan``) for a
 missing marker, and a marker at exactly (0, 0, 0), which is how several exporters (Vicon
-Nexus among them) fill a gap. Everything else is an error naming the file and the line.
+Nexus among them) fill a gap; rows missing from the Time column are read with a warning
+that names them. Everything else is an error naming the file and the line (a marker's
+single-frame spike, such as 9999999 written for a lost marker, is read as it is:
+:func:`solver.io.spikes.without_spikes` judges it where a trial is loaded).
 """
 
 from __future__ import annotations
@@ -28,7 +31,15 @@ import numpy as np
 
 from solver.errors import TrcFormatError
 from solver.io._numbers import format_float, format_shifted, parse_shifted
-from solver.io._text import TokenError, flatten, is_number, parse_floats, read_lines
+from solver.io._text import (
+    TokenError,
+    check_time,
+    flatten,
+    is_number,
+    parse_floats,
+    read_lines,
+    warn_frame_gaps,
+)
 from solver.io.types import MarkerTrajectories
 from solver.sampling import frame_interval
 
@@ -63,8 +74,14 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
         Naming the file and the 1-based line: missing header keys, an unknown
         ``Units`` (known: mm, cm, m), a marker count different from ``NumMarkers``,
         duplicate marker names, a row with the wrong number of values, text in a
-        number field, a frame count different from ``NumFrames`` (truncated file),
-        or a time column that does not increase.
+        number field, an infinite coordinate, a frame count different from
+        ``NumFrames`` (truncated file), no data rows, or a time column that does not
+        increase.
+
+    Warns
+    -----
+    UserWarning
+        Rows missing from the time column (:func:`solver.io._text.warn_frame_gaps`).
     """
     lines = read_lines(path, TrcFormatError)
     header = _read_header(lines, path)
@@ -81,12 +98,16 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
             path=path,
             line=line_numbers[-1] if rows else len(lines),
         )
+    if not rows:
+        raise TrcFormatError("no data rows after the header; expected one row per frame", path=path, line=len(lines))
     _parse_column(rows, line_numbers, 0, path)  # frame numbers: checked, not used
     time = _parse_column(rows, line_numbers, 1, path)
-    _check_time(time, line_numbers, path)
+    check_time(time, line_numbers, path, TrcFormatError)
     _check_rate(time, rate, path)
+    warn_frame_gaps(time, line_numbers, path)
     coords = _parse_coordinates(rows, line_numbers, shift, path)
     positions = coords.reshape(len(rows), len(names), 3)
+    _check_finite(positions, names, line_numbers, path)
     positions[np.all(positions == 0.0, axis=2)] = np.nan  # gaps exported as (0, 0, 0)
     return MarkerTrajectories(names, positions, time, rate, source=str(path))
 
@@ -222,21 +243,6 @@ def _parse_column(
     return values
 
 
-def _check_time(time: np.ndarray, numbers: list[int], path: str | Path) -> None:
-    bad = np.flatnonzero(~np.isfinite(time))
-    if bad.size:
-        raise TrcFormatError("the time is not a finite number", path=path, line=numbers[bad[0]])
-    with np.errstate(over="ignore"):  # 1e308 - -1e308 is inf, still an increase
-        steps = np.flatnonzero(np.diff(time) <= 0)
-    if steps.size:
-        k = steps[0] + 1
-        raise TrcFormatError(
-            f"time {float(time[k])!r} s does not increase (previous row: {float(time[k - 1])!r} s)",
-            path=path,
-            line=numbers[k],
-        )
-
-
 def _check_rate(time: np.ndarray, rate: float, path: str | Path) -> None:
     """Warn when the Time column's median step disagrees with DataRate by more than 1 %."""
     if time.shape[0] < 2:
@@ -270,6 +276,20 @@ def _parse_coordinates(
             where=f"column {col + 3}",
         ) from None
     return values.reshape(len(rows), width)
+
+
+def _check_finite(positions: np.ndarray, names: tuple[str, ...], numbers: list[int], path: str | Path) -> None:
+    """Refuse an infinite coordinate (``inf``), naming its line and marker: a missing
+    marker is an empty cell or ``nan``."""
+    bad = np.argwhere(np.isinf(positions))
+    if bad.size:
+        row, marker, axis = (int(v) for v in bad[0])
+        raise TrcFormatError(
+            f"marker {names[marker]}'s {'XYZ'[axis]} is {float(positions[row, marker, axis])!r}; expected a finite number "
+            "(an empty cell or nan for a missing marker)",
+            path=path,
+            line=numbers[row],
+        )
 
 
 def write_trc(path: str | Path, markers: MarkerTrajectories, *, units: str = "mm") -> None:
