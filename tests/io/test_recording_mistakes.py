@@ -24,6 +24,7 @@ from solver.io.trc import read_trc
 from solver.pipeline import process_kinematics
 from solver.results import load_processed
 from tests.conftest import SHARED_DATA, writable_copy
+from tests.trial_edits import mot_first_row, trc_first_row
 
 WALK = SHARED_DATA / "subjects" / "rajagopal2016_walk"
 TRC = WALK / "trials" / "walk" / "markers.trc"
@@ -33,11 +34,6 @@ GRF = WALK / "trials" / "walk" / "grf.mot"
 @pytest.fixture
 def walk(tmp_path: Path) -> Path:
     return writable_copy(WALK, tmp_path / "walk")
-
-
-def _data_start(lines: list[str]) -> int:
-    """0-based index of the first data row of a TRC (its first cell a frame number)."""
-    return next(k for k, line in enumerate(lines) if line.split("\t")[0].strip().isdigit())
 
 
 def _with_num_frames(lines: list[str], n: int) -> list[str]:
@@ -61,7 +57,7 @@ def _cut_rows(src: Path, dst: Path, first: int, count: int) -> None:
 def test_rows_cut_from_a_trc_are_named_with_their_line_and_count(tmp_path: Path) -> None:
     clean = read_trc(TRC)
     lines = TRC.read_text().split("\n")
-    start = _data_start(lines)
+    start = trc_first_row(lines)
     cut = tmp_path / "markers.trc"
     cut.write_text("\n".join(_with_num_frames(lines, clean.time.size - 30)))
     _cut_rows(cut, cut, start + 60, 30)
@@ -77,7 +73,7 @@ def test_rows_cut_from_a_trc_are_named_with_their_line_and_count(tmp_path: Path)
 def test_rows_cut_from_a_force_file_are_named_and_counted_in_all(tmp_path: Path) -> None:
     clean = read_table(GRF)
     lines = GRF.read_text().split("\n")
-    head = next(k for k, line in enumerate(lines) if line.strip().lower() == "endheader") + 2  # first data line
+    head = mot_first_row(lines)
     n_rows = clean.time.size
     cut = tmp_path / "grf.mot"
     # two gaps: 400 rows, then (in the file left) 10 rows further on
@@ -117,7 +113,7 @@ def _set_cells(src: Path, dst: Path, row: int, marker: int, values: tuple[str, s
     """Write ``src`` to ``dst`` with marker ``marker``'s x y z on data row ``row`` (0-based)
     set to ``values``; returns the 1-based line edited."""
     lines = src.read_text().split("\n")
-    k = _data_start(lines) + row
+    k = trc_first_row(lines) + row
     cells = lines[k].split("\t")
     cells[2 + 3 * marker : 5 + 3 * marker] = values
     lines[k] = "\t".join(cells)
@@ -172,7 +168,7 @@ def test_an_infinite_coordinate_is_refused_with_its_line_and_marker(tmp_path: Pa
 
 def test_a_trc_with_no_data_rows_is_refused(tmp_path: Path) -> None:
     lines = TRC.read_text().split("\n")
-    start = _data_start(lines)
+    start = trc_first_row(lines)
     head = _with_num_frames(lines[:start], 0)
     path = tmp_path / "markers.trc"
     path.write_text("\n".join(head) + "\n")
@@ -182,7 +178,7 @@ def test_a_trc_with_no_data_rows_is_refused(tmp_path: Path) -> None:
 
 def test_a_force_file_with_a_header_and_no_rows_is_refused(walk: Path, tmp_path: Path) -> None:
     lines = GRF.read_text().split("\n")
-    head = next(k for k, line in enumerate(lines) if line.strip().lower() == "endheader") + 2
+    head = mot_first_row(lines)
     empty = [re.sub(r"^nRows=\d+", "nRows=0", s) for s in lines[:head]]
     (walk / "trials" / "walk" / "grf.mot").write_text("\n".join(empty) + "\n")
     with pytest.raises(MotFormatError, match=r"grf.mot, data rows\): 0 data rows after the header; force plates need at least two"):
