@@ -159,7 +159,8 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
         Passed to ``viser.ViserServer``.
 
     Connections a browser opens and closes unused are not logged as failed handshakes
-    (:mod:`addb_viewer.app.server_log`).
+    (:mod:`addb_viewer.app.server_log`); the app's threads may push to the pages
+    (:mod:`addb_viewer.app.viser_threads`).
 
     Returns
     -------
@@ -178,10 +179,12 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
     import websockets.asyncio.server as ws_server
 
     from addb_viewer.app.server_log import quiet_unused_connections
+    from addb_viewer.app.viser_threads import make_pushes_thread_safe
 
     quiet_unused_connections()
     if token is None:
         server = viser.ViserServer(host=host, port=port, **kwargs)
+        make_pushes_thread_safe(server)
         server.addb_access_gate = None
         return server
     gate = AccessGate(token)
@@ -213,5 +216,6 @@ def start_viser(host: str, port: int, *, token: str | None, **kwargs: Any) -> An
             f"viser {viser.__version__} did not start its server through websockets' serve(process_request=...); "
             "the access token cannot be enforced, so the server was not started on a non-loopback address"
         )
+    make_pushes_thread_safe(server)
     server.addb_access_gate = gate
     return server

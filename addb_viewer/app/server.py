@@ -700,18 +700,25 @@ class ReviewApp:
         reviewed box) would run side by side and the earlier one's message could come last;
         edits therefore run one at a time, each message final before the next edit starts."""
         name = self.reviewer_name(getattr(self._actor, "client", None))
+        with self._edit_lock:
+            saved = self._edit_as(name, what, action, history)
+        if saved and self.workbench is not None:  # review state and pending proposals in the queue
+            self.workbench.refresh()
+
+    def _edit_as(self, name: str | None, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None],
+                 history: bool) -> bool:  # fmt: skip
+        """:meth:`edit` under the name ``name`` (None: ask for one); the caller holds
+        ``_edit_lock``. False when nothing was asked of the store."""
         if name is None:
             self._answer(
                 "<span style='color:#c00'>**not saved**</span>: type your name in “Your name” at the "
                 "top of the panel first (each edit keeps its reviewer's name)."
             )
-            return
-        with self._edit_lock:
-            acting = self.store.acting_as(name) if self.store is not None else contextlib.nullcontext()
-            with acting:
-                self._edit(what, action, history)
-        if self.workbench is not None:  # review state and pending proposals in the queue
-            self.workbench.refresh()
+            return False
+        acting = self.store.acting_as(name) if self.store is not None else contextlib.nullcontext()
+        with acting:
+            self._edit(what, action, history)
+        return True
 
     def _edit(self, what: str, action: Callable[[TrialEditor, int, str], Edit | list[Edit] | None], history: bool = False) -> None:
         with self._lock:
@@ -970,6 +977,15 @@ class ReviewApp:
             return
         name = self.reviewer_name(getattr(self._actor, "client", None))
         undo = what == "Undo"
+        # the last action is read and taken back with no other edit between: a Redo pressed
+        # while another page's Undo was still moving its action to the redo list would
+        # otherwise find that list empty, then redo the other reviewer's edit
+        with self._edit_lock:
+            saved = self._history_step(name, what, undo)
+        if saved and self.workbench is not None:
+            self.workbench.refresh()
+
+    def _history_step(self, name: str | None, what: str, undo: bool) -> bool:
         action = self.actions.last(undo)
         last = "edit" if undo else "undone edit"
         refused = f"<span style='color:#c00'>**not {'undone' if undo else 'redone'}**</span>: the last {last}"
@@ -978,13 +994,15 @@ class ReviewApp:
                 f"{refused} on this subject is {_escape(action.reviewer)}'s (one history for everyone on this "
                 "server); make your own edit instead (flag, unflag, accept or reject)."
             )
-            return
+            return False
         shown = self.trial.trial if self.trial is not None else None
         if action is not None and action.trial != shown:
             self._answer(f"{refused} is on trial {_escape(action.trial)}: open it to {what.lower()} it.")
-            return
+            return False
         store = self.store
-        self.edit(
+        assert store is not None
+        return self._edit_as(
+            name,
             what.lower() + (f" ({action.what})" if action is not None else ""),
             lambda _ed, _k, _f: self.actions.step(store.undo if undo else store.redo, undo),
             history=True,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import threading
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -197,6 +198,65 @@ def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
         assert disk.flag("walk", 40).provenance.reviewer == "ana"
         assert disk.flag("walk", 60).provenance.reviewer == "ben"
         assert app.store.reviewer == "tester"  # the store's own name is unchanged
+
+
+def test_a_redo_pressed_during_another_pages_undo_waits_for_it(demo_paths, make_app) -> None:
+    """B's Undo is held inside the store (its flag already gone, its action not yet moved to
+    the redo list) while A presses Redo: A's press waits for B's Undo to end, then is
+    refused as B's to redo; it neither redoes B's edit nor is its answer overwritten.
+    (Before, A found the redo list empty, waited for the edit lock, then redid B's flag.)"""
+    app = make_app(demo_paths, token="team-token")
+    p = app.panel
+    store_undo = app.store.undo
+    a = ProtocolClient(app.port, "/?token=team-token")
+    b = None
+    try:
+        (ida,) = wait_for(lambda: list(app.name_fields), what="page A's name field")
+        b = ProtocolClient(app.port, "/?token=team-token")
+        idb = wait_for(lambda: [c for c in app.name_fields if c != ida], what="page B's name field")[0]
+        a.set_value(app.name_fields[ida], "ana")
+        b.set_value(app.name_fields[idb], "ben")
+        wait_for(lambda: app.client_names == {ida: "ana", idb: "ben"}, what="both names")
+        b.set_value(p.frame, 60)
+        wait_for(lambda: app.playback.frame == 60, what="seek to 60")
+        b.set_value(p.toggle_flag, True)
+        wait_for(lambda: "ben" in p.saved.content and app.store.flag("walk", 60) is not None, what="B's edit")
+
+        undoing, release = threading.Event(), threading.Event()
+        store_undo = app.store.undo
+
+        def held_undo():  # the store's undo, held after it removed the flag
+            e = store_undo()
+            undoing.set()
+            assert release.wait(60)
+            return e
+
+        redo_pressed = threading.Event()
+        history = app.history
+
+        def pressed(what: str) -> None:
+            if what == "Redo":
+                redo_pressed.set()
+            history(what)
+
+        app.store.undo, app.history = held_undo, pressed
+        b.set_value(p.history, "Undo")
+        assert undoing.wait(60), "B's undo did not reach the store"
+        assert app.store.flag("walk", 60) is None
+        a.set_value(p.history, "Redo")
+        assert redo_pressed.wait(60), "A's redo did not reach the app"
+        time.sleep(0.5)  # A's press runs (and, before the fix, read the empty redo list)
+        release.set()
+        wait_for(lambda: "not redone" in p.saved.content, what="A's refused redo")
+        assert "ben's" in p.saved.content and p.saved.content.startswith("**ana**: "), p.saved.content
+        assert app.store.flag("walk", 60) is None  # B's undone flag stays undone
+        b.set_value(p.history, "Redo")  # B's own redo
+        wait_for(lambda: app.store.flag("walk", 60) is not None, what="B's redo")
+    finally:
+        app.store.undo = store_undo
+        a.close()
+        if b is not None:
+            b.close()
 
 
 def test_store_acting_as_is_per_thread(tmp_path: Path) -> None:
