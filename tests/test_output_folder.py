@@ -225,3 +225,23 @@ def test_a_folder_inside_a_dataset_output_tree_given_as_the_subject_is_named_as_
         f"folder of the dataset (addb info {out_tree} names the dataset folder), or addb view {out_tree} to review its subjects"
     ) in err, err
     assert "Traceback" not in err and _tree(out_tree) == before and not list(tmp_path.glob("written*"))
+
+
+@pytest.mark.parametrize("command", ["process", "kinematics", "convert"])
+@pytest.mark.parametrize("where", ["a file", "under a file"])
+def test_an_out_that_is_or_lies_under_a_file_is_refused_by_the_parser(
+    command: str, where: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before, ``addb process SUBJECT --out FILE/out`` computed the whole subject, then
+    failed on writing ("cannot use FILE: File exists")."""
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("keep")
+    out = a_file if where == "a file" else a_file / "deeper" / "out"
+    subject = str(WALK) if command != "convert" else str(SHARED_DATA / "b3d" / "results.b3d")
+    with pytest.raises(SystemExit) as exit_:
+        cli([command, subject, "--out", str(out)])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    expected = f"{out} is a file; expected a folder" if where == "a file" else f"{out} lies under {a_file}, which is a file"
+    assert f"addb {command}: error: argument --out: {expected}" in err, err
+    assert a_file.read_text() == "keep"

@@ -57,3 +57,21 @@ def memory_size(text: str) -> str:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a size above zero, got {text!r}")
     return text
+
+
+def output_folder(text: str) -> str:
+    """An argparse ``type`` for an ``--out`` folder a command writes (``process``,
+    ``kinematics``, ``convert``): ``argparse.ArgumentTypeError`` when the path is a file, or
+    lies under a file, so that the command refuses at once instead of after computing
+    everything (the folder itself is made, or replaced, when the outputs are written)."""
+    from pathlib import Path
+
+    path = Path(text).expanduser()
+    if path.is_file():
+        raise argparse.ArgumentTypeError(f"{text} is a file; expected a folder (new, empty, or an earlier output of addb)")
+    for parent in path.absolute().parents:
+        if parent.is_file():
+            raise argparse.ArgumentTypeError(f"{text} lies under {parent}, which is a file, not a folder")
+        if parent.is_dir():
+            break
+    return text

@@ -26,6 +26,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from addb_viewer.commands import output_folder
+
 
 def write_review_record(converted: Any, *, reviewer: str = "addb convert") -> Path:
     """Store a converted subject's missing-GRF labels as its review record.
@@ -170,7 +172,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("file", help="the .b3d file")
-    p.add_argument("--out", required=True, help="subject folder to write")
+    p.add_argument("--out", required=True, type=output_folder, help="subject folder to write")
     p.add_argument("--pass", dest="pass_index", type=int, default=0, help="processing pass whose model to use (default 0)")
     p.add_argument(
         "--force",

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from addb_viewer.commands import output_folder
+
 
 def run(args: argparse.Namespace) -> int:
     """``addb kinematics SUBJECT_DIR --out OUT``: scaling and inverse kinematics (``--model``:
@@ -37,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``kinematics`` subcommand's parser to ``sub`` (its ``handler``: :func:`run`)."""
     p = sub.add_parser("kinematics", help="scale the model and solve inverse kinematics for a subject")
     p.add_argument("subject", help="AddBiomechanics subject folder")
-    p.add_argument("--out", required=True, help="output folder: new, empty, or an earlier output of addb (replaced atomically)")
+    p.add_argument("--out", required=True, type=output_folder, help="output folder: new, empty, or an earlier output of addb (replaced atomically)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable); all trials are used for scaling")
     p.add_argument(
         "--model",

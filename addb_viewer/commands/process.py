@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from addb_viewer.commands import FIT_CHOICES, fit_settings, memory_size, whole_number
+from addb_viewer.commands import FIT_CHOICES, fit_settings, memory_size, output_folder, whole_number
 
 
 def run_dataset(args: argparse.Namespace) -> int:
@@ -269,7 +269,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("subject", help="AddBiomechanics subject folder, or a dataset folder of subject folders")
-    p.add_argument("--out", required=True, help="output folder: new, empty, or an earlier output of addb (replaced atomically; for a dataset, the output tree)")
+    p.add_argument("--out", required=True, type=output_folder, help="output folder: new, empty, or an earlier output of addb (replaced atomically; for a dataset, the output tree)")
     p.add_argument("--trial", action="append", help="write only this trial (repeatable)")
     p.add_argument(
         "--fit", choices=FIT_CHOICES, default="default",
