@@ -35,7 +35,9 @@ def cache_root() -> Path:
     return Path(base) / "addb"
 
 
-def _is_bundled_demo(subject: Path) -> bool:
+def is_bundled_demo(subject: Path) -> bool:
+    """Whether ``subject`` (a resolved path) is the demo subject shipped inside the package
+    (package data: addb writes nothing there)."""
     from addb_viewer.demo import DEMO_SUBJECT
 
     return subject == DEMO_SUBJECT.resolve()
@@ -44,7 +46,7 @@ def _is_bundled_demo(subject: Path) -> bool:
 def uses_subject_folder(subject_dir: str | os.PathLike[str]) -> bool:
     """True when outputs go inside ``subject_dir`` (writable and not the bundled demo)."""
     subject = Path(subject_dir).resolve()
-    return not _is_bundled_demo(subject) and folder_is_writable(subject)
+    return not is_bundled_demo(subject) and folder_is_writable(subject)
 
 
 def default_output_dir(subject_dir: str | os.PathLike[str]) -> Path:

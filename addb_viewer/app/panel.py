@@ -47,6 +47,10 @@ SIDE_WIDTH_PX, MAIN_WIDTH_PX = 440, 320
 DEFAULT_FOOT = "both"
 #: The Edits line before the shown subject's first edit.
 NO_EDITS = "Every edit is saved at once in the review record."
+
+#: The hint of "Apply the named cause and reprocess" where it can be used (elsewhere the
+#: hint says why it is disabled: :func:`addb_viewer.app.reprocess.apply_refusal`).
+APPLY_HINT = "saves the correction in addb_extensions.json (as addb diagnose --apply) and reprocesses"
 """The edits' line before an edit (and once a refusal is taken back: "No edits yet" read as
 "nothing to undo" after earlier edits)."""
 
@@ -183,8 +187,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     with h["diagnosis_folder"]:
         h["diagnose"] = gui.add_button("Diagnose this trial", hint="why its residuals remain: the candidate causes of docs/diagnose, "
                                        "fitted and cross-validated (about 10 s; progress and Cancel above)")
-        h["apply_diagnosis"] = gui.add_button("Apply the named cause and reprocess", hint="saves the correction in "
-                                              "addb_extensions.json (as addb diagnose --apply) and reprocesses")
+        h["apply_diagnosis"] = gui.add_button("Apply the named cause and reprocess", hint=APPLY_HINT)
         h["diagnosis"] = gui.add_markdown("")
     with gui.add_folder("Display", expand_by_default=False):
         h["show_labels"] = gui.add_checkbox("Marker names", initial_value=False)

@@ -38,6 +38,23 @@ from solver.errors import AddbError
 PLAN_POLL_S = 0.2
 
 
+def apply_refusal(subject_dir: Path) -> str | None:
+    """Why "Apply the named cause and reprocess" cannot save a correction in ``subject_dir``
+    (markdown), None when it can: the correction goes into the subject folder
+    (``addb_extensions.json``), so a read-only folder and the bundled demo (package data,
+    :func:`addb_viewer.locations.uses_subject_folder`) are refused before anything runs."""
+    from addb_viewer.locations import is_bundled_demo
+    from solver.io.subject import folder_is_writable
+
+    subject = Path(subject_dir).resolve()
+    if is_bundled_demo(subject):
+        return ("the bundled demo is package data and is not changed: copy its folder "
+                f"({subject}) to a folder you can write to, open the copy and apply there")  # fmt: skip
+    if not folder_is_writable(subject):
+        return "the subject folder is read-only: copy the subject to a folder you can write to, open the copy and apply there"
+    return None
+
+
 class ReprocessHost(Protocol):
     """What the reprocessor needs from the app (:class:`~addb_viewer.app.server.ReviewApp`
     implements it); the reprocessor imports nothing of the server."""
@@ -263,6 +280,10 @@ class Reprocessor:
         name = trial or (app.trial.trial if app.trial is not None else None)
         if name is None:
             self._say("No trial shown.")
+            return None
+        refused = apply_refusal(app.paths.subject_dir)
+        if refused is not None:
+            self._say(f"<span style='color:#c00'>**Not applied**</span>: {html.escape(refused, quote=False)}")
             return None
         path = app.paths.out_dir / name / "diagnosis.json"
         try:

@@ -43,10 +43,10 @@ from addb_viewer.app.flags import (
 from addb_viewer.app.history import ActionHistory
 from addb_viewer.app.meshes import body_mesh
 from addb_viewer.app.page_cameras import PageCameras
-from addb_viewer.app.panel import DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
+from addb_viewer.app.panel import APPLY_HINT, DEFAULT_FOOT, NO_EDITS, ReviewPanel, build_panel
 from addb_viewer.app.paths import ReviewPaths, safe_name
 from addb_viewer.app.plots import TrialPlots
-from addb_viewer.app.reprocess import Reprocessor, SecondThought
+from addb_viewer.app.reprocess import Reprocessor, SecondThought, apply_refusal
 from addb_viewer.app.scene import SceneSettings, TrialScene
 from addb_viewer.app.state import Playback, next_run_start
 from addb_viewer.app.summary import hicks_exceeded
@@ -320,6 +320,10 @@ class ReviewApp:
             self.ready.set()
 
     def _open_store(self) -> None:
+        # the subject's own button first: "Apply the named cause" writes in the subject folder
+        refused = apply_refusal(self.paths.subject_dir)
+        self.panel.apply_diagnosis.disabled = refused is not None
+        self.panel.apply_diagnosis.hint = f"disabled: {refused}" if refused else APPLY_HINT
         self.paths.annotations.parent.mkdir(parents=True, exist_ok=True)
         try:
             self.store = AnnotationStore.open(self.paths.annotations, reviewer=self.reviewer)

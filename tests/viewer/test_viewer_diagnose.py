@@ -119,3 +119,40 @@ def test_apply_saves_a_correction_once(walk_processed, make_app, tmp_path) -> No
     (out / "walk" / "diagnosis.json").write_text(json.dumps(report))
     assert app.jobs.apply_diagnosis() is None and "still pending" in app.panel.job_status.content
     assert len(read_extensions(subject)) == 1
+
+
+def test_apply_is_disabled_where_the_correction_cannot_be_saved(walk_processed, make_app, demo_paths, tmp_path) -> None:
+    """The correction goes into the subject folder: for a read-only folder and for the
+    bundled demo (package data) the button is disabled, its hint says why, and a press
+    from Python (or a page that raced the update) saves nothing and says so beside it."""
+    import os
+    import stat
+
+    from addb_viewer.app.panel import APPLY_HINT
+
+    subject0, out0 = walk_processed
+    out = shutil.copytree(out0, tmp_path / "walk_out")
+    (out / "walk" / "diagnosis.json").write_text(json.dumps({"extension": {"cause": "body_mass", "mass_change_kg": 3.0}}))
+    writable = shutil.copytree(subject0, tmp_path / "walk")
+    app = make_app(ReviewPaths.for_subject(writable, out))
+    assert not app.panel.apply_diagnosis.disabled and app.panel.apply_diagnosis.hint == APPLY_HINT
+    app.stop()
+    ro = shutil.copytree(subject0, tmp_path / "ro")
+    os.chmod(ro, stat.S_IRUSR | stat.S_IXUSR)
+    try:  # read-only by its mode bits, for root too
+        app = make_app(ReviewPaths.for_subject(ro, out))
+        p = app.panel
+        assert p.apply_diagnosis.disabled and "the subject folder is read-only" in p.apply_diagnosis.hint
+        assert app.jobs.apply_diagnosis() is None and not app.jobs.running
+        assert "Not applied" in p.job_status.content and "read-only" in p.job_status.content
+        assert not (ro / "addb_extensions.json").exists()
+        # the dataset queue's Open of a writable subject enables it again
+        app.open_subject(ReviewPaths.for_subject(writable, out))
+        assert not p.apply_diagnosis.disabled and p.apply_diagnosis.hint == APPLY_HINT
+        app.stop()
+    finally:
+        os.chmod(ro, stat.S_IRWXU)
+    demo = make_app(demo_paths)
+    assert demo.panel.apply_diagnosis.disabled and "bundled demo is package data" in demo.panel.apply_diagnosis.hint
+    assert demo.jobs.apply_diagnosis("walk") is None and "Not applied" in demo.panel.job_status.content
+    assert not (demo_paths.subject_dir / "addb_extensions.json").exists()
