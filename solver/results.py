@@ -226,6 +226,8 @@ def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
     base = Path(folder) / trial
     try:
         return _load_processed(Path(folder), base)
+    except ProcessedTrialError:  # already names the file (a ValueError too: kept apart)
+        raise
     except (zipfile.BadZipFile, EOFError, KeyError, json.JSONDecodeError) as exc:
         raise ProcessedTrialError(
             f"cannot be read as a processed trial ({type(exc).__name__}: {exc}); the file is damaged (an interrupted "
@@ -233,8 +235,6 @@ def load_processed(folder: str | Path, trial: str) -> ProcessedTrial:
             path=base / "trial.npz",
         ) from None
     except ValueError as exc:
-        if isinstance(exc, ProcessedTrialError):
-            raise
         raise ProcessedTrialError(f"cannot be read as a processed trial: {exc}", path=base / "trial.npz") from None
 
 

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from solver.errors import FileFormatError
+from solver.sampling import frame_interval, frame_rate
 
 FloatArray = NDArray[np.float64]
 
@@ -149,7 +150,7 @@ def frame_gaps(time: FloatArray) -> list[tuple[int, int]]:
     if time.size < 3:
         return []
     steps = np.diff(time)
-    interval = float(np.median(steps))
+    interval = frame_interval(time)
     if not interval > 0.0:
         return []
     long = np.flatnonzero(steps > GAP_STEP * interval)
@@ -176,7 +177,7 @@ def warn_frame_gaps(time: FloatArray, numbers: Sequence[int], path: str | Path) 
         return
     k, n = gaps[0]
     total = sum(m for _, m in gaps)
-    rate = 1.0 / float(np.median(np.diff(time)))
+    rate = frame_rate(time)
     more = f"; {total} frames missing in {len(gaps)} gaps in all" if len(gaps) > 1 else ""
     warnings.warn(
         f"{path}, line {numbers[k]}: the time steps from {float(time[k - 1]):.4f} s to {float(time[k]):.4f} s, "

@@ -260,9 +260,7 @@ def _check_rate(time: np.ndarray, rate: float, path: str | Path) -> None:
 def _parse_coordinates(
     rows: list[list[str]], numbers: list[int], shift: int, path: str | Path
 ) -> np.ndarray:
-    """``(T, 3M)`` coordinates in metres; empty cells are NaN."""
-    if not rows:
-        return np.zeros((0, 0))
+    """``(T, 3M)`` coordinates in metres of ``rows`` (at least one); empty cells are NaN."""
     width = len(rows[0]) - 2
     tokens = flatten(r[2:] for r in rows)
     try:
