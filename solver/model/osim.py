@@ -437,12 +437,14 @@ def _parse_coordinate(ctx: _Ctx, elem: ET.Element, joint: str, axes: tuple[Trans
     name = elem.get("name") or ""
     declared = (elem.findtext("motion_type") or "").strip().lower() or None
     rng = ctx.floats(elem, "range", 2, "-99999.9 99999.9")
+    if rng[0] > rng[1]:  # OpenSim 4.6 refuses such a model too ("Maximum coordinate range less than minimum")
+        raise ctx.error(f"<range> {rng[0]:g} {rng[1]:g}: the minimum is above the maximum; expected 'min max'", elem)
     return Coordinate(
         name=name,
         joint=joint,
         motion_type=_motion_type(name, axes, declared),
         default_value=ctx.floats(elem, "default_value", 1, "0")[0],
-        range=(min(rng), max(rng)),
+        range=(rng[0], rng[1]),
         clamped=ctx.flag(elem, "clamped", False),
         locked=ctx.flag(elem, "locked", False),
     )

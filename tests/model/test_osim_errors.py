@@ -8,6 +8,7 @@ import pytest
 
 from solver.errors import OsimModelError
 from solver.model.osim import read_osim
+from tests.conftest import import_tool
 from tests.model.conftest import MODELS
 
 SOURCE = (MODELS / "Rajagopal2016.osim").read_text()
@@ -91,3 +92,21 @@ def test_a_model_without_mass_is_refused(tmp_path: Path) -> None:
     text = re.sub(r"<mass>[^<]*</mass>", "<mass>0</mass>", SOURCE)
     with pytest.raises(OsimModelError, match="every body has zero mass"):
         read_osim(_write(tmp_path, text))
+
+
+def test_a_coordinate_range_with_min_above_max_is_refused(tmp_path: Path) -> None:
+    """OpenSim 4.6 refuses the model ("Maximum coordinate range less than minimum"); addb
+    read it as the range turned round, with nothing said. Min equal to max stays valid."""
+    start = SOURCE.index('<Coordinate name="knee_angle_r"')
+    lo = SOURCE.index("<range>", start)
+    hi = SOURCE.index("</range>", lo) + len("</range>")
+    text = SOURCE[:lo] + "<range>2.0944 0</range>" + SOURCE[hi:]
+    with pytest.raises(OsimModelError, match=r"<range> 2.0944 0: the minimum is above the maximum") as err:
+        read_osim(_write(tmp_path, text))
+    assert "knee_angle_r" in str(err.value) and "broken.osim" in str(err.value)
+    opensim = import_tool("opensim")  # the oracle refuses the same file
+    with pytest.raises(Exception, match="Maximum coordinate range less than minimum"):
+        opensim.Model(str(tmp_path / "broken.osim")).initSystem()
+    model = read_osim(_write(tmp_path, SOURCE[:lo] + "<range>0.5 0.5</range>" + SOURCE[hi:]))
+    (knee,) = [c for c in model.coordinates if c.name == "knee_angle_r"]
+    assert knee.range == (0.5, 0.5)
