@@ -219,17 +219,37 @@ def euler_xyz(angles: tuple[float, float, float] | FloatArray) -> FloatArray:
 
 
 class _Ctx:
-    """Parsing context: the file path, for error messages."""
+    """Parsing context: the file path and its parsed document, for error messages."""
 
     def __init__(self, path: str) -> None:
         self.path = path
+        self.document: ET.Element | None = None
+        self._lines: dict[int, int] | None = None
+
+    def line_of(self, elem: ET.Element) -> int | None:
+        """The 1-based line where ``elem`` starts in the file. ElementTree keeps no line
+        numbers, so on the first error only the file is read again with expat, whose
+        element starts come in the document order of ``document.iter()``."""
+        if self.document is None:
+            return None
+        if self._lines is None:
+            import xml.parsers.expat
+
+            starts: list[int] = []
+            parser = xml.parsers.expat.ParserCreate()
+            parser.StartElementHandler = lambda _name, _attrs: starts.append(parser.CurrentLineNumber)
+            with open(self.path, "rb") as f:
+                parser.ParseFile(f)
+            self._lines = {id(e): line for e, line in zip(self.document.iter(), starts, strict=False)}
+        return self._lines.get(id(elem))
 
     def error(self, message: str, elem: ET.Element | None = None) -> OsimModelError:
-        where = None
+        where = line = None
         if elem is not None:
             name = elem.get("name")
             where = f"<{elem.tag}{' name=' + repr(name) if name else ''}>"
-        return OsimModelError(message, path=self.path, where=where)
+            line = self.line_of(elem)
+        return OsimModelError(message, path=self.path, line=line, where=where)
 
     def text(self, elem: ET.Element, tag: str, default: str | None = None) -> str:
         child = elem.find(tag)
@@ -653,6 +673,7 @@ def read_osim(path: str | Path) -> OsimModel:
         line = exc.position[0] if hasattr(exc, "position") else None
         raise OsimModelError(f"not well-formed XML: {exc}", path=path, line=line) from None
     doc = tree.getroot()
+    ctx.document = doc
     root = doc.find("Model")
     if root is None:
         raise OsimModelError("no <Model> element under the document root", path=path)

@@ -1,4 +1,4 @@
-"""Bad .osim input gives an OsimModelError naming the file and the element."""
+"""Bad .osim input gives an OsimModelError naming the file, the line and the element."""
 
 from __future__ import annotations
 
@@ -49,6 +49,7 @@ def test_text_in_a_number_field(tmp_path: Path) -> None:
     with pytest.raises(OsimModelError, match=r"<mass> must hold numbers.*eleven") as err:
         read_osim(_write(tmp_path, text))
     assert "pelvis" in str(err.value)
+    assert err.value.line == text[: text.index('<Body name="pelvis">')].count("\n") + 1
 
 
 def test_marker_on_unknown_body(tmp_path: Path) -> None:
@@ -104,6 +105,8 @@ def test_a_coordinate_range_with_min_above_max_is_refused(tmp_path: Path) -> Non
     with pytest.raises(OsimModelError, match=r"<range> 2.0944 0: the minimum is above the maximum") as err:
         read_osim(_write(tmp_path, text))
     assert "knee_angle_r" in str(err.value) and "broken.osim" in str(err.value)
+    line = text[:start].count("\n") + 1  # where <Coordinate name="knee_angle_r"> starts
+    assert err.value.line == line and f"broken.osim:{line}," in str(err.value)
     opensim = import_tool("opensim")  # the oracle refuses the same file
     with pytest.raises(Exception, match="Maximum coordinate range less than minimum"):
         opensim.Model(str(tmp_path / "broken.osim")).initSystem()
