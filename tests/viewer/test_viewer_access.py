@@ -8,11 +8,13 @@ failed under ``CI=true``); the HTTP and websocket checks need neither.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import threading
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
@@ -144,18 +146,30 @@ def test_lab_server_requires_the_token(lab_server) -> None:
             browser.close()
 
 
-def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
-    """Two pages of one team server: an edit from a page without a name is refused, then
-    each page's edits are recorded under the name typed in its own "Your name" field."""
-    app = make_app(demo_paths, token="team-token")
-    assert app.token == "team-token"
-    p = app.panel
+@contextlib.contextmanager
+def _two_pages(app) -> Iterator[tuple[ProtocolClient, ProtocolClient, int, int]]:
+    """Two pages (A, B) of the team server ``app`` (token ``team-token``), with their client
+    ids once both have a "Your name" field; closed afterwards."""
     a = ProtocolClient(app.port, "/?token=team-token")
     b = None
     try:
         (ida,) = wait_for(lambda: list(app.name_fields), what="page A's name field")
         b = ProtocolClient(app.port, "/?token=team-token")
         idb = wait_for(lambda: [c for c in app.name_fields if c != ida], what="page B's name field")[0]
+        yield a, b, ida, idb
+    finally:
+        a.close()
+        if b is not None:
+            b.close()
+
+
+def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
+    """Two pages of one team server: an edit from a page without a name is refused, then
+    each page's edits are recorded under the name typed in its own "Your name" field."""
+    app = make_app(demo_paths, token="team-token")
+    assert app.token == "team-token"
+    p = app.panel
+    with _two_pages(app) as (a, b, ida, idb):
         assert app.client_names == {ida: "", idb: ""}  # empty on a team server
 
         a.set_value(p.frame, 40)
@@ -190,10 +204,6 @@ def test_each_edit_keeps_its_reviewers_name(demo_paths, make_app) -> None:
         b.set_value(p.frame, 60)
         b.set_value(p.toggle_flag, True)
         wait_for(lambda: app.store.flag("walk", 60) is not None, what="B's flag again")
-    finally:
-        a.close()
-        if b is not None:
-            b.close()
     with AnnotationStore.open(demo_paths.annotations, reviewer="checker") as disk:
         assert disk.flag("walk", 40).provenance.reviewer == "ana"
         assert disk.flag("walk", 60).provenance.reviewer == "ben"
@@ -208,12 +218,7 @@ def test_a_redo_pressed_during_another_pages_undo_waits_for_it(demo_paths, make_
     app = make_app(demo_paths, token="team-token")
     p = app.panel
     store_undo = app.store.undo
-    a = ProtocolClient(app.port, "/?token=team-token")
-    b = None
-    try:
-        (ida,) = wait_for(lambda: list(app.name_fields), what="page A's name field")
-        b = ProtocolClient(app.port, "/?token=team-token")
-        idb = wait_for(lambda: [c for c in app.name_fields if c != ida], what="page B's name field")[0]
+    with _two_pages(app) as (a, b, ida, idb):
         a.set_value(app.name_fields[ida], "ana")
         b.set_value(app.name_fields[idb], "ben")
         wait_for(lambda: app.client_names == {ida: "ana", idb: "ben"}, what="both names")
@@ -252,11 +257,7 @@ def test_a_redo_pressed_during_another_pages_undo_waits_for_it(demo_paths, make_
         assert app.store.flag("walk", 60) is None  # B's undone flag stays undone
         b.set_value(p.history, "Redo")  # B's own redo
         wait_for(lambda: app.store.flag("walk", 60) is not None, what="B's redo")
-    finally:
-        app.store.undo = store_undo
-        a.close()
-        if b is not None:
-            b.close()
+    app.store.undo = store_undo
 
 
 def test_store_acting_as_is_per_thread(tmp_path: Path) -> None:
