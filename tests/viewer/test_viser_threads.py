@@ -18,12 +18,19 @@ from addb_viewer.app.viser_threads import LoopSafeEvent, make_pushes_thread_safe
 def test_a_set_from_another_thread_runs_in_the_loop() -> None:
     """While the loop is busy, ``set()`` from this thread changes nothing (a plain
     ``asyncio.Event`` would wake its waiter here, in the wrong thread); once the loop runs
-    again the waiter wakes."""
+    again the waiter wakes. Sets before the loop gets to the first schedule one wake-up."""
     loop = asyncio.new_event_loop()
     runner = threading.Thread(target=loop.run_forever, daemon=True)
     runner.start()
+    wakes: list[int] = []
+
+    class Counted(LoopSafeEvent):
+        def _set_in_loop(self) -> None:
+            wakes.append(1)
+            super()._set_in_loop()
+
     try:
-        event = LoopSafeEvent(loop)
+        event = Counted(loop)
         waiter = asyncio.run_coroutine_threadsafe(event.wait(), loop)
         hold, holding = threading.Event(), threading.Event()
 
@@ -33,14 +40,18 @@ def test_a_set_from_another_thread_runs_in_the_loop() -> None:
 
         loop.call_soon_threadsafe(busy)
         assert holding.wait(30)
-        event.set()
+        for _ in range(5):
+            event.set()
         assert not event.is_set() and not waiter.done()
         plain = asyncio.Event()
         plain.set()  # the behaviour the class replaces: set at once in the calling thread
         assert plain.is_set()
         hold.set()
         assert waiter.result(timeout=30) is True
-        assert event.is_set()
+        assert event.is_set() and wakes == [1]
+        event.set()  # already set: nothing scheduled
+        asyncio.run_coroutine_threadsafe(asyncio.sleep(0), loop).result(timeout=30)
+        assert wakes == [1]
     finally:
         loop.call_soon_threadsafe(loop.stop)
         runner.join(30)
