@@ -47,12 +47,11 @@ SIDE_WIDTH_PX, MAIN_WIDTH_PX = 440, 320
 DEFAULT_FOOT = "both"
 #: The Edits line before the shown subject's first edit.
 NO_EDITS = "Every edit is saved at once in the review record."
-
+"""The edits' line before an edit (and once a refusal is taken back: "No edits yet" read as
+"nothing to undo" after earlier edits)."""
 #: The hint of "Apply the named cause and reprocess" where it can be used (elsewhere the
 #: hint says why it is disabled: :func:`addb_viewer.app.reprocess.apply_refusal`).
 APPLY_HINT = "saves the correction in addb_extensions.json (as addb diagnose --apply) and reprocesses"
-"""The edits' line before an edit (and once a refusal is taken back: "No edits yet" read as
-"nothing to undo" after earlier edits)."""
 
 LEGEND = (
     "<small>"
