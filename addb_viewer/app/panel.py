@@ -17,7 +17,7 @@ import viser
 from addb_viewer.app.camera import VIEWS
 from addb_viewer.app.plots import shading_legend
 from addb_viewer.app.state import SPEED_MAX, SPEED_MIN
-from addb_viewer.app.timeline import legend_markdown
+from addb_viewer.app.timeline import RIGHT_PX, legend_markdown
 
 #: Command label -> (hotkey, description); a hotkey ``"shift+U"`` is U with that modifier.
 HOTKEYS: dict[str, tuple[str, str]] = {
@@ -143,6 +143,13 @@ class ReviewPanel:
     commands: dict[str, viser.CommandHandle]
 
 
+#: The Selection slider keeps the timeline strip's room on its right: the docked panel's
+#: scrollbar floats over the panel's right edge and took the presses on the slider's last
+#: frames (a thumb at the last frame could not be grabbed). viser's client gives its range
+#: slider the class ``multi-slider`` (the panel has no other) and a width of 100 %.
+SLIDER_ROOM = f"<style>div.multi-slider {{ width: calc(100% - {RIGHT_PX}px); }}</style>"
+
+
 def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     """Add the review controls to ``server``'s GUI (see :class:`ReviewPanel`)."""
     gui = server.gui
@@ -209,6 +216,7 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
         gui.add_markdown(legend_markdown())
         h["timeline_frame"] = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0, disabled=True)
         h["selection"] = gui.add_multi_slider("Selection", min=0, max=1, step=1, initial_value=(0, 0), disabled=True)
+        gui.add_html(SLIDER_ROOM)
         h["selection_info"] = gui.add_markdown("Drag the ends of Selection to choose frames.")
         h["selection_edit"] = gui.add_button_group("Selected frames", ("Flag", "Unflag", "Accept", "Reject"))
         h["saved"] = EchoedMarkdown(saved, gui.add_markdown(NO_EDITS))

@@ -4,7 +4,7 @@ tree of two shared subjects without a Geometry folder, processed by ``addb proce
 docked panels leave the 3D view 40 % of the width, the queue's window fits it and the
 walk's skeleton is drawn below it on its first and last frames). The queue lists both subjects and
 their trials; opening the second works (its bones drawn, no axes fallback); the timeline's
-plots lie inside the viewport and their frame cursors line up at the last frame; a selection dragged over frames 20-40 (each end within a
+plots lie inside the viewport and their frame cursors line up at the last frame; the Selection's thumb at the last frame lies clear of the panel's scrollbar; a selection dragged over frames 20-40 (each end within a
 pixel's frames) and the flag hotkey write exactly the selected range to the record on disk; Reprocess ends with the before/after table: the
 frames with measured force drop to the frames the reviewer did not flag (the flags replace
 the solver's own choice, and the range adds frames that were in the fit) and the residuals
@@ -77,12 +77,12 @@ def _drag_selection(page, start: int, end: int, last_frame: int) -> tuple[int, i
     px = track["width"] / last_frame
     for index, frame in ((1, end), (0, start)):  # both start at frame 0: the top thumb first
         shift = 0.0
-        for _ in range(10):
+        for attempt in range(10):
             sel = _selection(page)
             now = sel[index] if sel is not None else None
             if now == frame:
                 break
-            if now is not None:
+            if now is not None and attempt > 0:  # a nudge by what the last drag missed
                 shift += 0.6 * (frame - now) * px
             box = thumbs.nth(index).bounding_box()
             y = box["y"] + box["height"] / 2
@@ -95,6 +95,25 @@ def _drag_selection(page, start: int, end: int, last_frame: int) -> tuple[int, i
     per_pixel = int(np.ceil(1.0 / px))
     assert reached is not None and abs(reached[0] - start) <= per_pixel and abs(reached[1] - end) <= per_pixel, (reached, px)
     return reached
+
+
+def _last_thumb_reachable(page, last_frame: int) -> None:
+    """Drag the Selection's upper thumb past the end of its track: the selection ends at the
+    last frame, and the thumb there lies clear of the docked panel's scrollbar (the element
+    under its centre is the thumb, so a press there grabs it)."""
+    slider_id = page.get_by_text("Selection", exact=True).get_attribute("for")
+    track = page.locator(f"[id='{slider_id}'] .multi-slider-track").bounding_box()
+    thumb = page.locator(f"[id='{slider_id}'] .multi-slider-thumb").nth(1)
+    box = thumb.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] / 2, y)
+    page.mouse.down()
+    page.mouse.move(track["x"] + track["width"] + 40, y, steps=6)
+    page.mouse.up()
+    page.get_by_text(re.compile(rf"Selected: frames \d+–{last_frame} ")).wait_for(timeout=20_000)
+    box = thumb.bounding_box()
+    under = page.evaluate("([x, y]) => document.elementFromPoint(x, y).className", [box["x"] + box["width"] / 2, y])
+    assert "multi-slider-thumb" in under, (under, box)
 
 
 def _cursor_column(page, chart) -> int:
@@ -203,6 +222,9 @@ def test_workbench_in_the_browser(workbench, tmp_path: Path) -> None:
             assert max(columns) - min(columns) <= 2 and columns[0] > box["x"] + box["width"] / 2, (columns, box)
             page.get_by_role("button", name="Next ▶", exact=True).click()  # back to frame 0
             page.get_by_text(f"frame 0 / {last_run}").first.wait_for(timeout=20_000)
+            # the Selection's thumb at the last frame can be grabbed (the panel's scrollbar
+            # floated over it)
+            _last_thumb_reachable(page, last_run)
 
             # the timeline's proposals carry their reason on hover (a title on each run)
             tip = page.locator("div.run[data-track='proposal']").first.get_attribute("title")
