@@ -27,8 +27,9 @@ from solver.io.b3d import (
     open_b3d,
 )
 from solver.io.b3d_writer import write_b3d
+from tests.conftest import SHARED_DATA
 
-B3D = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "b3d" / "results.b3d"
+B3D = SHARED_DATA / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 
 def assert_same(a: object, b: object, where: str = "") -> None:
@@ -52,7 +53,6 @@ def assert_same(a: object, b: object, where: str = "") -> None:
         assert a == b, f"{where}: {a!r} != {b!r}"
 
 
-@pytest.mark.skipif(not B3D.exists(), reason="shared results.b3d not present")
 def test_results_b3d_rewrites_identically(tmp_path: Path) -> None:
     src = open_b3d(B3D)
     frames = [src.read_trial(k) for k in range(len(src.header.trials))]

@@ -9,10 +9,10 @@ import pytest
 
 from addb_viewer.commands.view import b3d_subject
 from solver.io.subject import load_subject
+from tests.conftest import SHARED_DATA
 
-B3D = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "b3d" / "results.b3d"
+B3D = SHARED_DATA / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
-pytestmark = pytest.mark.skipif(not B3D.exists(), reason="shared results.b3d not present")
 
 
 def test_b3d_subject_is_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
