@@ -22,7 +22,6 @@ from tests.conftest import SHARED_DATA
 B3D = SHARED_DATA / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 
-
 def test_converted_subject_holds_the_file_data(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "subject"
     assert main(["convert", str(B3D), "--out", str(out)]) == 0

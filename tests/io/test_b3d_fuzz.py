@@ -19,11 +19,11 @@ from tests.conftest import SHARED_DATA
 B3D = SHARED_DATA / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 
-ORIGINAL = B3D.read_bytes() if B3D.exists() else b""
-_N = struct.unpack("<q", ORIGINAL[:8])[0] if ORIGINAL else 0
+ORIGINAL = B3D.read_bytes()
+_N = struct.unpack("<q", ORIGINAL[:8])[0]
 DATA_START = 8 + _N
 #: where the embedded model text ends: after it come the rest of the header (trial headers)
-TEXT_END = ORIGINAL.find(b"</OpenSimDocument>") + len(b"</OpenSimDocument>") if ORIGINAL else 0
+TEXT_END = ORIGINAL.find(b"</OpenSimDocument>") + len(b"</OpenSimDocument>")
 
 #: byte ranges that matter: the length prefix, the start of the header (counts, sizes),
 #: the header after the model text (trial headers, marker names), the frames, anywhere.

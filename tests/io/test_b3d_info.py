@@ -14,7 +14,6 @@ SHARED = Path(__file__).resolve().parents[2].parent / "shared"
 B3D = SHARED / "data" / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 
-
 def test_summary_matches_oracle() -> None:
     o = json.loads((SHARED / "oracles" / "b3d_results_oracle.json").read_text())
     s = summarize(B3D)

@@ -22,7 +22,6 @@ B3D = SHARED / "data" / "b3d" / "results.b3d"  # the published subject: its abse
 ORACLE_PATH = SHARED / "oracles" / "b3d_results_oracle.json"
 
 
-
 @pytest.fixture(scope="module")
 def oracle() -> dict:
     return json.loads(ORACLE_PATH.read_text())

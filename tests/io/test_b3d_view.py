@@ -14,7 +14,6 @@ from tests.conftest import SHARED_DATA
 B3D = SHARED_DATA / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 
-
 def test_b3d_subject_is_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     folder = b3d_subject(B3D)

@@ -65,15 +65,32 @@ def _selection(page) -> tuple[int, int] | None:
     return (int(m.group(1)), int(m.group(2))) if m else None
 
 
+def _selection_slider(page):
+    """The Selection slider's track (its bounding box) and its two thumbs (a locator)."""
+    slider_id = page.get_by_text("Selection", exact=True).get_attribute("for")
+    track = page.locator(f"[id='{slider_id}'] .multi-slider-track").bounding_box()
+    return track, page.locator(f"[id='{slider_id}'] .multi-slider-thumb")
+
+
+def _drag_thumb(page, thumb, x: float) -> float:
+    """Press ``thumb`` at its centre and drag it along the track to page x ``x``; returns the
+    page y of the drag."""
+    box = thumb.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] / 2, y)
+    page.mouse.down()
+    page.mouse.move(x, y, steps=6)
+    page.mouse.up()
+    return y
+
+
 def _drag_selection(page, start: int, end: int, last_frame: int) -> tuple[int, int]:
     """Drag the Selection slider's two thumbs (the timeline's range) to frames ``start`` and
     ``end``: a drag from each thumb to the frame's place on the track, then, while the
     page reports another frame, a nudge by the difference. A pixel of the track can span
     several frames (a 900-frame run on a 300 px track), so the selection reached is returned:
     each end within one pixel's frames of the one asked for."""
-    slider_id = page.get_by_text("Selection", exact=True).get_attribute("for")
-    track = page.locator(f"[id='{slider_id}'] .multi-slider-track").bounding_box()
-    thumbs = page.locator(f"[id='{slider_id}'] .multi-slider-thumb")
+    track, thumbs = _selection_slider(page)
     px = track["width"] / last_frame
     for index, frame in ((1, end), (0, start)):  # both start at frame 0: the top thumb first
         shift = 0.0
@@ -84,12 +101,7 @@ def _drag_selection(page, start: int, end: int, last_frame: int) -> tuple[int, i
                 break
             if now is not None and attempt > 0:  # a nudge by what the last drag missed
                 shift += 0.6 * (frame - now) * px
-            box = thumbs.nth(index).bounding_box()
-            y = box["y"] + box["height"] / 2
-            page.mouse.move(box["x"] + box["width"] / 2, y)
-            page.mouse.down()
-            page.mouse.move(track["x"] + frame * px + shift, y, steps=6)
-            page.mouse.up()
+            _drag_thumb(page, thumbs.nth(index), track["x"] + frame * px + shift)
             page.wait_for_timeout(400)
     reached = _selection(page)
     per_pixel = int(np.ceil(1.0 / px))
@@ -101,15 +113,9 @@ def _last_thumb_reachable(page, last_frame: int) -> None:
     """Drag the Selection's upper thumb past the end of its track: the selection ends at the
     last frame, and the thumb there lies clear of the docked panel's scrollbar (the element
     under its centre is the thumb, so a press there grabs it)."""
-    slider_id = page.get_by_text("Selection", exact=True).get_attribute("for")
-    track = page.locator(f"[id='{slider_id}'] .multi-slider-track").bounding_box()
-    thumb = page.locator(f"[id='{slider_id}'] .multi-slider-thumb").nth(1)
-    box = thumb.bounding_box()
-    y = box["y"] + box["height"] / 2
-    page.mouse.move(box["x"] + box["width"] / 2, y)
-    page.mouse.down()
-    page.mouse.move(track["x"] + track["width"] + 40, y, steps=6)
-    page.mouse.up()
+    track, thumbs = _selection_slider(page)
+    thumb = thumbs.nth(1)
+    y = _drag_thumb(page, thumb, track["x"] + track["width"] + 40)
     page.get_by_text(re.compile(rf"Selected: frames \d+–{last_frame} ")).wait_for(timeout=20_000)
     box = thumb.bounding_box()
     under = page.evaluate("([x, y]) => document.elementFromPoint(x, y).className", [box["x"] + box["width"] / 2, y])
