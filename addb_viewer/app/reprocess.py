@@ -28,7 +28,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from addb_viewer.app.diagnosis import kept_reports, restore_reports
-from addb_viewer.app.flags import pending_replaced
+from addb_viewer.app.flags import FlagView, build_view, pending_replaced
 from addb_viewer.app.jobs import JobResult, JobSpec, SolverJob, new_work_dir, prestart_solver
 from addb_viewer.app.summary import comparison_markdown, trial_summary
 from annotations import AnnotationError, AnnotationStore
@@ -162,6 +162,52 @@ CONFIRM_AFTER_S = 1.0
 """Least time between the pending-proposal warning and the press that goes ahead, s."""
 
 
+def output_view(store: AnnotationStore, out_dir: str | Path, trial: str) -> FlagView | None:
+    """:class:`~addb_viewer.app.flags.FlagView` of ``trial`` as the store holds it, against
+    the proposals of its processed output (``OUT/<trial>/trial.npz``, ``proposed``): the
+    review state of a trial that is not on screen. None when that output cannot be read (no
+    file, damaged, without the array), or the store refuses the trial
+    (:class:`annotations.AnnotationError`)."""
+    path = Path(out_dir) / trial / "trial.npz"
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            proposed = np.asarray(npz["proposed"], dtype=bool)
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+    if proposed.ndim != 1:
+        return None
+    try:
+        return build_view(store.review(trial), proposed)
+    except AnnotationError:
+        return None
+
+
+def _pending_count(pending: list[tuple[str, int]]) -> str:
+    """"11 proposed frames of walk" or "14 proposed frames (walk 11, run 3)"."""
+    if len(pending) == 1:
+        trial, n = pending[0]
+        return f"{n} proposed frames of {trial} are"
+    parts = ", ".join(f"{trial} {n}" for trial, n in pending)
+    return f"{sum(n for _, n in pending)} proposed frames ({parts}) are"
+
+
+def _pending_warning(name: str, pending: list[tuple[str, int]]) -> str:
+    """The first press's warning of a Reprocess of ``name`` that would fit ``pending``
+    (``(trial, frames)``) as measured frames (markdown)."""
+    others = [trial for trial, _ in pending if trial != name]
+    also = ""
+    if others:
+        also = (f" A Reprocess of {name} fits {', '.join(others)} again too (the body mass and the segment masses "
+                "are fitted over every trial with force plates).")
+    whose = "trial's" if len(pending) == 1 else "trials'"
+    return (
+        f"<span style='color:#c00'>**{_pending_count(pending)} still pending.**</span>{also} The "
+        f"{whose} flags replace the solver's own choice, so Reprocess fits them as measured frames (with the "
+        "plates' force, often none: marker and residual errors rise). Accept or reject them first (All "
+        "proposals), or press Reprocess again to fit them as measured."
+    )
+
+
 class SecondThought:
     """A press that warns first and goes ahead when pressed again about the same thing
     (``key``, e.g. the trial and its pending frames) at least :data:`CONFIRM_AFTER_S` later:
@@ -220,8 +266,9 @@ class Reprocessor:
     def reprocess(self, trial: str | None = None) -> None:
         """Run the solver on ``trial`` (default: the one shown) with the current flags.
 
-        When the shown trial's flags replace the solver's proposals and some proposals are
-        still pending (:func:`~addb_viewer.app.flags.pending_replaced`), the first press
+        When some trial the run rewrites (:func:`written_trials`: the one shown, or any other
+        with dynamics) has flags that replace the solver's proposals while some proposals
+        are still pending (:func:`~addb_viewer.app.flags.pending_replaced`), the first press
         says so and starts nothing; pressed again with the same pending frames, at least
         :data:`CONFIRM_AFTER_S` later (a double click is not a second thought), it runs."""
         app = self.app
@@ -230,15 +277,11 @@ class Reprocessor:
         if name is None:
             self._say("No trial to reprocess.")
             return
-        view = app.view if app.trial is not None and app.trial.trial == name else None
-        pending = pending_replaced(view) if view is not None else 0
-        if pending and not self.pending_warning.confirmed((name, pending)):
-            self._say(
-                f"<span style='color:#c00'>**{pending} proposed frames of {name} are still pending.**</span> The "
-                "trial's flags replace the solver's own choice, so Reprocess fits them as measured frames (with the "
-                "plates' force, often none: marker and residual errors rise). Accept or reject them first (All "
-                "proposals), or press Reprocess again to fit them as measured."
-            )
+        # every trial with dynamics is rewritten, since the masses are fitted over all of them
+        trials = written_trials(app.paths.subject_dir, app.paths.out_dir, name)
+        pending = self._pending(trials)
+        if pending and not self.pending_warning.confirmed(tuple(pending)):
+            self._say(_pending_warning(name, pending))
             return
         self.pending_warning.forget()
         if self.running:  # before the reports of the running one's trials are read again
@@ -246,9 +289,7 @@ class Reprocessor:
             return
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
         # flags change the dynamics only: the child reuses the kinematics cached by the last
-        # full run (a full run when that cache is missing or stale, e.g. after an extension);
-        # every trial with dynamics is rewritten, since the masses are fitted over all of them
-        trials = written_trials(app.paths.subject_dir, app.paths.out_dir, name)
+        # full run (a full run when that cache is missing or stale, e.g. after an extension)
         spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, trials, self._masks(), dynamics_only=True)
         self._review = self._review_digest()  # the flags this run takes, for a dataset run's manifest
         self._kept = kept_reports(app.paths.out_dir, trials)  # the solver rewrites those folders without them
@@ -301,11 +342,10 @@ class Reprocessor:
         if self.running:
             self._say("A solver run is already in progress; the correction was not saved (press again once it ends).")
             return None
-        view = app.view if app.trial is not None and app.trial.trial == name else None
-        pending = pending_replaced(view) if view is not None else 0
+        pending = self._pending(written_trials(app.paths.subject_dir, app.paths.out_dir, name))
         if pending:
             self._say(
-                f"<span style='color:#c00'>**{pending} proposed frames of {name} are still pending**</span>: accept or reject them first "
+                f"<span style='color:#c00'>**{_pending_count(pending)} still pending**</span>: accept or reject them first "
                 "(All proposals); the correction was not saved."
             )
             return None
@@ -321,6 +361,24 @@ class Reprocessor:
         self._say(f"Saved `{entry['cause']}` in {saved.name}; reprocessing {name} with it…")
         self.reprocess(name)
         return entry
+
+    def _pending(self, trials: tuple[str, ...]) -> list[tuple[str, int]]:
+        """``(trial, frames)`` for each of ``trials`` with pending proposals that a run fits as
+        measured frames (:func:`~addb_viewer.app.flags.pending_replaced`): the shown trial's
+        from the page's view, the others' from the store and their processed output
+        (:func:`output_view`). Empty without a review record (the
+        solver then keeps its own proposals)."""
+        app = self.app
+        if app.store is None:
+            return []
+        found = []
+        for name in trials:
+            shown = app.trial is not None and app.trial.trial == name
+            view = app.view if shown else output_view(app.store, app.paths.out_dir, name)
+            n = pending_replaced(view) if view is not None else 0
+            if n:
+                found.append((name, n))
+        return found
 
     def _masks(self) -> dict[str, np.ndarray]:
         """The reviewer's ``unmeasured_force`` masks as the solver takes them

@@ -137,3 +137,41 @@ def test_a_review_record_outside_the_subject_folder_is_named(walk_processed: Pat
         assert f"The review record is {record}" in capsys.readouterr().err
     finally:
         os.chmod(ro, stat.S_IRWXU)
+
+
+def test_reprocess_of_another_trial_warns_about_the_pending_proposals_it_would_refit(
+    walk_processed: Path, tmp_path: Path, make_app, started: list
+) -> None:
+    """A Reprocess rewrites every trial with dynamics (the masses are fitted over all of
+    them), so the pending proposals of a trial that is not on screen are fitted as measured
+    too: a Reprocess pressed on the static trial, with the walk flagged and its proposals
+    pending, warns first and names the walk; the same holds for "Apply the named cause"."""
+    subject = writable_copy(WALK, tmp_path / "walk")
+    out = tmp_path / "out"
+    shutil.copytree(walk_processed, out)
+    app = make_app(ReviewPaths.for_subject(subject, out))
+    assert app.trial.trial == "walk" and reprocess.written_trials(subject, out, "static") == ("static", "walk")
+    n_proposed = int(app.view.proposed.sum())
+    frame = int(np.flatnonzero(~app.view.proposed)[0])
+    app.seek(frame)
+    app.edit("flag", lambda ed, k, foot: ed.toggle(k, foot))
+    assert pending_replaced(app.view) == n_proposed > 0
+    app.load_trial("static")
+    assert app.trial.trial == "static" and not app.trial.has_dynamics
+    app.jobs.reprocess()
+    status = app.panel.job_status.content
+    assert not started and f"{n_proposed} proposed frames of walk are still pending" in status
+    assert "A Reprocess of static fits walk again too" in status
+    # the correction of a diagnosis is not saved either while the walk's proposals are pending
+    (out / "static" / "diagnosis.json").write_text('{"extension": {"cause": "force_delay", "parameters": {}}}', encoding="utf-8")
+    assert app.jobs.apply_diagnosis() is None and f"{n_proposed} proposed frames of walk are still pending" in app.panel.job_status.content
+    assert not (subject / "addb_extensions.json").exists()
+    app.jobs.pending_warning.at -= reprocess.CONFIRM_AFTER_S  # the warning read: pressed again later
+    app.jobs.reprocess()  # the reviewer means it (the apply above warned but did not reset the warning)
+    assert len(started) == 1 and started[0].trials == ("static", "walk") and started[0].unmeasured_force["walk"].sum() == 1
+    # once the walk's proposals are decided, the static trial's Reprocess runs at once
+    app.load_trial("walk")
+    app.edit("accept all", lambda ed, k, foot: ed.accept())
+    app.load_trial("static")
+    app.jobs.reprocess()
+    assert len(started) == 2 and started[-1].unmeasured_force["walk"].sum() == n_proposed + 1
