@@ -382,6 +382,8 @@ class ReviewApp:
         for body, files in trial.body_meshes.items():
             meshes[body], p = body_mesh(search, files) if files else (None, [])
             problems += p
+        if self.store is None and self.store_problem is not None:
+            self._open_store()  # a record mended since it failed to open is taken up at the next trial shown
         editor, record_problem = self._editor_for(trial)
         view = editor.view() if editor is not None else None
         self._forget_refusal()

@@ -86,7 +86,9 @@ def test_a_record_on_other_frames_is_not_edited_and_says_why(demo_paths, make_ap
 def test_a_damaged_review_record_keeps_saying_why_flagging_is_off(demo_paths, make_app) -> None:
     """A hand-edited record that does not open disables flagging; the reason stays in the
     page after every trial load, and a flag key says it too (it was shown once, then
-    cleared by the end of the first trial's loading, and the page said only "unavailable")."""
+    cleared by the end of the first trial's loading, and the page said only "unavailable");
+    once the record is mended, the next trial loaded opens it (until 2026-12-01 it stayed
+    disabled until another subject was opened: the explorer's report)."""
     from addb_viewer.locations import annotations_path
 
     record = annotations_path(demo_paths.subject_dir, demo_paths.out_dir)
@@ -101,6 +103,13 @@ def test_a_damaged_review_record_keeps_saying_why_flagging_is_off(demo_paths, ma
     app._edit("flag", lambda ed, frame, foot: ed.toggle(frame, foot))
     assert app.panel.saved.content.startswith("Flagging is unavailable: ") and "no trial or no review record" not in app.panel.saved.content
     assert record.read_text() == '{"schema": "addb.annotations", "vers'  # left as it was
+    # mended (here: removed, as a reviewer restoring a backup would replace it): the next
+    # trial shown opens it again, and flagging works without opening another subject first
+    record.unlink()
+    app.load_trial("walk")
+    assert app.store is not None and app.editor is not None and not app.panel.error.visible
+    app._edit("flag", lambda ed, frame, foot: ed.toggle(frame, foot))
+    assert app.view.flagged.sum() == 1 and app.panel.saved.content.startswith("✓")
 
 
 def test_trial_picker_refuses_names_from_the_page_that_leave_the_output(demo_paths, make_app) -> None:
