@@ -15,6 +15,7 @@ here raises: the review goes on whatever these files hold.
 
 from __future__ import annotations
 
+import html
 import json
 import os
 from pathlib import Path
@@ -110,7 +111,13 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
     path = Path(out_dir) / trial / DIAGNOSIS_FILE
     blocks: list[str] = []
     if not path.is_file():
-        blocks.append(f"Not diagnosed yet: press **Diagnose this trial** (or run `addb diagnose {Path(subject_dir).name} --trial {trial}`).")
+        results, _ = _read_json(path.with_name("results.json"))
+        if isinstance(results, dict) and "n_observed_frames" not in results:  # the dynamics stage did not run
+            error = results.get("dynamics_error")
+            why = f"its dynamics failed: {error['message']}" if isinstance(error, dict) and error.get("message") else "no force plates"
+            blocks.append(f"{trial} has no dynamics ({html.escape(str(why), quote=False)}): nothing to diagnose.")
+        else:
+            blocks.append(f"Not diagnosed yet: press **Diagnose this trial** (or run `addb diagnose {Path(subject_dir).name} --trial {trial}`).")
     else:
         report, problem = _read_json(path)
         if problem is not None or not isinstance(report, dict) or report.get("schema") != "addb.diagnosis":

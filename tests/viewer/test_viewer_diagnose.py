@@ -156,3 +156,21 @@ def test_apply_is_disabled_where_the_correction_cannot_be_saved(walk_processed, 
     assert demo.panel.apply_diagnosis.disabled and "bundled demo is package data" in demo.panel.apply_diagnosis.hint
     assert demo.jobs.apply_diagnosis("walk") is None and "Not applied" in demo.panel.job_status.content
     assert not (demo_paths.subject_dir / "addb_extensions.json").exists()
+
+
+def test_a_trial_without_dynamics_is_not_offered_a_diagnosis(walk_processed, tmp_path) -> None:
+    """The static trial has no force plates: its Diagnosis folder says there is nothing to
+    diagnose, not "press Diagnose this trial" (the explorer's report: the button then answered
+    "nothing to diagnose" beside the same invitation); a trial whose dynamics failed says why."""
+    from addb_viewer.app.diagnosis import diagnosis_markdown
+
+    subject, out0 = walk_processed
+    out = shutil.copytree(out0, tmp_path / "out")
+    assert "n_observed_frames" not in json.loads((out / "static" / "results.json").read_text())
+    assert diagnosis_markdown(out, subject, "static") == "static has no dynamics (no force plates): nothing to diagnose."
+    assert "Not diagnosed yet" in diagnosis_markdown(out, subject, "walk")
+    failed = json.loads((out / "static" / "results.json").read_text())
+    failed["dynamics_error"] = {"type": "ForcePlateError", "message": "grf.mot: plate 2 <has> no force"}
+    (out / "static" / "results.json").write_text(json.dumps(failed))
+    shown = diagnosis_markdown(out, subject, "static")
+    assert shown == "static has no dynamics (its dynamics failed: grf.mot: plate 2 &lt;has&gt; no force): nothing to diagnose."
