@@ -143,10 +143,20 @@ def comparison_markdown(
     """A markdown table of two :func:`trial_summary` results with their change.
 
     "—" marks a figure that is not available (e.g. residuals before the dynamics stage).
+    The change is the difference of the two figures as shown (rounded), so that it reads
+    as their difference ("2.9 → 2.9" changes by 0.0, not by the -0.1 of the unrounded
+    figures), signed when it is not zero.
     """
     lines = ["| | before | after | change |", "|---|---:|---:|---:|"]
     for key, label, digits in _ROWS:
         b, a = before.get(key), after.get(key)
-        change = "—" if a is None or b is None else f"{a - b:+.{digits}f}"
-        lines.append(f"| {label} | {_fmt(b, digits)} | {_fmt(a, digits)} | {change} |")
+        shown_b, shown_a = _fmt(b, digits), _fmt(a, digits)
+        change = "—" if a is None or b is None else _change(float(shown_a) - float(shown_b), digits)
+        lines.append(f"| {label} | {shown_b} | {shown_a} | {change} |")
     return "\n".join(lines)
+
+
+def _change(delta: float, digits: int) -> str:
+    """``delta`` with ``digits`` decimals, signed unless it rounds to zero ("0.00", never "-0.00")."""
+    text = f"{delta:+.{digits}f}"
+    return text[1:] if float(text) == 0.0 else text

@@ -99,3 +99,13 @@ def test_summary_table_marks_missing_dynamics(walk) -> None:
     table = comparison_markdown(before, after)
     assert "| residual force RMS, measured frames (N) | — | 12.5 | — |" in table
     assert "| marker RMS (cm) |" in table and "+0.50" in table
+    # the change is that of the figures as shown: 2.94 -> 2.86 shows 2.9 -> 2.9, change 0.0
+    # (it read -0.1), 1.14 -> 1.16 shows 1.1 -> 1.2, +0.1 (it read +0.0), and a change that
+    # rounds to zero has no sign (it read -0.00)
+    b = dict(before, residual_force_max_n=2.94, residual_moment_rms_nm=1.14, marker_max_cm=1.001)
+    a = dict(before, residual_force_max_n=2.86, residual_moment_rms_nm=1.16, marker_max_cm=0.999)
+    table = comparison_markdown(b, a)
+    assert "| residual force max, measured frames (N) | 2.9 | 2.9 | 0.0 |" in table
+    assert "| residual moment RMS, measured frames (N·m) | 1.1 | 1.2 | +0.1 |" in table
+    assert "| marker max (cm) | 1.00 | 1.00 | 0.00 |" in table
+    assert "| frames left out of dynamics | " in table and "-0" not in table
