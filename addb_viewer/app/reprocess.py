@@ -243,7 +243,7 @@ class Reprocessor:
         self._lock = threading.Lock()
         self.last_result: JobResult | None = None
         self.finished = threading.Event()
-        self.pending_warning = SecondThought()  # Reprocess with pending proposals: (trial, pending frames)
+        self.pending_warning = SecondThought()  # Reprocess with pending proposals: ((trial, pending frames), ...)
         self._review: str | None | bool = False  # the flags' digest when the running Reprocess started
         self._tree = ExitStack()  # the output tree held by the run going (_hold_output_tree)
         self._kept: dict[str, tuple[bytes, int]] = {}  # the diagnosis reports of the trials a Reprocess rewrites

@@ -26,7 +26,7 @@ def test_open_cancels_the_running_reprocess_and_says_so(walk_processed: Path, ma
     app.edit("flag", lambda ed, _k, _f: ed.flag_range(10, 12, "left"))
     assert "✓ saved" in app.panel.saved.content
     before = (tmp_path / "first_out" / "walk" / "results.json").read_bytes()
-    app.jobs.pending_warning.key = ("walk", int(app.view.pending.sum()))  # the pending-proposal warning was seen
+    app.jobs.pending_warning.key = (("walk", int(app.view.pending.sum())),)  # the pending-proposal warning was seen (trial, frames) per trial
     app.jobs.pending_warning.at = -1e9  # long ago
     app.jobs.reprocess("walk")
     assert app.jobs.running
