@@ -385,6 +385,7 @@ FIGURES: tuple[Figure, ...] = (
         "{ diff -r -q -x results.json -x trial.npz -x subject.json -x .addb_cache /tmp/addb_checks/before_$f /tmp/addb_checks/after_$f "
         "&& echo 'every other file byte-identical' || echo 'the files listed differ'; }; done",
         "accuracy", 3.0),
+    Figure("band-solve", RESULTS, f"{PY} tests/benchmarks/probe_band_solve.py --repeat 7", "timing", 1.0, fence=False),
     Figure("dataset", RESULTS, f"{PY} tests/benchmarks/bench_dataset.py --dask-defaults --host-reference", "timing", 4.0),
     Figure("dataset-client", RESULTS, f"{PY} tests/benchmarks/bench_dataset_client.py", "timing", 1.5, fence=False),
     Figure("reprocess", RESULTS, f"{PY} tests/benchmarks/bench_reprocess.py --repeat 3 --host-reference walk camargo", "timing", 2.5, fence=False),
