@@ -20,6 +20,8 @@ import html
 import json
 import threading
 import time
+import zipfile
+import zlib
 from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
@@ -172,7 +174,7 @@ def output_view(store: AnnotationStore, out_dir: str | Path, trial: str) -> Flag
     try:
         with np.load(path, allow_pickle=False) as npz:
             proposed = np.asarray(npz["proposed"], dtype=bool)
-    except (OSError, ValueError, KeyError, EOFError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):  # as load_processed's damaged file
         return None
     if proposed.ndim != 1:
         return None
