@@ -21,6 +21,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from solver.dataset.summary import dynamics_error_message
 from solver.diagnose.report import (
     STANDING_OUT_HEADING,
     candidate_line,
@@ -113,8 +114,8 @@ def diagnosis_markdown(out_dir: str | Path, subject_dir: str | Path, trial: str)
     if not path.is_file():
         results, _ = _read_json(path.with_name("results.json"))
         if isinstance(results, dict) and "n_observed_frames" not in results:  # the dynamics stage did not run
-            error = results.get("dynamics_error")
-            why = f"its dynamics failed: {error['message']}" if isinstance(error, dict) and error.get("message") else "no force plates"
+            failed = dynamics_error_message(results)
+            why = f"its dynamics failed: {failed}" if failed else "no force plates"
             blocks.append(f"{trial} has no dynamics ({html.escape(str(why), quote=False)}): nothing to diagnose.")
         else:
             blocks.append(f"Not diagnosed yet: press **Diagnose this trial** (or run `addb diagnose {Path(subject_dir).name} --trial {trial}`).")
