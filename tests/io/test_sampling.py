@@ -9,8 +9,9 @@ import pytest
 
 from solver.io.trc import read_trc
 from solver.sampling import frame_interval, frame_rate
+from tests.conftest import SHARED_DATA
 
-DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+DATA = SHARED_DATA
 TRC_FILES = sorted(DATA.rglob("*.trc"))
 
 
