@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +14,9 @@ from solver.dynamics.fit import FitSettings, FitTrialInput, _TrialProblem
 from solver.errors import DynamicsError
 from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
+from tests.conftest import SHARED_DATA
 
-MODEL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "models" / "Rajagopal2016.osim"
+MODEL = SHARED_DATA / "models" / "Rajagopal2016.osim"
 
 
 def _random_block_bands(t: int, nbp1: int, nf: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -18,9 +18,10 @@ from solver.dynamics.fit import FitOutput, alternating_fit, converged_fit, mass_
 from solver.dynamics.joint_fit import _BorderedProblem, fit_dynamics_joint
 from solver.dynamics.stage import DynamicsOptions
 from solver.pipeline import ProcessOptions, process_subject
+from tests.conftest import SHARED_DATA
 
 REPO = Path(__file__).resolve().parents[2]
-SUBJECTS = REPO.parent / "shared" / "data" / "subjects"
+SUBJECTS = SHARED_DATA / "subjects"
 WALK = SUBJECTS / "rajagopal2016_walk"
 ALTERNATION = ProcessOptions(dynamics=DynamicsOptions(fit=alternating_fit()))
 

@@ -9,8 +9,9 @@ import pytest
 
 from addb_viewer.cli import main
 from solver.io.summary import summarize
+from tests.conftest import SHARED_DATA
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+SHARED = SHARED_DATA.parent
 B3D = SHARED / "data" / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 
 

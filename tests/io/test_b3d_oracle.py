@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from solver.io.b3d import B3dFile, dof_names, open_b3d
+from tests.conftest import SHARED_DATA
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+SHARED = SHARED_DATA.parent
 B3D = SHARED / "data" / "b3d" / "results.b3d"  # the published subject: its absence fails, as every shared file's
 ORACLE_PATH = SHARED / "oracles" / "b3d_results_oracle.json"
 

@@ -14,9 +14,8 @@ import pytest
 from solver.errors import C3dFormatError
 from solver.io.c3d import read_c3d, rotation_to_opensim
 from solver.io.types import ForceRecording, MarkerTrajectories
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA as DATA
 
-DATA = SHARED_DATA
 C3D_FILES = sorted(DATA.rglob("*.c3d"))
 FOOT = ("CAL", "MT1", "MT2", "MAL")
 Loaded = tuple[Path, MarkerTrajectories, ForceRecording]

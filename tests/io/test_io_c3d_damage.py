@@ -21,9 +21,9 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from solver.io.c3d_layout import _dec_floats, check_c3d
+from tests.conftest import SHARED_DATA as DATA
 
 ROOT = Path(__file__).resolve().parents[2]
-DATA = ROOT.parent / "shared" / "data"
 TRIALS = DATA / "trials" / "opensim_c3d"
 SOURCES = {name: (TRIALS / name).read_bytes() for name in ("walking2.c3d", "walking5.c3d")}
 PARAMETER_END = 13 * 512  # header block + 12 parameter blocks in both files; data after

@@ -19,9 +19,9 @@ from solver.io.external_loads import (
 )
 from solver.io.mot import read_forces, read_table
 from solver.io.review import read_review
-from tests.conftest import OPENSIM_REASON, SHARED_DATA, import_tool
+from tests.conftest import OPENSIM_REASON, import_tool
+from tests.conftest import SHARED_DATA as DATA
 
-DATA = SHARED_DATA
 LOADS = sorted(DATA.rglob("grf_*.xml"))
 REVIEWS = sorted(DATA.rglob("*review*.json"))
 

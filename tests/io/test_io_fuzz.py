@@ -16,9 +16,8 @@ from hypothesis import strategies as st
 from solver.errors import AddbError
 from solver.io.mot import read_coordinates, read_forces, read_table
 from solver.io.trc import read_trc
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA as DATA
 
-DATA = SHARED_DATA
 N_ROWS = 12
 
 

@@ -25,10 +25,10 @@ from solver.io.mot import (
 )
 from solver.io.plate_moments import detect_reference
 from solver.io.types import ForcePlate, ForceRecording, Table
-from tests.conftest import OPENSIM_REASON, SHARED_DATA, import_tool
+from tests.conftest import OPENSIM_REASON, import_tool
+from tests.conftest import SHARED_DATA as DATA
 from tests.io.damage import damaged, expect_format_error
 
-DATA = SHARED_DATA
 MOT_FILES = sorted([*DATA.rglob("*.mot"), *DATA.rglob("*.sto")])
 G = 9.80665
 

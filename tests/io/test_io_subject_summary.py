@@ -17,10 +17,10 @@ import pytest
 from solver.errors import FileFormatError, SubjectFolderError, TrcFormatError
 from solver.io.subject import load_subject, load_trial
 from solver.io.summary import format_summary, summarize
-from tests.conftest import OPENSIM_REASON, SHARED_DATA, import_tool, writable_copy
+from tests.conftest import OPENSIM_REASON, import_tool, writable_copy
+from tests.conftest import SHARED_DATA as DATA
 from tests.opensim_tables import trc_times_by_hand
 
-DATA = SHARED_DATA
 SUBJECTS = sorted(p for p in (DATA / "subjects").iterdir() if p.is_dir())
 #: name -> (mass kg, height m, {trial: has forces}) from the data README and JSON files
 EXPECTED = {

@@ -10,10 +10,10 @@ import pytest
 from solver.errors import TrcFormatError
 from solver.io.trc import read_trc, write_trc
 from solver.io.types import MarkerTrajectories
-from tests.conftest import OPENSIM_REASON, SHARED_DATA, import_tool
+from tests.conftest import OPENSIM_REASON, import_tool
+from tests.conftest import SHARED_DATA as DATA
 from tests.io.damage import damaged, expect_format_error
 
-DATA = SHARED_DATA
 TRC_FILES = sorted(DATA.rglob("*.trc"))
 PELVIS_WORDS = ("asi", "psi", "sacr")
 

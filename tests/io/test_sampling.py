@@ -9,9 +9,8 @@ import pytest
 
 from solver.io.trc import read_trc
 from solver.sampling import frame_interval, frame_rate
-from tests.conftest import SHARED_DATA
+from tests.conftest import SHARED_DATA as DATA
 
-DATA = SHARED_DATA
 TRC_FILES = sorted(DATA.rglob("*.trc"))
 
 

@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from solver.model.osim import read_osim
 from solver.model.skeleton import Skeleton
+from tests.conftest import SHARED_DATA
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+SHARED = SHARED_DATA.parent
 ORACLES = SHARED / "oracles"
 MODELS = SHARED / "data" / "models"
 ORACLE_MODELS = {
