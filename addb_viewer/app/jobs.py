@@ -447,8 +447,9 @@ def _warm_child() -> int:
     input (EOF: the app ended, exit), send standard error to ``child.log`` beside the spec,
     then run that one job (:func:`_child`)."""
     try:  # what a Reprocess / process job imports; a failure is reported by the job itself
-        import scipy.signal  # noqa: F401  (the dynamics' filter)
+        from solver.scipy_imports import import_scipy
 
+        import_scipy("scipy.signal")  # the dynamics' filter
         import solver.dynamics.stage
         import solver.pipeline
         import solver.results  # noqa: F401

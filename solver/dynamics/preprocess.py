@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from solver.errors import DynamicsError
 from solver.masks import true_runs  # noqa: F401 (re-exported: the one runs helper lives in solver.masks)
+from solver.scipy_imports import import_scipy
 
 FloatArray = NDArray[np.float64]
 
@@ -46,11 +47,11 @@ def lowpass(x: FloatArray, rate_hz: float, cutoff_hz: float, order: int = 3) -> 
     nyquist = 0.5 * rate_hz
     if cutoff_hz >= nyquist or x.shape[0] < 4:
         return x.copy()
-    from scipy.signal import butter, sosfiltfilt  # ~0.5 s to import: only when filtering
+    signal = import_scipy("scipy.signal")  # ~0.5 s to import: only when filtering
 
-    sos = butter(order, cutoff_hz / nyquist, btype="low", output="sos")
+    sos = signal.butter(order, cutoff_hz / nyquist, btype="low", output="sos")
     padlen = min(3 * (2 * len(sos) + 1), x.shape[0] - 1)
-    return sosfiltfilt(sos, x, axis=0, padlen=padlen)
+    return signal.sosfiltfilt(sos, x, axis=0, padlen=padlen)
 
 
 def moment_about_origin(force: FloatArray, cop: FloatArray, free_moment: FloatArray) -> FloatArray:

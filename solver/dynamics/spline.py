@@ -28,10 +28,12 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sps
 from numpy.typing import NDArray
-from scipy.interpolate import BSpline
 from scipy.sparse.linalg import splu
 
 from solver.errors import DynamicsError
+from solver.scipy_imports import import_scipy
+
+BSpline = import_scipy("scipy.interpolate").BSpline  # without scipy 1.17's docstring notes
 
 FloatArray = NDArray[np.float64]
 
