@@ -30,6 +30,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
@@ -37,6 +38,7 @@ from solver.dataset.manifest import MANIFEST_NAME, read_manifest
 from solver.dataset.summary import dynamics_error_message
 from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
+from solver.masks import true_runs
 from solver.outputs import SUMMARY_NAME, read_summary
 
 #: Output folder of a dataset inside a writable dataset folder.
@@ -310,15 +312,26 @@ def _results_row(res: Path) -> dict[str, Any] | None:
     }  # fmt: skip
 
 
+def _proposed(npz: Path) -> NDArray[np.bool_] | None:
+    """``(T,)`` the frames a trial's fit proposes as unmeasured, from its ``trial.npz`` (None
+    when it cannot be read or has none)."""
+    try:
+        with np.load(npz) as z:
+            return np.asarray(z["proposed"], dtype=bool).reshape(-1)
+    except (OSError, KeyError, ValueError):
+        return None
+
+
 #: The figures of a manifest's trial row that a later Reprocess (which rewrites the trial's
-#: results.json, not the dataset run's manifest) replaces.
+#: results.json and trial.npz, not the dataset run's manifest) replaces; its proposals too.
 _REPROCESSED = ("status", "measured_frames", "marker_rms_m", "hicks_linear_ok", "hicks_angular_ok", "dynamics_error")
 
 
 def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any]]]:
     """(processing state, detail, trial rows) from a subject's output folder: the dataset
     run's manifest, with the figures of each trial whose results.json is newer (the review
-    app's Reprocess) taken from there; without a manifest, the results.json files."""
+    app's Reprocess) taken from there, and its proposals from the trial.npz beside it;
+    without a manifest, the results.json files."""
     manifest = read_manifest(subject.out_dir)
     if manifest is not None:
         if manifest.get("status") == "failed":
@@ -331,6 +344,8 @@ def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any
             res = subject.out_dir / str(r.get("trial")) / "results.json"
             if res.is_file() and res.stat().st_mtime_ns > written and (new := _results_row(res)) is not None:
                 r.update({k: new[k] for k in _REPROCESSED})
+                if (proposed := _proposed(res.parent / "trial.npz")) is not None:  # its fit's proposals
+                    r["frames"], r["proposed_ranges"] = len(proposed), [list(x) for x in true_runs(proposed)]
         return PROCESSED, "", rows
     rows = [row for res in sorted(subject.out_dir.glob("*/results.json")) if (row := _results_row(res)) is not None]
     return (PROCESSED if rows else NOT_PROCESSED), "", rows

@@ -8,6 +8,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from addb_viewer.app.queue import (
@@ -177,7 +178,8 @@ def test_next_to_review_reads_after_in_the_order_the_reviewer_saw() -> None:
 
 def test_a_reprocess_after_the_dataset_run_shows_its_figures_in_the_queue(dataset: Path) -> None:
     """The review app's Reprocess rewrites a trial's results.json, not the dataset run's
-    manifest: the queue takes that trial's figures from the newer results.json."""
+    manifest: the queue takes that trial's figures from the newer results.json, and its
+    pending proposals from the trial.npz written with it."""
     import os
 
     _, out, subjects = dataset_subjects(dataset)
@@ -191,7 +193,17 @@ def test_a_reprocess_after_the_dataset_run_shows_its_figures_in_the_queue(datase
     os.utime(res, ns=(manifest.stat().st_mtime_ns + 10**9,) * 2)  # written after the run
     after = {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")]
     assert after.marker_rms_m == 0.0131 and after.measured_frames == before.measured_frames - 14
-    assert after.hicks_linear_ok is False and after.pending == before.pending  # proposals: the run's
+    assert after.hicks_linear_ok is False and after.pending == before.pending  # trial.npz unchanged
+    # the Reprocess's fit proposes more frames (its trial.npz, written with results.json)
+    npz = res.parent / "trial.npz"
+    with np.load(npz) as z:
+        arrays = dict(z)
+    unmeasured = np.flatnonzero(~arrays["proposed"])[:9]
+    arrays["proposed"][unmeasured] = True
+    np.savez(npz, **arrays)
+    os.utime(npz, ns=(manifest.stat().st_mtime_ns + 10**9,) * 2)
+    again = {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")]
+    assert again.pending == before.pending + 9 and again.frames == before.frames
     os.utime(res, ns=(manifest.stat().st_mtime_ns - 10**9,) * 2)  # older than the manifest: the manifest counts
     assert {(r.subject.rel, r.trial): r for r in build_queue(subjects)}[("lab/fresh", "walk")].marker_rms_m == before.marker_rms_m
 
