@@ -163,6 +163,10 @@ def parse_degrees(tokens: Sequence[str]) -> FloatArray:
     return out
 
 
+#: The precisions format_degrees tries, shortest first (17 digits always read back, 25 never needed).
+_FORMAT_CONTEXTS = tuple(Context(prec=digits) for digits in range(17, 26))
+
+
 def format_degrees(x: float) -> str:
     """Degrees text of ``x`` radians that :func:`parse_degrees` reads back as exactly ``x``."""
     x = float(x)
@@ -171,8 +175,8 @@ def format_degrees(x: float) -> str:
     if x == 0.0:
         return repr(x)  # keeps the sign of -0.0
     exact = _CTX.multiply(Decimal(x), _DEG_PER_RAD)
-    for digits in range(17, 26):
-        text = format(Context(prec=digits).plus(exact), "g")
+    for context in _FORMAT_CONTEXTS:
+        text = format(context.plus(exact), "g")
         if _rad_from_deg_text(text) == x:
             return text
     raise AssertionError(f"no degree text reads back as {x!r}")  # pragma: no cover
