@@ -6,7 +6,8 @@ The dynamics fit's normal matrix H is symmetric and block-banded in time: with T
 and solved by a banded Cholesky factorization (LAPACK ``dpbtrf`` / ``dpbtrs``) in the
 lower band storage ``ab[d, c] = H[c + d, c]`` (d = 0 is the diagonal), whose column c is
 row c of the upper block band read from its diagonal on: a strided view of the blocks,
-so the conversion is a single copy.
+so the conversion is a single copy. :func:`banded_forward_solve` applies the factor's
+inverse to many right-hand sides at once (the joint fit's mass border).
 """
 
 from __future__ import annotations
@@ -14,9 +15,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import LinAlgError
-from scipy.linalg.lapack import dpbtrf, dpbtrs
+from scipy.linalg.lapack import dpbtrf, dpbtrs, dtbtrs
 
 FloatArray = NDArray[np.float64]
+
+#: Rows of the band per chunk of :func:`banded_forward_solve`: a chunk of the Camargo
+#: circuit's factor (145 band rows) is 9 MB; a system of at most this many rows is solved
+#: whole (tests/benchmarks/RESULTS.md, block ``band-solve``, times 512 to 8192).
+FORWARD_CHUNK = 8192
 
 
 class BlockBands:
@@ -158,3 +164,50 @@ def banded_cholesky_solve(ab: FloatArray, rhs: FloatArray) -> FloatArray:
         H is not positive definite (or a LAPACK argument error).
     """
     return banded_cholesky_back(banded_cholesky(ab), rhs)
+
+
+def banded_forward_solve(factor: FloatArray, rhs: FloatArray, chunk: int = FORWARD_CHUNK) -> FloatArray:
+    """``L^-1 rhs`` for the lower banded Cholesky factor L of :func:`banded_cholesky`, by
+    forward substitution in row chunks (Golub & Van Loan, *Matrix Computations*, 4th ed.,
+    §3.1.4 and §4.3).
+
+    LAPACK's ``dtbtrs`` solves one right-hand side at a time and reads the whole factor for
+    each; a large factor (the Camargo circuit's is 51 MB) then comes from memory once per
+    column. Here each chunk of rows [s, e) first subtracts its dependence on the solution
+    above it, one dense product with the band's corner ``L[s:s + u, s - u:s]``, and then
+    ``dtbtrs`` solves the chunk's own band, a few MB read once for all columns. A system of
+    at most ``chunk`` rows is one ``dtbtrs`` call, bit for bit; larger ones agree with it to
+    round-off (1e-13 relative on the Camargo circuit, block ``band-solve``).
+
+    Parameters
+    ----------
+    factor
+        ``(u + 1, N)`` lower band storage of L, ``factor[d, c] = L[c + d, c]``, Fortran-ordered.
+    rhs
+        ``(N,)`` or ``(N, k)`` right-hand sides.
+    chunk
+        Rows per chunk (any positive number).
+
+    Returns
+    -------
+    The solution, shaped as ``rhs``.
+
+    Raises
+    ------
+    LinAlgError
+        A zero on the factor's diagonal (or a LAPACK argument error), naming its chunk.
+    """
+    u, n = factor.shape[0] - 1, factor.shape[1]
+    x = np.array(rhs, dtype=np.float64, order="F", copy=True).reshape(n, -1, order="F")
+    for s in range(0, n, chunk):
+        e = min(s + chunk, n)
+        if s > 0:  # the chunk's rows that reach above it: L[r, c] = factor[r - c, c]
+            lo, hi = max(s - u, 0), min(s + u, e)
+            d = np.arange(s, hi)[:, None] - np.arange(lo, s)[None, :]
+            corner = np.where(d <= u, factor[np.minimum(d, u), np.arange(lo, s)[None, :]], 0.0)
+            x[s:hi] -= corner @ x[lo:s]
+        part, info = dtbtrs(factor[:, s:e], x[s:e], uplo="L")
+        if info != 0:
+            raise LinAlgError(f"dtbtrs failed on rows {s}..{e} (info {info})")
+        x[s:e] = part
+    return x.reshape(rhs.shape)

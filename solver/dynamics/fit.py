@@ -395,9 +395,10 @@ class _TrialProblem:
         # linearized next, and its centroidal terms are the ones the line search computed
         self._state: tuple[FloatArray, ...] | None = None
         self._bands: BlockBands | None = None  # the normal matrix's storage, reused
-        #: keep pinocchio's ``data.of`` of every frame at each linearization, as
-        #: ``subtree_rates`` ``(T, njoints, 6)`` (the joint mass fit's mass columns need them)
-        self.keep_subtree_rates = False
+        #: the joints whose pinocchio ``data.of`` (each subtree's momentum rate) every frame's
+        #: linearization keeps, in this order, as ``subtree_rates`` ``(T, len, 6)`` (the joint
+        #: mass fit's mass columns need them); empty: none kept
+        self.subtree_joints: tuple[int, ...] = ()
         self.subtree_rates: FloatArray | None = None
 
     def _init_coefficients(self) -> None:
@@ -487,11 +488,13 @@ class _TrialProblem:
         hq = np.empty((t, 6, nv))
         hv = np.empty((t, 6, nv))
         ha = np.empty((t, 6, nv))
-        of = np.empty((t, model.njoints, 6)) if self.keep_subtree_rates else None
+        keep = self.subtree_joints
+        of = np.empty((t, len(keep), 6)) if keep else None
         for k in range(t):
             _, hq[k], hv[k], ha[k] = pin.computeCentroidalDynamicsDerivatives(model, data, qp[k], vp[k], ap[k])
-            if of is not None:  # each subtree's momentum rate, world frame, about the origin
-                of[k] = [f.vector for f in data.of]
+            if of is not None:  # each kept subtree's momentum rate, world frame, about the origin
+                rates = data.of.tolist()  # one conversion: indexing data.of converts every time
+                of[k] = [rates[j].vector for j in keep]
         self.subtree_rates = of
         # the external moment about the centre of mass moves with it: d/dq of c x F_ext, with
         # the centre-of-mass Jacobian J_c = A_g[:3] / m (d hdot / d a is the centroidal

@@ -57,7 +57,7 @@ import numpy as np
 from scipy.linalg import LinAlgError
 from scipy.linalg.lapack import dtbtrs
 
-from solver.dynamics.banded import banded_cholesky
+from solver.dynamics.banded import banded_cholesky, banded_forward_solve
 from solver.dynamics.fit import (
     FitOutput,
     FitSettings,
@@ -127,7 +127,8 @@ def _mass_step(schur: FloatArray, rhs: FloatArray, constraint: FloatArray, f: Fl
 
 def _triangular_solve(factor: FloatArray, rhs: FloatArray, transpose: bool = False) -> FloatArray:
     """``L^-1 rhs`` (``L^-T rhs`` with ``transpose``) for the lower banded Cholesky factor L
-    of :func:`solver.dynamics.banded.banded_cholesky` (LAPACK ``dtbtrs``); ``rhs`` ``(N,)`` or
+    of :func:`solver.dynamics.banded.banded_cholesky` (LAPACK ``dtbtrs``; several right-hand
+    sides forward: :func:`solver.dynamics.banded.banded_forward_solve`); ``rhs`` ``(N,)`` or
     ``(N, k)``.
 
     Raises
@@ -136,6 +137,8 @@ def _triangular_solve(factor: FloatArray, rhs: FloatArray, transpose: bool = Fal
         A LAPACK argument error or a zero on the factor's diagonal.
     """
     b = rhs.reshape(rhs.shape[0], -1)
+    if not transpose and b.shape[1] > 1:  # the mass border: in row chunks that stay in cache
+        return banded_forward_solve(factor, b).reshape(rhs.shape)
     x, info = dtbtrs(factor, b, uplo="L", trans="T" if transpose else "N")
     if info != 0:
         raise LinAlgError(f"dtbtrs failed (info {info})")
@@ -155,25 +158,30 @@ class _BorderedProblem(_TrialProblem):
         self.rows: FloatArray | None = None  # (T, 6, J) weighted d res / d s at the last linearization
         self.res: FloatArray | None = None  # (T, 6) weighted residual wrench there
         self.border: FloatArray | None = None  # (nc, nf, J) J_a^T rows
-        self.keep_subtree_rates = True
+        parents = model.parents
+        # the rates mass_rows reads: each mass joint's subtree and its children's
+        self.subtree_joints = tuple(sorted(set(joints) | {c for c in range(1, model.njoints) if parents[c] in set(joints)}))
 
     def mass_rows(self, q: FloatArray, ofs: FloatArray) -> FloatArray:
         """``(T, 6, J)`` derivatives of the unweighted root residual wrench [force, moment
         about the centre of mass] (N, N·m; ground frame) with respect to s_j, the relative
         change of the mass and inertia of joint ``joints[j]`` (module docstring).
 
-        ``ofs``: ``(T, njoints, 6)`` pinocchio's ``data.of`` at q of every frame (each
-        subtree's momentum rate, world frame, about the origin), as the linearization keeps
-        them (``subtree_rates``)."""
+        ``ofs``: ``(T, len(subtree_joints), 6)`` pinocchio's ``data.of`` at q of every frame
+        for the joints ``subtree_joints`` (each subtree's momentum rate, world frame, about the
+        origin), as the linearization keeps them (``subtree_rates``)."""
         _, _, _, hdot, com = self._dynamics_state(q)
         model = self.sk.model
-        own = ofs.copy()
-        for j in range(model.njoints - 1, 0, -1):
-            own[:, model.parents[j]] -= ofs[:, j]
+        at = {j: i for i, j in enumerate(self.subtree_joints)}
+        own = ofs[:, [at[j] for j in self.joints]]  # (T, J, 6), a copy
+        place = {j: i for i, j in enumerate(self.joints)}
+        for c in reversed(self.subtree_joints):  # a subtree's own rate: minus its children's
+            if (p := model.parents[c]) in place:
+                own[:, place[p]] -= ofs[:, at[c]]
         joints = self.joints
         rot, pos = self.sk._joint_poses_soa(q)
         c_j = np.einsum("jikt,jk->tji", rot[joints], self._lever) + pos[joints].transpose(2, 0, 1)  # (T, J, 3)
-        f_j, n_j = own[:, joints, :3], own[:, joints, 3:]
+        f_j, n_j = own[:, :, :3], own[:, :, 3:]
         d_f = f_j - self._m[None, :, None] * self.g
         dc = self._m[None, :, None] * (c_j - com[:, None, :]) / self.mass
         lin = hdot[:, :3] - self.data.force  # pdot - F_ext

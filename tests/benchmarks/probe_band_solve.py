@@ -3,7 +3,9 @@ stay in cache, against LAPACK's ``dtbtrs`` on the whole band.
 
     .venv/bin/python tests/benchmarks/probe_band_solve.py [--repeat 7] [SUBJECT ...]
 
-A probe for issue 29 (throughput), not a change of ``addb process``. Every step of the
+A probe for issue 29 (throughput): since 2026-12-02 ``addb process`` solves in chunks of
+8192 rows (``solver.dynamics.banded.banded_forward_solve``, the function timed here; a
+system of at most that many rows is one ``dtbtrs`` call). Every step of the
 joint fit (:func:`solver.dynamics.joint_fit._reduced`) solves W = L^-1 [B, g] for each
 trial's banded Cholesky factor L (``(u + 1, N)`` lower band storage) and the J mass columns
 of its border plus the gradient: ``dtbtrs`` runs one column at a time (level-2 BLAS), and on
@@ -39,31 +41,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from example_subjects import subject_folder
 
+from solver.dynamics.banded import banded_forward_solve as chunked_forward_solve
+
 #: Row chunks tried (rows of the band, not frames).
 CHUNKS = (512, 1024, 2048, 4096, 8192)
 SUBJECTS = ("rajagopal2016_walk", "rajagopal2016_run", "opencap_uhlrich2023", "camargo2021_levelground")
-
-
-def chunked_forward_solve(factor: np.ndarray, rhs: np.ndarray, m: int) -> np.ndarray:
-    """``L^-1 rhs`` for the lower banded factor L (``(u + 1, N)`` LAPACK lower band storage,
-    ``factor[d, c] = L[c + d, c]``) and ``rhs`` ``(N, k)``, solved in row chunks of ``m``
-    (module docstring). Raises ``np.linalg.LinAlgError`` for a ``dtbtrs`` error."""
-    from scipy.linalg.lapack import dtbtrs
-
-    u, n = factor.shape[0] - 1, factor.shape[1]
-    x = np.array(rhs, dtype=np.float64, order="F", copy=True)
-    for s in range(0, n, m):
-        e = min(s + m, n)
-        if s > 0:  # the chunk's rows that reach above it: L[r, c] = factor[r - c, c]
-            lo, hi = max(s - u, 0), min(s + u, e)
-            d = np.arange(s, hi)[:, None] - np.arange(lo, s)[None, :]
-            corner = np.where(d <= u, factor[np.minimum(d, u), np.arange(lo, s)[None, :]], 0.0)
-            x[s:hi] -= corner @ x[lo:s]
-        part, info = dtbtrs(factor[:, s:e], x[s:e], uplo="L")
-        if info != 0:
-            raise np.linalg.LinAlgError(f"dtbtrs failed on rows {s}..{e} (info {info})")
-        x[s:e] = part
-    return x
 
 
 def capture(folder: Path) -> tuple[np.ndarray, np.ndarray, int]:

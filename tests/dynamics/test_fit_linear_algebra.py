@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 from scipy.linalg import LinAlgError, solveh_banded
 
-from solver.dynamics.banded import banded_cholesky_solve, lower_band_storage
+from solver.dynamics.banded import (
+    banded_cholesky,
+    banded_cholesky_solve,
+    banded_forward_solve,
+    lower_band_storage,
+)
 from solver.dynamics.fit import FitSettings, FitTrialInput, _TrialProblem
 from solver.errors import DynamicsError
 from solver.model.osim import read_osim
@@ -66,6 +71,38 @@ def test_banded_cholesky_solve_rejects_an_indefinite_matrix() -> None:
     ab = np.array([[1.0, -1.0, 1.0], [0.5, 0.0, 0.0]])
     with pytest.raises(LinAlgError):
         banded_cholesky_solve(ab, np.ones(3))
+
+
+@pytest.mark.parametrize("chunk", [7, 30, 64, 240, 8192])
+def test_banded_forward_solve_in_chunks_is_the_factors_inverse(chunk: int) -> None:
+    """L^-1 B by row chunks (the joint fit's mass border): equal to the dense triangular
+    solve to round-off for every chunk size (chunks shorter than, equal to and longer than
+    the band; 240 rows: one chunk, the whole system), and bit for bit LAPACK's dtbtrs when
+    the system is one chunk."""
+    from scipy.linalg import solve_triangular
+    from scipy.linalg.lapack import dtbtrs
+
+    rng = np.random.default_rng(11)
+    blocks, h = _random_block_bands(40, 5, 6, rng)  # N = 240 rows, band u = 29
+    factor = banded_cholesky(lower_band_storage(blocks))
+    ell = np.linalg.cholesky(h)
+    rhs = rng.normal(size=(h.shape[0], 23))
+    x = banded_forward_solve(factor, rhs, chunk=chunk)
+    np.testing.assert_allclose(x, solve_triangular(ell, rhs, lower=True), rtol=1e-11, atol=1e-12)
+    one = banded_forward_solve(factor, rhs[:, 0], chunk=chunk)
+    assert one.shape == (240,)
+    np.testing.assert_allclose(one, x[:, 0], rtol=1e-12, atol=1e-13)
+    if chunk >= 240:
+        np.testing.assert_array_equal(x, dtbtrs(factor, rhs, uplo="L")[0])
+
+
+def test_banded_forward_solve_names_the_chunk_of_a_zero_pivot() -> None:
+    rng = np.random.default_rng(3)
+    blocks, _ = _random_block_bands(40, 5, 6, rng)
+    factor = banded_cholesky(lower_band_storage(blocks)).copy(order="F")
+    factor[0, 100] = 0.0  # a zero on the diagonal, in the chunk of rows 64..128
+    with pytest.raises(LinAlgError, match=r"rows 64\.\.128"):
+        banded_forward_solve(factor, np.ones((240, 3)), chunk=64)
 
 
 @cache
