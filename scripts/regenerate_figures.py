@@ -56,7 +56,11 @@ Before it makes a timing figure, the script times the host reference (OpenSim's 
 the walk, best of 3: about 20 s) and stops with exit status 2 when the host runs more than
 :data:`HOST_SLACK` times slower than the median of the references the timing blocks record
 (:func:`host_check`): figures made on a slowed host would not compare with the others
-(``--any-host`` makes them all the same; the prose should then say so).
+(``--any-host`` makes them all the same; the prose should then say so). During the run,
+before each timing figure, the host is timed again when it was last timed more than 5
+minutes before (:class:`HostGate`); a host found slowed is waited for (``--host-wait``
+minutes, default 30), and a timing figure it does not come back for is left out, its block
+as it was.
 
 ``kind`` is ``timing`` (wall times: run on a quiet machine) or ``accuracy`` (errors,
 residuals, counts: deterministic given the code and data, up to round-off and network
@@ -991,14 +995,17 @@ def prerequisites(chosen: list[Figure]) -> dict[str, set[str]]:
     return out
 
 
-def run_all(chosen: list[Figure], jobs: int = 1, poll: float = 0.5) -> list[str]:
+def run_all(chosen: list[Figure], jobs: int = 1, poll: float = 0.5,
+            gate: Callable[[Figure], bool] | None = None) -> list[str]:
     """Run ``chosen`` (in the registry's order), up to ``jobs`` accuracy figures at a time.
 
     A figure starts when every figure it waits for (:func:`prerequisites`) has succeeded;
     one whose prerequisite failed is not run. A timing figure runs alone: while one is
     ready, no other starts, and it starts when the others have finished (its wall times
     would otherwise measure the others' load). With ``jobs`` 1 the figures run one after
-    another in the registry's order, as before this option.
+    another in the registry's order, as before this option. ``gate`` (a :class:`HostGate`)
+    is asked before each timing figure starts, with nothing else running; a figure it
+    refuses is not run (nor what reads its data) and counts as failed.
 
     Returns
     -------
@@ -1025,6 +1032,9 @@ def run_all(chosen: list[Figure], jobs: int = 1, poll: float = 0.5) -> list[str]
             if running and (alone or len(running) >= jobs or any(j.fig.kind == "timing" for j in running)):
                 break
             pending.remove(fig)
+            if fig.kind == "timing" and gate is not None and not gate(fig):
+                failed.add(fig.name)
+                break
             running.append(start(fig))
             if alone:
                 break
@@ -1108,6 +1118,65 @@ def host_check(chosen: list[Figure], measure: Callable[[], float] | None = None,
     return None
 
 
+#: A timing figure starts without the host being timed again when it was last found quick
+#: less than this long before (s; :class:`HostGate`): a block of a few minutes after another.
+HOST_RECHECK = 300.0
+#: The pause (s) between two timings of a host found slowed (:class:`HostGate`).
+HOST_PAUSE = 120.0
+
+
+@dataclass
+class HostGate:
+    """Asked before each timing figure of a run whether the host is still quick enough.
+
+    :func:`host_check` times the host once, before the run; over the 40 minutes of a run of
+    every timing figure the host can slow (on 2026-12-02 it passed that check and then ran
+    up to 1.26x slower, and one block was made at its slowest). The gate times the host
+    reference again (``measure``, s) when it was last found quick more than ``recheck``
+    seconds before; slower than :data:`HOST_SLACK` times ``median`` (the references the
+    timing blocks recorded when the run began), it pauses ``pause`` seconds and times it
+    again, for at most ``wait`` seconds in all, and then refuses the figure (its block is
+    left as it was; ``--run-stale`` later makes it). A measurement that fails refuses it too.
+    ``clock`` and ``sleep`` are :func:`time.monotonic` and :func:`time.sleep`, replaceable
+    in tests.
+    """
+
+    median: float
+    measure: Callable[[], float]
+    wait: float
+    pause: float = HOST_PAUSE
+    recheck: float = HOST_RECHECK
+    last_quick: float | None = None
+    clock: Callable[[], float] = time.monotonic
+    sleep: Callable[[float], None] = time.sleep
+
+    def __call__(self, fig: Figure) -> bool:
+        """True when ``fig`` may start now (after any waiting), False when it is refused."""
+        if self.last_quick is not None and self.clock() - self.last_quick < self.recheck:
+            return True
+        deadline = self.clock() + self.wait
+        limit = HOST_SLACK * self.median
+        while True:
+            try:
+                now = self.measure()
+            except RuntimeError as err:
+                print(f"!! {fig.name} not run: {err}", file=sys.stderr, flush=True)
+                return False
+            if now <= limit:
+                self.last_quick = self.clock()
+                print(f"host reference now {now:.2f} s (at most {limit:.2f} s): {fig.name} starts", file=sys.stderr, flush=True)
+                return True
+            if self.clock() + self.pause > deadline:
+                print(f"!! {fig.name} not run: the host reference is {now:.2f} s, {now / self.median:.2f}x the "
+                      f"{self.median:.2f} s its blocks record (at most {HOST_SLACK:g}x), after waiting up to "
+                      f"{self.wait / 60:g} min; its block is left as it was (--run-stale makes it later)",
+                      file=sys.stderr, flush=True)
+                return False
+            print(f"host reference now {now:.2f} s, above {limit:.2f} s: waiting {self.pause:g} s before "
+                  f"timing it again for {fig.name}", file=sys.stderr, flush=True)
+            self.sleep(self.pause)
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line (the module docstring); returns the exit code."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -1126,6 +1195,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--any-host", action="store_true",
                     help="make timing figures even when the host runs slower than when their blocks were made "
                          f"(more than {HOST_SLACK:g}x their recorded host reference)")
+    ap.add_argument("--host-wait", type=float, default=30.0, metavar="MINUTES",
+                    help="before each timing figure, how long to wait for a slowed host to be quick again before "
+                         "leaving that figure out (default 30; the host is timed again at most every "
+                         f"{HOST_RECHECK / 60:g} min)")
     args = ap.parse_args(argv)
     if args.jobs < 1:
         ap.error(f"--jobs must be 1 or more, not {args.jobs}")
@@ -1171,7 +1244,12 @@ def main(argv: list[str] | None = None) -> int:
     if reason:
         print(f"error: {reason}", file=sys.stderr)
         return 2
-    failed = run_all(chosen, args.jobs)
+    recorded = list(recorded_host_references().values())
+    gate = None
+    if not args.any_host and recorded and any(f.kind == "timing" for f in chosen):
+        gate = HostGate(statistics.median(recorded), measure_host_reference, 60.0 * args.host_wait,
+                        last_quick=time.monotonic())  # host_check has just found it quick
+    failed = run_all(chosen, args.jobs, gate=gate)
     if failed:
         print(f"failed or not run: {', '.join(failed)}", file=sys.stderr)
     return 1 if failed else 0

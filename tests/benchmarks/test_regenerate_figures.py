@@ -498,7 +498,7 @@ def test_timing_figures_are_not_made_on_a_slowed_host(rf, tmp_path, monkeypatch)
     monkeypatch.setattr(rf, "FIGURES", figures)
     assert rf.recorded_host_references() == {"t1": 4.0, "t2": 5.0, "t3": 9.0}
     ran: list[list[str]] = []
-    monkeypatch.setattr(rf, "run_all", lambda chosen, jobs: ran.append([f.name for f in chosen]) or [])
+    monkeypatch.setattr(rf, "run_all", lambda chosen, jobs, gate=None: ran.append([f.name for f in chosen]) or [])
     timed: list[float] = []
 
     def host(seconds: float):
@@ -515,6 +515,76 @@ def test_timing_figures_are_not_made_on_a_slowed_host(rf, tmp_path, monkeypatch)
     assert rf.main(["--only", "t1", "t2"]) == 0 and ran[-1] == ["t1", "t2"] and timed[-1] == 5.0
     reason = rf.host_check(list(figures), measure=host(6.0))
     assert reason is not None and "6.00 s now, median 5.00 s" in reason and "--any-host" in reason
+
+
+def test_the_host_gate_times_the_host_again_waits_for_it_and_refuses_a_figure_it_does_not_come_back_for(rf, capsys) -> None:
+    """:class:`HostGate` with a fake clock: found quick less than ``recheck`` before, a figure
+    starts untimed; later the host is timed again, and while slower than HOST_SLACK times the
+    median it pauses and times it again, starting the figure once it is quick; a host that
+    stays slow past ``wait`` refuses the figure, naming the time and the ratio; a failed
+    measurement refuses it too."""
+    clock = [0.0]
+    readings: list[float] = []
+    timed: list[float] = []
+    slept: list[float] = []
+
+    def measure() -> float:
+        timed.append(clock[0])
+        clock[0] += 20.0  # a measurement takes time
+        return readings.pop(0)
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        clock[0] += seconds
+
+    fig = rf.Figure("t", "doc.md", "true", "timing", 0.0)
+    gate = rf.HostGate(5.0, measure, wait=600.0, pause=120.0, recheck=300.0, last_quick=0.0, clock=lambda: clock[0], sleep=sleep)
+    clock[0] = 299.0
+    assert gate(fig) and timed == []  # found quick 299 s before
+    clock[0] = 301.0
+    readings[:] = [rf.HOST_SLACK * 5.0 + 0.01, 7.0, 5.5]
+    assert gate(fig) and slept == [120.0, 120.0] and len(timed) == 3 and readings == []
+    assert gate.last_quick == clock[0]
+    clock[0] += 301.0
+    readings[:] = [8.0] * 10
+    assert not gate(fig)
+    assert len(slept) == 2 + 4  # pauses that end before the deadline (600 s after the first timing began)
+    assert "8.00 s, 1.60x the 5.00 s" in capsys.readouterr().err
+
+    def failing() -> float:
+        raise RuntimeError("could not time the host reference (cmd): no opensim")
+
+    assert not rf.HostGate(5.0, failing, wait=600.0)(fig)
+    assert "t not run: could not time the host reference (cmd): no opensim" in capsys.readouterr().err
+
+
+def test_run_all_leaves_out_a_timing_figure_the_gate_refuses_and_what_reads_its_data(rf, tmp_path, monkeypatch) -> None:
+    """:func:`run_all` asks the gate before each timing figure only; a refused one keeps its
+    block, counts as failed, and a figure that reads its data is not run; the others run."""
+    names = ["a", "t1", "reads-t1", "t2"]
+    doc = tmp_path / "doc.md"
+    doc.write_text("".join(f"<!-- begin: {n} -->\nold\n<!-- end: {n} -->\n" for n in names))
+    monkeypatch.setattr(rf, "REPO", tmp_path)
+    monkeypatch.setattr(rf, "stamp", lambda fig, seconds: "stamp")
+    fig = partial(rf.Figure, doc="doc.md", minutes=0.0)
+    chosen = [
+        fig("a", command="echo a", kind="accuracy"),
+        fig("t1", command=": --json out/t1.json; echo t1", kind="timing"),
+        fig("reads-t1", command=": --from-json out/t1.json; echo r", kind="accuracy"),
+        fig("t2", command="echo t2", kind="timing"),
+    ]
+    asked: list[str] = []
+
+    def gate(f) -> bool:
+        asked.append(f.name)
+        return f.name != "t1"
+
+    assert rf.run_all(chosen, jobs=2, poll=0.02, gate=gate) == ["t1", "reads-t1"]
+    assert asked == ["t1", "t2"]
+    text = doc.read_text()
+    assert "old" in rf._pattern("t1").findall(text)[0] and "old" in rf._pattern("reads-t1").findall(text)[0]
+    assert "t2" in rf._pattern("t2").findall(text)[0].split("\n")[2:-1][-2]
+    assert "old" not in rf._pattern("a").findall(text)[0]
 
 
 def test_a_host_reference_that_cannot_be_timed_stops_the_timing_figures(rf) -> None:
