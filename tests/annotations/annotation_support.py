@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
-SHARED_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+from tests.conftest import SHARED_DATA
 UHLRICH = SHARED_DATA / "trials" / "opencap_uhlrich2023"
 WORKER = Path(__file__).with_name("annotation_worker.py")
 
