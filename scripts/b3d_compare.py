@@ -33,6 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO))
     from solver.io.b3d_compare import compare_with_b3d
+    from solver.io.b3d_convert import converted_trial_folders
 
     work = Path(args.work or tempfile.mkdtemp(prefix="addb_b3d_compare_"))
     subject, out = work / "subject", work / "out"
@@ -41,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     subprocess.run([*addb, "process", str(subject), "--out", str(out)], check=True, cwd=REPO)
     seconds = time.perf_counter() - t0
-    rows = compare_with_b3d(args.b3d, out)
+    rows = compare_with_b3d(args.b3d, out, trial_names=converted_trial_folders(subject))  # renamed trial folders
     (work / "comparison.json").write_text(json.dumps(rows, indent=2))
     b3d_name = Path(args.b3d).name
     cmd = f"`.venv/bin/python scripts/b3d_compare.py {'' if args.b3d == str(DEFAULT_B3D) else args.b3d}`".replace(" `", "`")

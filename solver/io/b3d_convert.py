@@ -136,7 +136,7 @@ def b3d_to_subject(
         The file is damaged.
     SubjectFolderError
         ``out_dir`` already holds a subject and ``overwrite`` is False, or the file has no
-        trial with frames or no model.
+        trial with frames, no model or no subject mass (checked before anything is written).
     """
     b3d = path if isinstance(path, B3dFile) else open_b3d(path)
     h = b3d.header
@@ -147,6 +147,9 @@ def b3d_to_subject(
         raise SubjectFolderError(f"the file has {_passes(len(h.passes))}, no pass {pass_index} to take the model from", path=b3d.path)
     if not any(t.n_frames for t in h.trials):
         raise SubjectFolderError("the file has no trial with frames", path=b3d.path)
+    if not (np.isfinite(h.mass_kg) and h.mass_kg > 0):  # proto3: an absent mass reads as 0
+        raise SubjectFolderError(f"the file's header gives no subject mass (mass_kg {h.mass_kg!r}), which addb process "
+                                 "needs; nothing was written", path=b3d.path)
     earlier = _converted_trials(out) if overwrite else ()
     out.mkdir(parents=True, exist_ok=True)
     (out / MODEL_FILE).write_text(b3d.model_text(pass_index), encoding="utf-8")
@@ -204,6 +207,25 @@ def b3d_to_subject(
     gone = [name for name in earlier if name not in source["trials"] and (out / "trials" / name).is_dir()]
     removed = tuple(name for name in gone if _remove_converted_trial(out / "trials" / name))
     return ConvertedSubject(out, Path(b3d.path), tuple(trials), removed, tuple(n for n in gone if n not in removed))
+
+
+def converted_trial_folders(subject_dir: str | Path) -> dict[str, str]:
+    """.b3d trial name -> trial folder name of a subject folder written by
+    :func:`b3d_to_subject` (its ``b3d_source.json``; a trial whose name is no folder name,
+    with spaces or slashes, was renamed): the ``trial_names`` of
+    :func:`solver.io.b3d_compare.compare_with_b3d`.
+
+    Raises
+    ------
+    SubjectFolderError
+        The folder has no readable ``b3d_source.json`` (it was not converted from a .b3d).
+    """
+    path = Path(subject_dir) / SOURCE_JSON
+    try:
+        trials = json.loads(path.read_text(encoding="utf-8"))["trials"]
+        return {str(v["b3d_trial"]): str(folder) for folder, v in trials.items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise SubjectFolderError(f"no trial map of a .b3d conversion ({type(err).__name__}: {err})", path=path) from None
 
 
 def _converted_trials(out: Path) -> tuple[str, ...]:
@@ -298,7 +320,9 @@ def processed_to_b3d(
     Contents: per trial the sensor data addb used (observed markers, m; the plates on the
     trial's frames: force N, CoP m (0 where unloaded), free moment N·m), then two passes
     with addb's coordinates (the independent coordinates of the scaled model, in the order
-    of :func:`solver.io.b3d.dof_names`; velocities and accelerations):
+    of :func:`solver.io.b3d.dof_names`; velocities and accelerations, those of a
+    kinematics-only trial the central differences of its coordinates), at the time step of
+    the trial's rate rounded to 1e-6 Hz:
 
     * ``kinematics``: coordinates, centre of mass, the contact wrenches, per-frame marker
       RMS and max; joint torques and residual wrench 0 (the kinematics pass computes
@@ -314,7 +338,9 @@ def processed_to_b3d(
     ``manualReview`` where ``manual`` marks the frame (reviewer flags), else
     ``notOverForcePlate`` / ``forceDiscrepancy`` / ``unmeasuredExternalForceDetected`` by
     addb's proposal reason for frames excluded from the dynamic fit, else ``notMissingGRF``.
-    Both passes embed the scaled model (``<subject>_scaled.osim``).
+    Both passes embed the scaled model (``<subject>_scaled.osim``), and the header's subject
+    mass is that model's: the mass the dynamics fit settled on (the given mass when no trial
+    has dynamics).
 
     Parameters
     ----------
@@ -377,9 +403,10 @@ def processed_to_b3d(
     summary = json.loads(subject_json.read_text()) if subject_json.exists() else {}
     for k, tr in enumerate(trials):
         t = tr.n_frames
-        dt = frame_interval(tr.time, default=0.01)
+        dt = _nominal_interval(frame_interval(tr.time, default=0.01))
         cols = [tr.coordinate_names.index(n) for n in dofs]
-        q, qd, qdd = tr.q[:, cols], tr.qd[:, cols], tr.qdd[:, cols]
+        qd_all, qdd_all = _finite_rates(tr.q, tr.qd, tr.qdd, tr.time)
+        q, qd, qdd = tr.q[:, cols], qd_all[:, cols], qdd_all[:, cols]
         has_dyn = tr.has_dynamics
         tau = np.nan_to_num(tr.tau[:, cols]) if has_dyn else np.zeros_like(q)
         markers = np.full((t, len(marker_names), 3), np.nan)
@@ -400,7 +427,7 @@ def processed_to_b3d(
         ang = np.nan_to_num(np.linalg.norm(tr.residual_moment, axis=1)) if has_dyn else np.zeros(t)
         rot = [i for i, c in enumerate(model.coordinates) if c.name in dofs and c.motion_type != "translational"]
         rot_cols = [tr.coordinate_names.index(model.coordinates[i].name) for i in rot]
-        max_vel = np.abs(tr.qd[:, rot_cols]).max(axis=1) if rot_cols else np.zeros(t)
+        max_vel = np.abs(qd_all[:, rot_cols]).max(axis=1) if rot_cols else np.zeros(t)
         flagged = np.zeros(t, bool) if manual is None or tr.trial not in manual else np.asarray(manual[tr.trial], bool)[:t]
         if flagged.size < t:
             flagged = np.concatenate([flagged, np.zeros(t - flagged.size, bool)])
@@ -457,7 +484,7 @@ def processed_to_b3d(
     header = B3dHeader(
         version=4,
         n_dofs=len(dofs),
-        mass_kg=float(trials[0].mass_kg),
+        mass_kg=_model_mass(trials),
         height_m=float(trials[0].height_m or summary.get("height_m") or 0.0),
         sex=str(info.get("sex", "unknown")),
         age_years=int(info.get("age_years", -1)),
@@ -471,6 +498,41 @@ def processed_to_b3d(
     )
     write_b3d(path, header, blocks)
     return Path(path)
+
+
+def _model_mass(trials: list[Any]) -> float:
+    """The subject mass (kg) of the scaled model a processed subject's .b3d embeds: the mass
+    the dynamics fit settled on, which every trial with dynamics holds (a kinematics-only
+    trial, such as a static one, holds the given mass); the given mass when no trial has
+    dynamics (the model is then scaled to it)."""
+    return float(next((tr.mass_kg for tr in trials if tr.has_dynamics), trials[0].mass_kg))
+
+
+def _nominal_interval(dt: float) -> float:
+    """A frame interval (s) read from a time column, as the interval of its rate rounded to
+    1e-6 Hz: ``np.arange(T) * 0.01`` has a median step of 0.010000000000000009 s, which a
+    reader would take for 99.99999999999991 Hz; this gives 0.01 s (100 Hz)."""
+    return 1.0 / round(1.0 / dt, 6)
+
+
+def _finite_rates(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations of a processed trial for a .b3d pass, ``(T, n)`` each.
+
+    A trial with dynamics has them from its fit's spline; a kinematics-only trial (a static
+    trial) has none (NaN). Where a value is not finite it is replaced by the central
+    difference of ``q`` ``(T, n)`` over ``time`` ``(T,)`` (s) (of the velocities for the
+    accelerations; zero for a trial of one frame), as the passes' flags
+    ``dof_velocities_finite_differenced`` say: a reader that filters frames on the joint
+    velocities would otherwise get NaN.
+    """
+    if np.isfinite(qd).all() and np.isfinite(qdd).all():
+        return qd, qdd
+    if q.shape[0] > 1:
+        fd_v = np.gradient(q, time, axis=0)
+        fd_a = np.gradient(fd_v, time, axis=0)
+    else:
+        fd_v = fd_a = np.zeros_like(q)
+    return np.where(np.isfinite(qd), qd, fd_v), np.where(np.isfinite(qdd), qdd, fd_a)
 
 
 def _passes(n: int) -> str:

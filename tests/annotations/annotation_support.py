@@ -6,6 +6,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from tests.conftest import SHARED_DATA
+
 UHLRICH = SHARED_DATA / "trials" / "opencap_uhlrich2023"
 WORKER = Path(__file__).with_name("annotation_worker.py")
 

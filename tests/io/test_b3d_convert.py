@@ -166,6 +166,44 @@ def test_a_pass_the_file_does_not_have_is_named_with_the_passes_it_has(tmp_path:
     assert not (tmp_path / "s").exists()
 
 
+def test_a_file_without_a_subject_mass_is_refused_before_anything_is_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A .b3d whose header has no mass (proto3 reads an absent one as 0): the conversion fails
+    naming the .b3d and the missing mass, and leaves no folder (it wrote a subject folder
+    that ``addb process`` then refused, naming that folder's own ``_subject.json``)."""
+    f = open_b3d(B3D)
+    no_mass = tmp_path / "no_mass.b3d"
+    write_b3d(no_mass, dataclasses.replace(f.header, mass_kg=0.0), [f.read_trial(k) for k in range(len(f.header.trials))])
+    assert main(["convert", str(no_mass), "--out", str(tmp_path / "s")]) == 1
+    err = capsys.readouterr().err
+    assert f"SubjectFolderError ({no_mass}): the file's header gives no subject mass (mass_kg 0.0)" in err, err
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.slow
+def test_a_trial_renamed_by_the_conversion_is_compared_under_its_folder_name(tmp_path: Path) -> None:
+    """Trial names with spaces become folder names with underscores; the conversion's
+    ``b3d_source.json`` maps them back (:func:`converted_trial_folders`), and the comparison
+    with the file given that map finds every trial (``scripts/b3d_compare.py`` passed none
+    and stopped with FileNotFoundError on the first)."""
+    from solver.io.b3d_compare import compare_with_b3d
+    from solver.io.b3d_convert import converted_trial_folders
+
+    f = open_b3d(B3D)
+    spaced = tmp_path / "spaced.b3d"
+    trials = tuple(dataclasses.replace(t, name=t.name.replace("_segment_", " segment ")) for t in f.header.trials)
+    write_b3d(spaced, dataclasses.replace(f.header, trials=trials), [f.read_trial(k) for k in range(len(trials))])
+    subject, out = tmp_path / "subject", tmp_path / "out"
+    assert main(["convert", str(spaced), "--out", str(subject)]) == 0
+    names = converted_trial_folders(subject)
+    assert names == {t.name: t.name.replace(" ", "_") for t in trials} and all(" " in n for n in names)
+    assert main(["process", str(subject), "--out", str(out)]) == 0
+    with pytest.raises(FileNotFoundError):
+        compare_with_b3d(spaced, out)
+    rows = compare_with_b3d(spaced, out, trial_names=names)
+    assert [r["trial"] for r in rows] == [t.name for t in trials]
+    assert all(r["addb_marker_rms_m"] < r["b3d_marker_rms_m"] for r in rows)
+
+
 def _with_labels(f, k: int, runs: dict[tuple[int, int], str], path: Path) -> Path:
     """``f`` written to ``path`` with trial ``k``'s missing-GRF labels set to ``runs``
     ((start, stop) -> reason; every other frame ``notMissingGRF``)."""

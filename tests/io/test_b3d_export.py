@@ -15,6 +15,7 @@ import pytest
 from addb_viewer.cli import main
 from solver.io.b3d import dof_names, open_b3d
 from solver.io.b3d_writer import write_b3d
+from solver.model.osim import read_osim
 from solver.results import load_processed, processed_trials
 from tests.conftest import SHARED_DATA
 from tests.io.test_b3d_roundtrip import assert_same
@@ -208,6 +209,23 @@ def test_a_trial_without_force_data_exports_no_measured_frame(tmp_path: Path) ->
     assert set(trials["static"].missing_grf) == {"notOverForcePlate"} and len(trials["static"].missing_grf) == trials["static"].n_frames
     walk = load_processed(out, "walk")
     np.testing.assert_array_equal([r != "notMissingGRF" for r in trials["walk"].missing_grf], walk.unobserved)
+    # the header's mass is the scaled model's (the fitted one the walk's torques used), not the
+    # static trial's given mass (trials[0], by name: the header said 85.07 kg, the model 84.95)
+    f = open_b3d(exported)
+    static = load_processed(out, "static")
+    assert f.header.mass_kg == walk.mass_kg != static.mass_kg
+    # the static trial has no fitted velocities: the central differences of its coordinates,
+    # finite in both passes and in the header's per-frame maximum (they were NaN)
+    k = f.header.trial_index("static")
+    frames, info = f.read_trial(k), f.header.trials[k]
+    cols = [static.coordinate_names.index(n) for n in dof_names(read_osim(next(out.glob("*_scaled.osim"))))]
+    velocity = np.gradient(static.q[:, cols], static.time, axis=0)
+    for kept in frames.passes:
+        np.testing.assert_array_equal(kept.vel, velocity)
+        np.testing.assert_array_equal(kept.acc, np.gradient(velocity, static.time, axis=0))
+    assert all(np.isfinite(tp.joints_max_velocity).all() for tp in info.passes)
+    # the time step of 100 Hz, not the median step of the time column (0.010000000000000009 s)
+    assert {t.timestep_s for t in f.header.trials} == {0.01} and {t.rate_hz for t in f.header.trials} == {100.0}
     ours, theirs = load_dataset([out]), load_dataset([exported])
     assert [t.trial for t in theirs.trials] == [t.trial for t in ours.trials] == ["walk"]
     assert theirs.n_frames == ours.n_frames > 100
