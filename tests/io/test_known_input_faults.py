@@ -43,6 +43,14 @@ def _c3d_with_float(path: Path, group: str, name: str, value: float, header_rate
     return path
 
 
+def _refused_c3d(bad: Path, match: str) -> None:
+    """``read_c3d(bad)`` raises a C3dFormatError matching ``match`` that names ``bad``."""
+    with warnings.catch_warnings(), pytest.raises(C3dFormatError, match=match) as err:
+        warnings.simplefilter("ignore")
+        read_c3d(bad)
+    assert err.value.path == str(bad)
+
+
 @pytest.mark.xfail(strict=True, raises=subprocess.TimeoutExpired,
                    reason="audit 2026-12-02 finding 1: solver/model/osim.py _sort_joints revisits a joint whose child "
                           "frame is ground and never ends (memory grows without bound)")
@@ -64,11 +72,7 @@ def test_a_joint_whose_child_is_ground_is_refused(tmp_path: Path) -> None:
                                        "rate; a rate of 0 gives NaN and infinite frame times")
 def test_a_c3d_frame_rate_of_zero_is_refused(tmp_path: Path) -> None:
     """POINT:RATE and the header's rate 0: a C3dFormatError naming the file and the rate."""
-    bad = _c3d_with_float(tmp_path / "rate0.c3d", "POINT", "RATE", 0.0, header_rate=0.0)
-    with warnings.catch_warnings(), pytest.raises(C3dFormatError, match="RATE") as err:
-        warnings.simplefilter("ignore")
-        read_c3d(bad)
-    assert err.value.path == str(bad)
+    _refused_c3d(_c3d_with_float(tmp_path / "rate0.c3d", "POINT", "RATE", 0.0, header_rate=0.0), "RATE")
 
 
 @pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="audit 2026-12-02 finding 5: solver/io/c3d_layout.py reads ANALOG:RATE without "
@@ -77,11 +81,7 @@ def test_a_c3d_frame_rate_of_zero_is_refused(tmp_path: Path) -> None:
 def test_an_analog_rate_that_disagrees_with_the_header_is_refused(tmp_path: Path) -> None:
     """ANALOG:RATE 1000 Hz where the header says 8 samples per frame at 250 Hz (2000 Hz): a
     C3dFormatError naming the file and ANALOG:RATE, not 168,895 N peak forces."""
-    bad = _c3d_with_float(tmp_path / "analog_rate.c3d", "ANALOG", "RATE", 1000.0)
-    with warnings.catch_warnings(), pytest.raises(C3dFormatError, match="ANALOG:RATE") as err:
-        warnings.simplefilter("ignore")
-        read_c3d(bad)
-    assert err.value.path == str(bad)
+    _refused_c3d(_c3d_with_float(tmp_path / "analog_rate.c3d", "ANALOG", "RATE", 1000.0), "ANALOG:RATE")
 
 
 @pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="audit 2026-12-02 finding 6: solver/io/trc.py accepts a row of exactly the data "
