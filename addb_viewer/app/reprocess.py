@@ -669,11 +669,12 @@ class Reprocessor:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 search = trial_search_path(trial, app.paths.subject_dir, app.geometry)
                 write_rerun(trial, path, annotations=review, mesh_path=search)
+                app.clear_error()  # an earlier refusal's error no longer applies; cleared before
+                # the status says so, so that whoever reads "wrote" never sees the old error
                 status.content = f"✓ wrote {path} ({path.stat().st_size / 1e6:.1f} MB)"
-                app.clear_error()  # an earlier refusal's error no longer applies
             except Exception as exc:  # noqa: BLE001 - shown in the page
+                app.show_error("Record to Rerun", exc)  # before the status, as above
                 status.content = f"<span style='color:#c00'>Recording failed</span>: {exc}"
-                app.show_error("Record to Rerun", exc)
 
         threading.Thread(target=run, name="addb-record", daemon=True).start()
 
