@@ -35,10 +35,9 @@ from numpy.typing import NDArray
 from addb_viewer.locations import annotations_path, cache_root
 from solver.dataset.discover import DatasetScan, b3d_note, loop_note, scan_dataset
 from solver.dataset.manifest import MANIFEST_NAME, read_manifest
-from solver.dataset.summary import dynamics_error_message
+from solver.dataset.summary import dynamics_error_message, proposed_ranges
 from solver.errors import counted, listed
 from solver.io.subject import folder_is_writable
-from solver.masks import true_runs
 from solver.outputs import SUMMARY_NAME, read_summary
 
 #: Output folder of a dataset inside a writable dataset folder.
@@ -345,7 +344,7 @@ def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any
             if res.is_file() and res.stat().st_mtime_ns > written and (new := _results_row(res)) is not None:
                 r.update({k: new[k] for k in _REPROCESSED})
                 if (proposed := _proposed(res.parent / "trial.npz")) is not None:  # its fit's proposals
-                    r["frames"], r["proposed_ranges"] = len(proposed), [list(x) for x in true_runs(proposed)]
+                    r["frames"], r["proposed_ranges"] = len(proposed), proposed_ranges(proposed)
         return PROCESSED, "", rows
     rows = [row for res in sorted(subject.out_dir.glob("*/results.json")) if (row := _results_row(res)) is not None]
     return (PROCESSED if rows else NOT_PROCESSED), "", rows

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from solver.dynamics.metrics import GRAVITY, HICKS_ANGULAR_BWH, HICKS_LINEAR_BW
+from solver.masks import true_runs
 from solver.results import ProcessedTrial, load_processed
 from solver.sampling import frame_rate
 
@@ -91,6 +92,28 @@ def dynamics_error_message(metrics: Mapping[str, Any]) -> str | None:
     return str(error.get("message")) if isinstance(error, Mapping) and error.get("message") else None
 
 
+def proposed_ranges(proposed: Any) -> list[list[int]]:
+    """A trial's frames the solver proposes as unmeasured, as a manifest row holds them.
+
+    Parameters
+    ----------
+    proposed
+        ``(T,)`` booleans, True on a frame proposed as unmeasured (``ProcessedTrial.proposed``,
+        the ``proposed`` array of trial.npz).
+
+    Returns
+    -------
+    Half-open ``[start, stop]`` frame ranges, in order (:func:`solver.masks.true_runs`), as
+    lists (JSON arrays).
+
+    Raises
+    ------
+    ValueError
+        ``proposed`` is not one-dimensional.
+    """
+    return [list(r) for r in true_runs(np.asarray(proposed, dtype=bool))]
+
+
 def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
     """The summary row of one processed trial.
 
@@ -120,9 +143,7 @@ def trial_row(trial: ProcessedTrial) -> dict[str, Any]:
     error = dynamics_error_message(m)
     if error is not None:  # kept with its kinematics: the dynamics failed
         row["dynamics_error"] = error
-    from solver.masks import true_runs
-
-    row["proposed_ranges"] = [list(r) for r in true_runs(np.asarray(trial.proposed, dtype=bool))]
+    row["proposed_ranges"] = proposed_ranges(trial.proposed)
     if not dynamics:
         row.update(measured_frames=0, measured_s=0.0, contact_frames=None, clinical_frames=0,
                    residual_force_hist_BW=None, residual_moment_hist_BWh=None)  # fmt: skip

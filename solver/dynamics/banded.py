@@ -7,7 +7,8 @@ and solved by a banded Cholesky factorization (LAPACK ``dpbtrf`` / ``dpbtrs``) i
 lower band storage ``ab[d, c] = H[c + d, c]`` (d = 0 is the diagonal), whose column c is
 row c of the upper block band read from its diagonal on: a strided view of the blocks,
 so the conversion is a single copy. :func:`banded_forward_solve` applies the factor's
-inverse to many right-hand sides at once (the joint fit's mass border).
+inverse to many right-hand sides at once (the joint fit's mass border), and
+:func:`banded_back_solve` its transpose's.
 """
 
 from __future__ import annotations
@@ -210,4 +211,32 @@ def banded_forward_solve(factor: FloatArray, rhs: FloatArray, chunk: int = FORWA
         if info != 0:
             raise LinAlgError(f"dtbtrs failed on rows {s}..{e} (info {info})")
         x[s:e] = part
+    return x.reshape(rhs.shape)
+
+
+def banded_back_solve(factor: FloatArray, rhs: FloatArray) -> FloatArray:
+    """``L^-T rhs`` for the lower banded Cholesky factor L of :func:`banded_cholesky`: back
+    substitution with the transposed factor (LAPACK ``dtbtrs``, ``trans="T"``; Golub & Van
+    Loan, *Matrix Computations*, 4th ed., §3.1.4). Its one right-hand side reads the factor
+    once, so it is not chunked as :func:`banded_forward_solve` is.
+
+    Parameters
+    ----------
+    factor
+        ``(u + 1, N)`` lower band storage of L, ``factor[d, c] = L[c + d, c]``.
+    rhs
+        ``(N,)`` or ``(N, k)`` right-hand side(s).
+
+    Returns
+    -------
+    The solution, shaped as ``rhs``.
+
+    Raises
+    ------
+    LinAlgError
+        A zero on the factor's diagonal (or a LAPACK argument error).
+    """
+    x, info = dtbtrs(factor, rhs.reshape(rhs.shape[0], -1), uplo="L", trans="T")
+    if info != 0:
+        raise LinAlgError(f"dtbtrs failed (info {info})")
     return x.reshape(rhs.shape)

@@ -55,9 +55,8 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy.linalg import LinAlgError
-from scipy.linalg.lapack import dtbtrs
 
-from solver.dynamics.banded import banded_cholesky, banded_forward_solve
+from solver.dynamics.banded import banded_back_solve, banded_cholesky, banded_forward_solve
 from solver.dynamics.fit import (
     FitOutput,
     FitSettings,
@@ -125,26 +124,6 @@ def _mass_step(schur: FloatArray, rhs: FloatArray, constraint: FloatArray, f: Fl
     return ds  # pragma: no cover - every factor fixed: the last solve stands
 
 
-def _triangular_solve(factor: FloatArray, rhs: FloatArray, transpose: bool = False) -> FloatArray:
-    """``L^-1 rhs`` (``L^-T rhs`` with ``transpose``) for the lower banded Cholesky factor L
-    of :func:`solver.dynamics.banded.banded_cholesky` (LAPACK ``dtbtrs``; several right-hand
-    sides forward: :func:`solver.dynamics.banded.banded_forward_solve`); ``rhs`` ``(N,)`` or
-    ``(N, k)``.
-
-    Raises
-    ------
-    LinAlgError
-        A LAPACK argument error or a zero on the factor's diagonal.
-    """
-    b = rhs.reshape(rhs.shape[0], -1)
-    if not transpose and b.shape[1] > 1:  # the mass border: in row chunks that stay in cache
-        return banded_forward_solve(factor, b).reshape(rhs.shape)
-    x, info = dtbtrs(factor, b, uplo="L", trans="T" if transpose else "N")
-    if info != 0:
-        raise LinAlgError(f"dtbtrs failed (info {info})")
-    return x.reshape(rhs.shape)
-
-
 class _BorderedProblem(_TrialProblem):
     """A trial's problem with the mass border of its Gauss-Newton system
     (``direction="coefficients"`` only)."""
@@ -160,7 +139,8 @@ class _BorderedProblem(_TrialProblem):
         self.border: FloatArray | None = None  # (nc, nf, J) J_a^T rows
         parents = model.parents
         # the rates mass_rows reads: each mass joint's subtree and its children's
-        self.subtree_joints = tuple(sorted(set(joints) | {c for c in range(1, model.njoints) if parents[c] in set(joints)}))
+        mass_joints = set(joints)
+        self.subtree_joints = tuple(sorted(mass_joints | {c for c in range(1, model.njoints) if parents[c] in mass_joints}))
 
     def mass_rows(self, q: FloatArray, ofs: FloatArray) -> FloatArray:
         """``(T, 6, J)`` derivatives of the unweighted root residual wrench [force, moment
@@ -368,7 +348,7 @@ def _reduced(systems: Sequence[_System], mu: float, nj: int) -> tuple[list[tuple
         damp = np.maximum(diag.reshape(-1), 1e-9)
         ab[0] += mu * damp
         chol = banded_cholesky(ab, overwrite=True)
-        wv = _triangular_solve(chol, np.column_stack([border, grad.reshape(-1)]))
+        wv = banded_forward_solve(chol, np.column_stack([border, grad.reshape(-1)]))  # in row chunks that stay in cache
         w_b, v = wv[:, :nj], wv[:, nj]
         schur -= w_b.T @ w_b
         rhs += w_b.T @ v
@@ -387,7 +367,7 @@ def _coordinate_steps(
     poor model; the hold rows' own work is left out)."""
     deltas, predicted = [], 0.0
     for (p, _, _, _, _, _, _), (chol, w_b, v, damp), grad in zip(systems, solved, untargeted):
-        da = -_triangular_solve(chol, v + w_b @ ds, transpose=True)
+        da = -banded_back_solve(chol, v + w_b @ ds)
         predicted += float(-grad.reshape(-1) @ da + mu * np.sum(damp * da**2))
         deltas.append(p.cmaps.e0 @ da.reshape(-1, p.nf))
     return deltas, predicted

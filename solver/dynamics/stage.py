@@ -175,6 +175,18 @@ def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOpt
                 UserWarning,
                 stacklevel=2,
             )
+        for what, values, bad in (
+            ("free moment", np.asarray(p.free_moment, dtype=float), lambda v: ~np.isfinite(v)),
+            ("centre of pressure", np.asarray(p.cop, dtype=float), np.isinf),  # NaN: no CoP (unloaded)
+        ):
+            if (wrong := bad(values).any(axis=1)).any():
+                k = int(np.argmax(wrong))
+                raise DynamicsError(
+                    f"plate {p.name}: the {what} is {values[k].tolist()} at {forces.time[k]:.3f} s (sample {k + 1}; "
+                    f"{int(wrong.sum())} such samples); expected finite values",
+                    path=forces.source or None,
+                    where=f"trial {trial}",
+                )
         m_o = moment_about_origin(f, np.asarray(p.cop), np.asarray(p.free_moment))
         loaded = f[:, 1] > 0.02 * bw
         plane = float(np.nanmedian(np.asarray(p.cop)[loaded, 1])) if loaded.any() else 0.0

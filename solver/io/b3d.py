@@ -110,7 +110,8 @@ class B3dTrial:
         Trial tags of the AddBiomechanics platform.
     missing_grf
         (N,) per-frame reason the ground reaction force is not trusted, by name
-        (:data:`MISSING_GRF_REASONS`; ``"notMissingGRF"`` = measured force is usable).
+        (:data:`MISSING_GRF_REASONS`, or ``unknownReason<number>`` for a number this reader
+        does not know; ``"notMissingGRF"`` = measured force is usable).
     n_force_plates
         Number of force plates in the sensor frames of this trial.
     force_plate_corners
@@ -310,6 +311,37 @@ class B3dFrames:
 # --------------------------------------------------------------------------- header
 
 
+#: The name a missing-GRF reason number this reader does not know is read as (proto3 enums
+#: are open: a newer writer may store reasons added since), ``unknownReason<number>``; such a
+#: frame counts as not measured, and :func:`missing_grf_number` writes the number back.
+UNKNOWN_REASON = "unknownReason"
+
+
+def missing_grf_number(name: str) -> int:
+    """The stored number of a missing-GRF reason name (:data:`MISSING_GRF_REASONS`, or
+    ``unknownReason<number>`` for a number read from a newer file).
+
+    Raises
+    ------
+    ValueError
+        Neither a known name nor ``unknownReason`` followed by a non-negative number.
+    """
+    if name in MISSING_GRF_REASONS:
+        return MISSING_GRF_REASONS.index(name)
+    digits = name[len(UNKNOWN_REASON):] if name.startswith(UNKNOWN_REASON) else ""
+    if digits.isdigit():
+        return int(digits)
+    raise ValueError(f"missing-GRF reason {name!r}; expected one of {', '.join(MISSING_GRF_REASONS)} or {UNKNOWN_REASON}<number>")
+
+
+def _reason_name(number: int, path: Path) -> str:
+    """A stored missing-GRF reason number as its name (an unknown non-negative one as
+    ``unknownReason<number>``: the file stays readable)."""
+    if number >= len(MISSING_GRF_REASONS):
+        return f"{UNKNOWN_REASON}{number}"
+    return _enum_name(MISSING_GRF_REASONS, number, "missing-GRF reason", path, PREFIX_BYTES)
+
+
 def _enum_name(values: tuple[str, ...], number: int, what: str, path: Path, offset: int) -> str:
     if 0 <= number < len(values):
         return values[number]
@@ -363,7 +395,7 @@ def _trial(msg: Any, index: int, n_passes: int, n_dofs: int, path: Path) -> B3dT
         raise B3dFormatError(f"missing_GRF_reason has {len(reasons)} values, expected {n} (one per frame)", path=path, offset=PREFIX_BYTES, where=where)
     if not reasons:
         reasons = [0] * n
-    names = tuple(_enum_name(MISSING_GRF_REASONS, r, "missing-GRF reason", path, PREFIX_BYTES) for r in reasons)
+    names = tuple(_reason_name(r, path) for r in reasons)
     plates = int(msg.num_force_plates)
     if not 0 <= plates <= 10_000:
         raise B3dFormatError(f"num_force_plates is {plates}, expected 0..10000", path=path, offset=PREFIX_BYTES, where=where)
@@ -615,8 +647,8 @@ def open_b3d(path: str | Path) -> B3dFile:
     sensor, pass_bytes = int(msg.raw_sensor_frame_size), int(msg.processing_pass_frame_size)
     data_start = PREFIX_BYTES + n
     total_frames = sum(t.n_frames for t in header.trials)
-    if total_frames and sensor <= 0:
-        raise B3dFormatError(f"raw_sensor_frame_size is {sensor}, expected > 0", path=p, offset=PREFIX_BYTES)
+    if sensor < 0:  # 0 is a frame with no marker, plate or IMU value (an empty message)
+        raise B3dFormatError(f"raw_sensor_frame_size is {sensor}, expected 0 or more", path=p, offset=PREFIX_BYTES)
     if any(t.passes and t.n_frames for t in header.trials) and pass_bytes <= 0:
         raise B3dFormatError(f"processing_pass_frame_size is {pass_bytes}, expected > 0", path=p, offset=PREFIX_BYTES)
     b3d = B3dFile(p, header, data_start, max(sensor, 0), max(pass_bytes, 0), size)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from solver.io import b3d_schema as schema
-from solver.io.b3d import MISSING_GRF_REASONS, PASS_TYPES, B3dFrames, B3dHeader, B3dTrial
+from solver.io.b3d import PASS_TYPES, B3dFrames, B3dHeader, B3dTrial, missing_grf_number
 
 #: The file format version written.
 WRITE_VERSION = 4
@@ -67,7 +67,7 @@ def _trial_message(out: Any, t: B3dTrial) -> None:
     out.num_force_plates = t.n_force_plates
     out.marker_names_guessed = t.marker_names_guessed
     out.trial_tag.extend(t.tags)
-    out.missing_grf_reason.extend(MISSING_GRF_REASONS.index(r) for r in t.missing_grf)
+    out.missing_grf_reason.extend(missing_grf_number(r) for r in t.missing_grf)
     out.force_plate_corners.extend(np.asarray(t.force_plate_corners, dtype=np.float64).ravel().tolist())
     for p in t.passes:
         ph = out.processing_pass_header.add(

@@ -212,6 +212,8 @@ class _Checker:
         analogs = n_analog // analog_per_frame if n_analog else 0
         float_storage = scale < 0
         self._check_required(params, n_points, analogs, scale, data_block, p_start, p_end)
+        if n_points or analogs:
+            self._check_rates(params, self._floats(d[20:24])[0], analog_per_frame if analogs else 0)
         first, last = self._frame_range(params, first, last)
         n_frames = last - first + 1
         width = 4 if float_storage else 2
@@ -477,6 +479,27 @@ class _Checker:
             self._labels(params, "ANALOG", analogs)
             self._param(params, "ANALOG", "RATE", (4,), 1, required=False)
         self._check_plates(params, analogs)
+
+    def _check_rates(self, params: dict[tuple[str, str], C3dParameter], header_rate: float, analog_per_frame: int) -> None:
+        """The frame rate (POINT:RATE, else the header's bytes 20-23) is a positive number of
+        Hz, and ANALOG:RATE, when present, is the header's analog samples per frame (bytes
+        18-19) times it: C3D readers take the samples per frame from the two rates, so a
+        disagreement reads every analog and point value with the wrong stride."""
+        point_rate = params.get(("POINT", "RATE"))
+        rate = float(point_rate.values[0]) if point_rate is not None else header_rate  # type: ignore[arg-type]
+        where = "parameter section: POINT:RATE" if point_rate is not None else "header"
+        at = f"byte offset {point_rate.offset}" if point_rate is not None else "bytes 20-23 (frame rate)"
+        if not (math.isfinite(rate) and rate > 0):
+            raise self.fail(where, f"{at}: a frame rate of {rate:g} Hz; expected a positive number")
+        analog_rate = params.get(("ANALOG", "RATE"))
+        if analog_per_frame and analog_rate is not None:
+            hz = float(analog_rate.values[0])  # type: ignore[arg-type]
+            if not (math.isfinite(hz) and math.isclose(hz, analog_per_frame * rate, rel_tol=1e-4)):
+                raise self.fail(
+                    "parameter section: ANALOG:RATE",
+                    f"byte offset {analog_rate.offset}: {hz:g} Hz, {hz / rate:g} samples per frame at {rate:g} Hz; "
+                    f"the header (bytes 18-19) gives {analog_per_frame} samples per frame ({analog_per_frame * rate:g} Hz)",
+                )
 
     def _labels(self, params: dict[tuple[str, str], C3dParameter], group: str, n: int) -> None:
         count = 0

@@ -92,13 +92,28 @@ def classify(column: str) -> tuple[str, str, int] | None:
 
 
 class IncompletePlateError(ValueError):
-    """A plate has some but not all columns of a force or CoP triple."""
+    """A plate has some but not all columns of a force or CoP triple, or two columns for
+    one of them (:class:`ClashingPlateColumnsError`)."""
 
     def __init__(self, plate: str, kind: str, present: list[str]) -> None:
         super().__init__(f"plate {plate!r} has {kind} columns {present} but not all of x, y, z")
         self.plate = plate
         self.kind = kind
         self.present = present
+
+
+class ClashingPlateColumnsError(IncompletePlateError):
+    """Two columns give the same axis of the same plate's force, CoP or moment (e.g.
+    ``ground_force_r_vx`` and ``r_ground_force_vx``, or ``ground_torque_r_x`` and
+    ``ground_force_r_mx``): which one holds the plate's values cannot be told."""
+
+    def __init__(self, plate: str, kind: str, axis: int, first: str, second: str) -> None:
+        ValueError.__init__(
+            self, f"columns {first} and {second} both give plate {plate!r}'s {kind} {_AXES[axis]}; expected one column"
+        )
+        self.plate = plate
+        self.kind = kind
+        self.present = [first, second]
 
 
 def group_plates(columns: Sequence[str]) -> tuple[PlateColumns, ...]:
@@ -109,6 +124,8 @@ def group_plates(columns: Sequence[str]) -> tuple[PlateColumns, ...]:
     IncompletePlateError
         A plate lacks one of x, y, z of its force or CoP (or has a partial moment
         triple), or has force without CoP / CoP without force.
+    ClashingPlateColumnsError
+        Two columns give the same axis of a plate's force, CoP or moment.
     """
     found: dict[str, dict[str, list[str | None]]] = {}
     for col in columns:
@@ -117,6 +134,8 @@ def group_plates(columns: Sequence[str]) -> tuple[PlateColumns, ...]:
             continue
         plate, kind, axis = c
         slots = found.setdefault(plate, {}).setdefault(kind, [None, None, None])
+        if slots[axis] is not None:
+            raise ClashingPlateColumnsError(plate, kind, axis, slots[axis], col)
         slots[axis] = col
     plates = []
     for plate, kinds in found.items():

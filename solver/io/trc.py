@@ -202,23 +202,40 @@ def _first_data_line(lines: list[str]) -> int:
 def _data_rows(
     lines: list[str], first: int, n_markers: int, path: str | Path
 ) -> tuple[list[list[str]], list[int]]:
-    """Token rows (frame, time, 3M coordinates; '' for empty cells) and their line numbers."""
+    """Token rows (frame, time, 3M coordinates; '' for empty cells) and their line numbers.
+
+    A file whose rows end with a tab after their last value (most of them: width + 1 cells,
+    the last empty) reads a row of exactly ``width`` cells as one value short: its trailing
+    empty cell would otherwise stand for the last value and every value after the gap would
+    move one axis (a row with an empty cell reported "found 125" of 125, and a full-width row
+    missing one value was read shifted).
+
+    Raises
+    ------
+    TrcFormatError
+        A row with another number of values, naming its line.
+    """
     width = 2 + 3 * n_markers
-    rows: list[list[str]] = []
-    numbers: list[int] = []
+    split: list[tuple[int, list[str]]] = []
     for i in range(first, len(lines)):
         line = lines[i]
-        if not line.strip():
-            continue
-        cells = line.split("\t") if "\t" in line else line.split()
-        if len(cells) != width:
+        if line.strip():
+            split.append((i, line.split("\t") if "\t" in line else line.split()))
+    trailing_tab = 2 * sum(len(c) == width + 1 and not c[-1].strip() for _, c in split) > len(split)
+    rows: list[list[str]] = []
+    numbers: list[int] = []
+    for i, cells in split:
+        if len(cells) != width or trailing_tab:
             if len(cells) > width and not "".join(cells[width:]).strip():
                 cells = cells[:width]
             else:
-                found = len([c for c in cells if c.strip()]) if len(cells) > width else len(cells)
+                values = cells[:-1] if trailing_tab and cells and not cells[-1].strip() else cells
+                empty = sum(not c.strip() for c in values)
                 raise TrcFormatError(
                     f"expected {width} values (frame, time and x y z of {n_markers} markers), "
-                    f"found {found}",
+                    f"found {len(values)} cells"
+                    + (f" ({empty} of them empty)" if empty else "")
+                    + ("; the other rows end with a tab after their last value" if trailing_tab else ""),
                     path=path,
                     line=i + 1,
                 )

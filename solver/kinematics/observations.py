@@ -55,7 +55,11 @@ def read_marker_settings(path: str | Path) -> MarkerSettings:
         Unparsable file or other content, naming the file.
     """
     path = Path(path)
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise KinematicsError(f"not UTF-8 text (byte {exc.start}: {exc.object[exc.start:exc.start + 1]!r}); save it as UTF-8",
+                              path=path) from None
     try:
         if path.suffix in (".yaml", ".yml"):
             import yaml

@@ -363,11 +363,21 @@ def _parse_body(ctx: _Ctx, elem: ET.Element) -> Body:
     mass = ctx.floats(elem, "mass", 1)[0]
     if mass < 0:
         raise ctx.error(f"negative mass {mass}", elem)
+    inertia = _parse_inertia(ctx, elem)
+    # principal moments must not be negative (the triangle inequality a + b >= c is not asked:
+    # the Rajagopal models' toes break it, and the rigid-body algorithms do not need it)
+    moments = np.linalg.eigvalsh(np.array(inertia))
+    if moments[0] < -1e-9 * max(float(np.abs(moments).max()), 1e-12):
+        raise ctx.error(
+            f"inertia {inertia} (kg·m², about the centre of mass) has a negative principal moment "
+            f"({', '.join(f'{m:.6g}' for m in moments)}); expected a positive semi-definite matrix",
+            elem,
+        )
     return Body(
         name=elem.get("name") or "",
         mass=mass,
         com=tuple(ctx.floats(elem, "mass_center", 3, "0 0 0")),
-        inertia=_parse_inertia(ctx, elem),
+        inertia=inertia,
         meshes=_parse_meshes(ctx, elem),
     )
 
@@ -550,6 +560,27 @@ def _finish_joint(ctx: _Ctx, elem: ET.Element, parent: Offset, child: Offset) ->
     return joint, coords
 
 
+def _refuse_coupler_chains(ctx: _Ctx, couplers: list[Coupler]) -> None:
+    """Each dependent coordinate has one coupler, and no coupler is driven by another's
+    dependent coordinate (chained couplers are not supported).
+
+    Raises
+    ------
+    OsimModelError
+        Naming the couplers and the coordinate.
+    """
+    driver: dict[str, str] = {}
+    for c in couplers:
+        if c.dependent in driver:
+            raise ctx.error(f"coordinate {c.dependent!r} is the dependent coordinate of two couplers, "
+                            f"{driver[c.dependent]} and {c.name}; expected one")
+        driver[c.dependent] = c.name
+    for c in couplers:
+        if c.independent in driver:
+            raise ctx.error(f"coupler {c.name} is driven by {c.independent!r}, which coupler {driver[c.independent]} "
+                            "drives; chained couplers (a dependent coordinate driving another) are not supported")
+
+
 def _sort_joints(ctx: _Ctx, joints: list[Joint]) -> list[Joint]:
     """Order joints depth-first from ground (children in declaration order).
 
@@ -559,6 +590,8 @@ def _sort_joints(ctx: _Ctx, joints: list[Joint]) -> list[Joint]:
     by_child: dict[str, Joint] = {}
     children: dict[str, list[Joint]] = {}
     for j in joints:
+        if j.child.body == "ground":  # nothing moves ground: the depth-first walk would revisit it forever
+            raise ctx.error(f"the child frame of joint {j.name} is on ground; a joint's child must be a body")
         if j.child.body in by_child:
             raise ctx.error(f"body {j.child.body!r} is the child of two joints (closed loops are not supported)")
         by_child[j.child.body] = j
@@ -728,6 +761,7 @@ def read_osim(path: str | Path) -> OsimModel:
         for n in (c.dependent, c.independent):
             if n not in cnames:
                 raise ctx.error(f"coupler {c.name} names unknown coordinate {n!r}")
+    _refuse_coupler_chains(ctx, couplers)
     markers = _parse_markers(ctx, root, frames)
     _refuse_duplicates(ctx, "marker", [m.name for m in markers], root.find("MarkerSet"))
     for m in markers:

@@ -57,23 +57,23 @@ def capture(folder: Path) -> tuple[np.ndarray, np.ndarray, int]:
 
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     count = 0
-    solve = jf._triangular_solve
+    solve = jf.banded_forward_solve
 
-    def spy(factor: np.ndarray, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
+    def spy(factor: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         nonlocal count
-        if not transpose and rhs.ndim == 2 and rhs.shape[1] > 1:
+        if rhs.ndim == 2 and rhs.shape[1] > 1:
             if not kept:
                 kept.append((factor.copy(order="F"), rhs.copy()))
             count += factor.shape == kept[0][0].shape
-        return solve(factor, rhs, transpose)
+        return solve(factor, rhs)
 
-    jf._triangular_solve = spy
+    jf.banded_forward_solve = spy
     try:
         with tempfile.TemporaryDirectory() as out, warnings.catch_warnings():
             warnings.simplefilter("ignore")
             process_subject(folder, out)
     finally:
-        jf._triangular_solve = solve
+        jf.banded_forward_solve = solve
     factor, rhs = kept[0]
     return factor, rhs, count
 

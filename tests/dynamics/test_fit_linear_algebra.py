@@ -10,6 +10,7 @@ import pytest
 from scipy.linalg import LinAlgError, solveh_banded
 
 from solver.dynamics.banded import (
+    banded_back_solve,
     banded_cholesky,
     banded_cholesky_solve,
     banded_forward_solve,
@@ -103,6 +104,29 @@ def test_banded_forward_solve_names_the_chunk_of_a_zero_pivot() -> None:
     factor[0, 100] = 0.0  # a zero on the diagonal, in the chunk of rows 64..128
     with pytest.raises(LinAlgError, match=r"rows 64\.\.128"):
         banded_forward_solve(factor, np.ones((240, 3)), chunk=64)
+
+
+def test_banded_back_solve_is_the_transposed_factors_inverse() -> None:
+    """L^-T b (the joint fit's coordinate step) equals the dense transposed triangular solve
+    to round-off, one right-hand side or several, and LAPACK's dtbtrs with trans="T" bit for
+    bit; a zero on the factor's diagonal raises LinAlgError."""
+    from scipy.linalg import solve_triangular
+    from scipy.linalg.lapack import dtbtrs
+
+    rng = np.random.default_rng(17)
+    blocks, h = _random_block_bands(40, 5, 6, rng)
+    factor = banded_cholesky(lower_band_storage(blocks))
+    ell = np.linalg.cholesky(h)
+    rhs = rng.normal(size=(h.shape[0], 4))
+    x = banded_back_solve(factor, rhs)
+    np.testing.assert_allclose(x, solve_triangular(ell.T, rhs, lower=False), rtol=1e-11, atol=1e-12)
+    one = banded_back_solve(factor, rhs[:, 1])
+    assert one.shape == (240,)
+    np.testing.assert_array_equal(one, dtbtrs(factor, rhs[:, 1:2], uplo="L", trans="T")[0][:, 0])
+    broken = factor.copy(order="F")
+    broken[0, 100] = 0.0
+    with pytest.raises(LinAlgError, match="dtbtrs failed"):
+        banded_back_solve(broken, rhs[:, 0])
 
 
 @cache

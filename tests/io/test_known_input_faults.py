@@ -1,12 +1,6 @@
-"""Bad input that does not yet get the clear error the project promises (found by the input
-audit of 2026-12-02, docs/audits/2026-12-02-inputs.md): each test states the error a user
-should get, and is a strict expected failure until the reader gives it, so the fix turns it
-into a pass (and a stale mark into a failure).
-
-The fixes belong in modules every measured figure reads (solver/model/osim.py,
-solver/io/c3d_layout.py, solver/io/trc.py), so they wait for the next batch of solver
-changes, whose figures are all made again anyway.
-"""
+"""Bad input that got no clear error before the input audit of 2026-12-02
+(docs/audits/2026-12-02-inputs.md): each test states the error a user gets now, naming the
+file and the line, element or parameter."""
 
 from __future__ import annotations
 
@@ -51,9 +45,6 @@ def _refused_c3d(bad: Path, match: str) -> None:
     assert err.value.path == str(bad)
 
 
-@pytest.mark.xfail(strict=True, raises=subprocess.TimeoutExpired,
-                   reason="audit 2026-12-02 finding 1: solver/model/osim.py _sort_joints revisits a joint whose child "
-                          "frame is ground and never ends (memory grows without bound)")
 def test_a_joint_whose_child_is_ground_is_refused(tmp_path: Path) -> None:
     """A joint whose child frame is ground: an OsimModelError naming the joint, in a fresh
     interpreter (the reader hangs today; the test gives it 20 s)."""
@@ -68,25 +59,17 @@ def test_a_joint_whose_child_is_ground_is_refused(tmp_path: Path) -> None:
     assert done.returncode == 0 and "ground_pelvis" in done.stdout and str(model) in done.stdout, done.stderr[-2000:]
 
 
-@pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="audit 2026-12-02 finding 4: solver/io/c3d_layout.py does not check the frame "
-                                       "rate; a rate of 0 gives NaN and infinite frame times")
 def test_a_c3d_frame_rate_of_zero_is_refused(tmp_path: Path) -> None:
     """POINT:RATE and the header's rate 0: a C3dFormatError naming the file and the rate."""
     _refused_c3d(_c3d_with_float(tmp_path / "rate0.c3d", "POINT", "RATE", 0.0, header_rate=0.0), "RATE")
 
 
-@pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="audit 2026-12-02 finding 5: solver/io/c3d_layout.py reads ANALOG:RATE without "
-                                       "comparing it with the header's analog samples per frame; ezc3d then reads every "
-                                       "marker and force with the wrong layout")
 def test_an_analog_rate_that_disagrees_with_the_header_is_refused(tmp_path: Path) -> None:
     """ANALOG:RATE 1000 Hz where the header says 8 samples per frame at 250 Hz (2000 Hz): a
     C3dFormatError naming the file and ANALOG:RATE, not 168,895 N peak forces."""
     _refused_c3d(_c3d_with_float(tmp_path / "analog_rate.c3d", "ANALOG", "RATE", 1000.0), "ANALOG:RATE")
 
 
-@pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="audit 2026-12-02 finding 6: solver/io/trc.py accepts a row of exactly the data "
-                                       "width in a file whose rows end with a tab, so a row missing one value is read "
-                                       "shifted by one axis")
 def test_a_row_missing_a_value_in_a_file_whose_rows_end_with_a_tab_is_refused(tmp_path: Path) -> None:
     """The run's TRC (rows end with a tab) with one value removed from line 11: a
     TrcFormatError naming the file and line 11, not 41 markers shifted by one axis."""
@@ -100,3 +83,140 @@ def test_a_row_missing_a_value_in_a_file_whose_rows_end_with_a_tab_is_refused(tm
     with pytest.raises(TrcFormatError, match="found 127 cells") as err:
         read_trc(bad)
     assert err.value.line == 11 and err.value.path == str(bad)
+
+
+WALK_MOT = SHARED_DATA / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "grf.mot"
+WALK_MODEL = SHARED_DATA / "subjects" / "rajagopal2016_walk" / "unscaled_generic.osim"
+
+
+def test_two_columns_for_one_plate_axis_are_refused(tmp_path: Path) -> None:
+    """Audit finding 7: the left plate's columns renamed in the ``r_ground_force_`` scheme
+    (so both plates read as plate r): a MotFormatError naming both columns, not a plate
+    silently dropped."""
+    from solver.errors import MotFormatError
+    from solver.io.mot import read_forces
+
+    lines = WALK_MOT.read_text().split("\n")
+    names = next(i for i, line in enumerate(lines) if line.startswith("time"))
+    lines[names] = (lines[names].replace("ground_force_l_v", "r_ground_force_v").replace("ground_force_l_p", "r_ground_force_p")
+                    .replace("ground_torque_l_", "r_ground_torque_"))
+    bad = tmp_path / "grf.mot"
+    bad.write_text("\n".join(lines))
+    with pytest.raises(MotFormatError, match="columns ground_force_r_vx and r_ground_force_vx both give plate 'r'") as err:
+        read_forces(bad)
+    assert err.value.path == str(bad)
+
+
+def test_a_nan_free_moment_is_named_with_its_plate_and_time(tmp_path: Path) -> None:
+    """Audit finding 8: a NaN in a plate's moment column stops the dynamics with the file, the
+    plate and the time (it said "cannot filter a signal with missing (NaN) samples")."""
+    from solver.dynamics.stage import DynamicsOptions, _filtered_plates
+    from solver.errors import DynamicsError
+    from solver.io.mot import read_forces
+
+    forces = read_forces(WALK_MOT)
+    moment = forces.plates[0].free_moment.copy()
+    moment[100, 1] = float("nan")
+    import dataclasses
+
+    broken = dataclasses.replace(forces, plates=(dataclasses.replace(forces.plates[0], free_moment=moment), *forces.plates[1:]))
+    with pytest.raises(DynamicsError, match=rf"plate {forces.plates[0].name}: the free moment is .* at {forces.time[100]:.3f} s \(sample 101") as err:
+        _filtered_plates(broken, forces.time[::10], DynamicsOptions(), 700.0, "walk")
+    assert err.value.path == str(WALK_MOT)
+
+
+def test_a_marker_mapping_that_is_not_utf8_is_named(tmp_path: Path) -> None:
+    """Audit finding 9: a Latin-1 markers.yaml gives a KinematicsError naming it, not a
+    UnicodeDecodeError traceback."""
+    from solver.errors import KinematicsError
+    from solver.kinematics.observations import read_marker_settings
+
+    bad = tmp_path / "markers.yaml"
+    bad.write_bytes(b"R.Shoulder: RACR  # \xe9paule droite\n")
+    with pytest.raises(KinematicsError, match="not UTF-8") as err:
+        read_marker_settings(bad)
+    assert err.value.path == str(bad)
+
+
+def test_chained_or_doubled_couplers_are_refused(tmp_path: Path) -> None:
+    """Audit finding 2: a coupler driven by another coupler's dependent coordinate, and a
+    coordinate two couplers drive, give an OsimModelError naming the couplers (a bare
+    ValueError from the coupling map, or silently the second coupler)."""
+    from solver.errors import OsimModelError
+    from solver.model.osim import read_osim
+
+    text = WALK_MODEL.read_text()
+    chained = tmp_path / "chained.osim"
+    chained.write_text(text.replace("<independent_coordinate_names>knee_angle_l</independent_coordinate_names>",
+                                    "<independent_coordinate_names>knee_angle_r_beta</independent_coordinate_names>", 1))
+    with pytest.raises(OsimModelError, match="driven by 'knee_angle_r_beta', which coupler .* drives; chained couplers"):
+        read_osim(chained)
+    doubled = tmp_path / "doubled.osim"
+    doubled.write_text(text.replace("<dependent_coordinate_name>knee_angle_l_beta</dependent_coordinate_name>",
+                                    "<dependent_coordinate_name>knee_angle_r_beta</dependent_coordinate_name>", 1))
+    with pytest.raises(OsimModelError, match="'knee_angle_r_beta' is the dependent coordinate of two couplers"):
+        read_osim(doubled)
+
+
+def test_an_inertia_with_a_negative_principal_moment_is_refused(tmp_path: Path) -> None:
+    """Audit finding 3: a negative inertia gives an OsimModelError naming the body and its
+    line (pinocchio's "The 3d inertia should be positive" traceback, or, off the diagonal,
+    accepted silently)."""
+    from solver.errors import OsimModelError
+    from solver.model.osim import read_osim
+
+    text = WALK_MODEL.read_text()
+    body = text.index('<Body name="pelvis">')
+    pelvis = text[body:].replace("<inertia_xy>0</inertia_xy>", "<inertia_xy>0.5</inertia_xy>", 1)
+    bad = tmp_path / "bad_pelvis.osim"
+    bad.write_text(text[:body] + pelvis)
+    with pytest.raises(OsimModelError, match="negative principal moment") as err:
+        read_osim(bad)
+    assert err.value.where == "<Body name='pelvis'>" and err.value.line is not None
+
+
+def test_a_b3d_with_empty_sensor_frames_opens(tmp_path: Path) -> None:
+    """.b3d audit finding 5: a trial with no marker, plate or IMU value has empty sensor frames
+    (raw_sensor_frame_size 0); our writer writes such a file and the reader opens it (it
+    refused "raw_sensor_frame_size is 0, expected > 0")."""
+    import numpy as np
+
+    from solver.io.b3d import B3dFrames, B3dHeader, B3dTrial, open_b3d
+    from solver.io.b3d_writer import write_b3d
+
+    trial = B3dTrial(name="a", original_name="a", split_index=0, timestep_s=0.01, n_frames=2, tags=(),
+                     missing_grf=("notMissingGRF",) * 2, n_force_plates=0, force_plate_corners=np.zeros((0, 4, 3)),
+                     marker_names_guessed=False, passes=())
+    header = B3dHeader(version=4, n_dofs=0, mass_kg=70.0, height_m=1.7, sex="male", age_years=30, tags=(), notes="",
+                       href="", ground_contact_bodies=(), marker_names=(), passes=(), trials=(trial,))
+    empty = np.zeros((2, 0, 3))
+    path = tmp_path / "empty_sensor.b3d"
+    write_b3d(path, header, [B3dFrames(trial=0, start=0, time_s=np.arange(2) * 0.01, missing_grf=trial.missing_grf,
+                                       markers=empty, plate_force=empty, plate_cop=empty, plate_moment=empty, passes=())])
+    frames = open_b3d(path).read_trial(0)
+    assert frames.markers.shape == (2, 0, 3) and frames.n_frames == 2
+
+
+def test_an_unknown_missing_grf_reason_is_read_and_written_back(tmp_path: Path) -> None:
+    """.b3d audit finding 6: a missing-GRF reason number this reader does not know (a newer
+    writer's) is read as ``unknownReason<number>`` (not measured) and written back as the
+    same number; the file was unreadable."""
+    from solver.io import b3d_schema as schema
+    from solver.io.b3d import open_b3d
+    from solver.io.b3d_writer import write_b3d
+
+    msg = schema.Header(version=4, num_dofs=0)
+    msg.marker_name.append("m")
+    sensor = schema.SensorFrame()
+    sensor.marker_obs.extend([1.0, 2.0, 3.0])
+    blob = sensor.SerializeToString()
+    msg.raw_sensor_frame_size = len(blob)
+    msg.trial_header.add(name="a", trial_length=2, trial_timestep=0.01).missing_grf_reason.extend([0, 11])
+    raw = msg.SerializeToString()
+    path = tmp_path / "reason11.b3d"
+    path.write_bytes(struct.pack("<q", len(raw)) + raw + blob * 2)
+    f = open_b3d(path)
+    assert f.header.trials[0].missing_grf == ("notMissingGRF", "unknownReason11")
+    again = tmp_path / "again.b3d"
+    write_b3d(again, f.header, [f.read_trial(0)])
+    assert open_b3d(again).header.trials[0].missing_grf == ("notMissingGRF", "unknownReason11")
