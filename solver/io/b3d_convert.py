@@ -32,7 +32,7 @@ from solver.io.subject import MODEL_FILE, SUBJECT_JSON
 from solver.io.trc import write_trc
 from solver.io.types import ForcePlate, ForceRecording, MarkerTrajectories
 from solver.outputs import SUBJECT_RECORD
-from solver.sampling import frame_interval
+from solver.sampling import frame_interval, nominal_interval
 
 #: The name of the file in a converted subject folder that says where it came from.
 SOURCE_JSON = "b3d_source.json"
@@ -229,13 +229,14 @@ def converted_trial_folders(subject_dir: str | Path) -> dict[str, str]:
 
 
 def _converted_trials(out: Path) -> tuple[str, ...]:
-    """The trial folders an earlier conversion into ``out`` wrote (its ``b3d_source.json``);
-    none when there is none or it cannot be read (a folder it did not write is not touched)."""
+    """The trial folders an earlier conversion into ``out`` wrote (read by
+    :func:`converted_trial_folders`); none when there is none or it cannot be read (a folder
+    it did not write is not touched), and never a name that leaves ``out/trials``."""
     try:
-        trials = json.loads((out / SOURCE_JSON).read_text(encoding="utf-8")).get("trials", {})
-    except (OSError, ValueError, AttributeError):
+        folders = converted_trial_folders(out).values()
+    except SubjectFolderError:
         return ()
-    return tuple(str(name) for name in trials if isinstance(name, str) and name and "/" not in name and name not in (".", ".."))
+    return tuple(name for name in folders if name and "/" not in name and name not in (".", ".."))
 
 
 def _remove_converted_trial(folder: Path) -> bool:
@@ -403,7 +404,7 @@ def processed_to_b3d(
     summary = json.loads(subject_json.read_text()) if subject_json.exists() else {}
     for k, tr in enumerate(trials):
         t = tr.n_frames
-        dt = _nominal_interval(frame_interval(tr.time, default=0.01))
+        dt = nominal_interval(frame_interval(tr.time, default=0.01))
         cols = [tr.coordinate_names.index(n) for n in dofs]
         qd_all, qdd_all = _finite_rates(tr.q, tr.qd, tr.qdd, tr.time)
         q, qd, qdd = tr.q[:, cols], qd_all[:, cols], qdd_all[:, cols]
@@ -506,13 +507,6 @@ def _model_mass(trials: list[Any]) -> float:
     trial, such as a static one, holds the given mass); the given mass when no trial has
     dynamics (the model is then scaled to it)."""
     return float(next((tr.mass_kg for tr in trials if tr.has_dynamics), trials[0].mass_kg))
-
-
-def _nominal_interval(dt: float) -> float:
-    """A frame interval (s) read from a time column, as the interval of its rate rounded to
-    1e-6 Hz: ``np.arange(T) * 0.01`` has a median step of 0.010000000000000009 s, which a
-    reader would take for 99.99999999999991 Hz; this gives 0.01 s (100 Hz)."""
-    return 1.0 / round(1.0 / dt, 6)
 
 
 def _finite_rates(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

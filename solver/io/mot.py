@@ -51,6 +51,7 @@ from solver.io.plate_moments import (
     warn_conversion,
 )
 from solver.io.types import ForcePlate, ForceRecording, Table
+from solver.sampling import nominal_rate
 
 #: Header keys written as "key value" (older Motion Analysis / SIMM style) instead of key=value.
 _SPACE_KEYS = {"name", "datacolumns", "datarows", "range"}
@@ -455,14 +456,12 @@ def estimate_rate(time: np.ndarray) -> float:
     """Sampling rate, Hz, from a uniform time column ``time`` ``(T,)``, s:
     ``(T - 1) / (t[-1] - t[0])``.
 
-    Rounded to the nearest integer when within 1e-6 of it (2000 Hz, not 1999.9999999).
+    Given as :func:`solver.sampling.nominal_rate` (2000 Hz, not 1999.9999999).
     Returns NaN for fewer than two samples.
     """
     if time.shape[0] < 2:
         return math.nan
-    rate = (time.shape[0] - 1) / (float(time[-1]) - float(time[0]))
-    nearest = round(rate)
-    return float(nearest) if nearest > 0 and abs(rate - nearest) <= 1e-6 * nearest else rate
+    return nominal_rate((time.shape[0] - 1) / (float(time[-1]) - float(time[0])))
 
 
 def _rate(table: Table, path: str | Path) -> float:

@@ -59,6 +59,7 @@ def test_walk_writes_every_output_with_the_required_keys(walk_out: Path) -> None
     assert "pelvis_tx_force" in id_table.column_names and "knee_angle_r_moment" in id_table.column_names
     # the static trial has no force plates: kinematics only
     assert "linear_residual_rms_N" not in _results(walk_out, "static")
+    assert _results(walk_out, "static")["rate_hz"] == 100.0  # the nominal rate (solver.sampling), not 99.99999999999991
 
 
 def test_walk_residuals_beat_opensim_and_meet_hicks(walk_out: Path) -> None:
