@@ -1087,6 +1087,16 @@ def measure_host_reference() -> float:
                            f"{(done.stderr.strip().splitlines() or ['no output'])[-1]}") from None
 
 
+def timing_reference(chosen: list[Figure], figures: tuple[Figure, ...] | list[Figure] | None = None) -> float | None:
+    """The host reference (s) timing figures made now are compared with: the median of the
+    references the live timing blocks record (:func:`recorded_host_references`); None when
+    ``chosen`` holds no timing figure or no block records a reference."""
+    if not any(f.kind == "timing" for f in chosen):
+        return None
+    recorded = list(recorded_host_references(figures).values())
+    return statistics.median(recorded) if recorded else None
+
+
 def host_check(chosen: list[Figure], measure: Callable[[], float] | None = None,
                figures: tuple[Figure, ...] | list[Figure] | None = None) -> str | None:
     """Why timing figures should not be made on this host now, or None when they may.
@@ -1099,17 +1109,14 @@ def host_check(chosen: list[Figure], measure: Callable[[], float] | None = None,
     median, the reason is returned. Nothing is timed when ``chosen`` holds no timing figure
     or no block records a reference.
     """
-    if not any(f.kind == "timing" for f in chosen):
+    median = timing_reference(chosen, figures)
+    if median is None:
         return None
-    recorded = list(recorded_host_references(figures).values())
-    if not recorded:
-        return None
-    median = statistics.median(recorded)
     try:
         now = (measure or measure_host_reference)()
     except RuntimeError as err:
         return f"{err}; the timing figures' host cannot be compared with their blocks'"
-    print(f"host reference now {now:.2f} s; the timing blocks record {median:.2f} s (median of {len(recorded)})", file=sys.stderr)
+    print(f"host reference now {now:.2f} s; the timing blocks record {median:.2f} s (their median)", file=sys.stderr)
     if now > HOST_SLACK * median:
         return (f"the host runs {now / median:.2f}x slower than when the timing blocks were made (OpenSim's IK tool on "
                 f"the walk: best {now:.2f} s now, median {median:.2f} s in their blocks; at most {HOST_SLACK:g}x): timing "
@@ -1244,10 +1251,10 @@ def main(argv: list[str] | None = None) -> int:
     if reason:
         print(f"error: {reason}", file=sys.stderr)
         return 2
-    recorded = list(recorded_host_references().values())
+    median = None if args.any_host else timing_reference(chosen)
     gate = None
-    if not args.any_host and recorded and any(f.kind == "timing" for f in chosen):
-        gate = HostGate(statistics.median(recorded), measure_host_reference, 60.0 * args.host_wait,
+    if median is not None:
+        gate = HostGate(median, measure_host_reference, 60.0 * args.host_wait,
                         last_quick=time.monotonic())  # host_check has just found it quick
     failed = run_all(chosen, args.jobs, gate=gate)
     if failed:
