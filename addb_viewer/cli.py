@@ -117,6 +117,26 @@ def run_to_completion() -> bool:
     return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) & bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
 
 
+class Terminated(KeyboardInterrupt):
+    """Raised in the main thread on SIGTERM (:func:`stop_on_sigterm`): what ``timeout``, SLURM
+    at the end of a job's time and ``kill`` send. A KeyboardInterrupt, so that every clean-up
+    of Ctrl-C runs (a dataset run keeps its finished subjects and writes its summary, listing
+    the others as cancelled); the command then exits with 143 (128 + SIGTERM)."""
+
+
+def stop_on_sigterm() -> None:
+    """Make SIGTERM stop the command as Ctrl-C does, raising :class:`Terminated` in the main
+    thread, instead of ending the process at once (Python's default): without it a dataset
+    run ended by ``timeout`` left no summary and its work folders behind
+    (docs/audits/2026-12-02-dataset.md, finding 9). Call from the main thread only."""
+    import signal
+
+    def terminate(signum: int, frame: object) -> None:
+        raise Terminated()
+
+    signal.signal(signal.SIGTERM, terminate)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``addb`` console script; returns the process exit code.
 
@@ -138,8 +158,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if argv is None and not getattr(args, "serves", False):
         run_to_completion()
+        stop_on_sigterm()
     try:
         return handler(args)
+    except Terminated:  # SIGTERM: as Ctrl-C
+        print(f"addb {args.command}: terminated (SIGTERM)", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:  # Ctrl-C: no traceback; outputs are put in place whole or not at all
         print(f"addb {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -110,6 +110,8 @@ class _Log:
             self._worker.log_event(PROGRESS_TOPIC, {"rel": self.rel, "message": message, "fraction": float(fraction)})
             self.check_stop()
         pct = "" if fraction is None else f"[{100 * fraction:5.1f}%] "
+        if self._f.closed:  # a failure after the log was closed (run_subject's last steps)
+            self._f = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
         self._f.write(f"{time.perf_counter() - self.t0:8.2f}s {pct}{message}\n")
         self._f.flush()
 
@@ -209,6 +211,7 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         log.close()
         outcome = {"rel": job.rel, "worker_pid": os.getpid(), "status": "cancelled", "trials": [], "seconds": time.perf_counter() - t0}
     except Exception as exc:  # noqa: BLE001 - the data's or the solver's failure: recorded, the batch goes on
+        _take_back_log(work, log)
         outcome["warnings"] = _log_warnings(log, caught)
         log(f"failed: {exc}")
         log(traceback.format_exc().rstrip())
@@ -219,6 +222,22 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         shutil.rmtree(work, ignore_errors=True)
     outcome["worker_peak_rss_mb"] = _peak_rss_mb()
     return outcome
+
+
+def _take_back_log(work: Path, log: _Log) -> None:
+    """Before a failure is written to ``log``: close it, and put it back at ``log.path`` when
+    the subject had already moved it into ``work/out`` (a failure in its last steps: renaming
+    the log or the output into place, writing the manifest), making ``work`` again if it is
+    gone; the failure is then appended to the whole log (:class:`_Log` opens it again), not
+    lost in an error about the closed file."""
+    log.close()
+    moved = work / "out" / LOG_NAME
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+        if moved.is_file() and not log.path.exists():
+            os.replace(moved, log.path)
+    except OSError:
+        pass  # the failure is written to a new log at log.path
 
 
 def _processed(subject_dir: str, out: Path, options: Any, unmeasured_force: Any, log: Callable[[str], None]) -> dict[str, Any]:

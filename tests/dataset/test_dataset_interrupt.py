@@ -40,9 +40,10 @@ _AS_FROM_A_TERMINAL = (
 )
 
 
-def _process(root: Path, out: Path, interrupt_after: str | None) -> tuple[int, str]:
+def _process(root: Path, out: Path, interrupt_after: str | None, terminate: bool = False) -> tuple[int, str]:
     """``addb process root --out out --workers 1`` in its own process group; with
-    ``interrupt_after``, SIGINT to the whole group once a line of its output holds that text.
+    ``interrupt_after``, SIGINT to the whole group once a line of its output holds that text
+    (with ``terminate``, SIGTERM to the command's own process alone, as ``timeout`` sends it).
 
     The command starts with SIGINT's default disposition, as from a terminal: a test run
     started in the background of a non-interactive shell (``bash .ci/run &``) ignores SIGINT,
@@ -59,7 +60,10 @@ def _process(root: Path, out: Path, interrupt_after: str | None) -> tuple[int, s
         for line in proc.stdout:
             lines.append(line)
             if interrupt_after is not None and interrupt_after in line:
-                os.killpg(proc.pid, signal.SIGINT)
+                if terminate:
+                    os.kill(proc.pid, signal.SIGTERM)
+                else:
+                    os.killpg(proc.pid, signal.SIGINT)
                 interrupt_after = None
         return proc.wait(), "".join(lines)
     finally:
@@ -84,6 +88,20 @@ def test_ctrl_c_keeps_finished_subjects_and_the_same_command_resumes(tmp_path: P
     code, text = _process(root, out, interrupt_after=None)
     assert code == 0, text
     assert "1 subjects: " not in text and "2 subjects: 1 processed, 1 up to date, 0 failed" in text, text
+
+
+def test_sigterm_stops_the_run_as_ctrl_c_does(tmp_path: Path) -> None:
+    """SIGTERM (``timeout``, SLURM, ``kill``) to the command: the finished subject is kept,
+    the summary is written with the other listed as cancelled, no work folder is left, exit
+    code 143 (docs/audits/2026-12-02-dataset.md, finding 9: it used to leave no summary)."""
+    root = build_tree(tmp_path / "ds", TREE)
+    out = tmp_path / "out"
+    code, text = _process(root, out, interrupt_after="1 processed, 0 failed", terminate=True)
+    assert code == 143, text
+    assert "Traceback" not in text and text.rstrip().endswith("addb process: terminated (SIGTERM)"), text
+    summary = json.loads((out / "dataset_summary.json").read_text())
+    assert [(s["rel"], s["status"]) for s in summary["subjects"]] == [("labA/a_walk", "ok"), ("labA/b_run", "cancelled")]
+    assert not [p.name for p in (out / "labA").iterdir() if p.name.startswith(".")]  # no work folder left
 
 
 def _sigint_ignored() -> bool:

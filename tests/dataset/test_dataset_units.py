@@ -252,6 +252,33 @@ def test_a_worker_killed_between_the_two_renames_loses_no_finished_output(tmp_pa
     assert sorted(p.name for p in out.iterdir()) == ["s-01"]
 
 
+def test_a_failure_after_the_subjects_log_was_closed_is_recorded_with_the_whole_log(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    """A subject that fails in its last steps (its output renamed into place: here a full
+    disk) is recorded as failing with that error, its process.log holding every line, not as
+    "I/O operation on closed file" without a record (docs/audits/2026-12-02-dataset.md,
+    finding 6)."""
+    import errno
+
+    from solver.dataset import task
+    from solver.dataset.manifest import read_manifest
+
+    subject = writable_copy(SUBJECTS / "rajagopal2016_walk", tmp_path / "s01")
+    final = tmp_path / "out" / "s01"
+
+    def full_disk(src: Path, dst: Path) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+
+    monkeypatch.setattr(task, "_replace_dir", full_disk)
+    outcome = task.run_subject(task.SubjectJob("s01", str(subject), str(final), {"inputs": "test"}))
+    assert outcome["status"] == "failed" and "No space left on device" in outcome["error"]["message"], outcome
+    log = (final / task.LOG_NAME).read_text(encoding="utf-8")
+    assert "done: ok" in log and "failed: [Errno 28] No space left on device" in log, log
+    assert "closed file" not in log, log
+    assert read_manifest(final)["status"] == "failed"
+    assert sorted(p.name for p in final.parent.iterdir()) == ["s01"]  # no work folder left
+
+
 def test_a_second_run_on_one_output_tree_is_refused_while_the_first_holds_it(tree: Path, tmp_path: Path,
                                                                             capsys: pytest.CaptureFixture[str]) -> None:
     """Two runs on one OUT each removed the other's work folders at start, failing its running
