@@ -25,6 +25,7 @@ from solver.dataset.manifest import (
     KeyUnreadable,
     finished_manifest,
     key_changes,
+    lost_trials,
     run_settings,
     subject_key_now,
 )
@@ -222,6 +223,9 @@ def _changes(
                  "one-subject addb process with --trial, or with a review file not the subject's own)")]
     if stored is None:
         return ["no finished output (cancelled, or its worker died)"]
+    lost = lost_trials(target, stored)
+    if lost:
+        return [f"its output of {listed(lost, 3)} is gone (trial.npz or results.json missing or empty)"]
     kept = stored["key"].get("annotations")
     try:
         now = subject_key_now(entry.path, target, settings, review_digest or (lambda subject, out: kept))

@@ -237,8 +237,29 @@ def finished_manifest(out_dir: str | Path) -> dict[str, Any] | None:
     return stored if stored is not None and stored.get("status") in FINAL_STATUSES else None
 
 
+def lost_trials(out_dir: str | Path, stored: dict[str, Any]) -> list[str]:
+    """The trials a finished manifest ``stored`` lists (its ``trials`` rows) whose output is
+    no longer in the subject's output folder ``out_dir``: a trial folder without a non-empty
+    ``trial.npz`` and ``results.json`` (deleted or emptied after the run). [] for a failure
+    record, which lists no trial. A manifest with lost trials is not up to date
+    (:func:`current_manifest`): a new run processes the subject again
+    (docs/audits/2026-12-02-dataset.md, finding 7)."""
+    base = Path(out_dir)
+    lost = []
+    for row in stored.get("trials") or []:
+        name = str(row.get("trial") or "") if isinstance(row, dict) else ""
+        folder = base / name
+        kept = bool(name) and all((folder / f).is_file() and (folder / f).stat().st_size > 0 for f in ("trial.npz", "results.json"))
+        if not kept:
+            lost.append(name or "(unnamed)")
+    return lost
+
+
 def current_manifest(out_dir: str | Path, key: dict[str, Any]) -> dict[str, Any] | None:
-    """The stored manifest when its run finished and its key equals ``key`` (the output, or
-    the failure it records, is up to date with the inputs), else None."""
+    """The stored manifest when its run finished, its key equals ``key`` (the output, or the
+    failure it records, is up to date with the inputs) and none of its trials' output is
+    lost (:func:`lost_trials`), else None."""
     stored = finished_manifest(out_dir)
-    return stored if stored is not None and stored["key"] == key else None
+    if stored is None or stored["key"] != key or lost_trials(out_dir, stored):
+        return None
+    return stored

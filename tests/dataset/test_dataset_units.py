@@ -4,6 +4,7 @@ key that decides what a rerun skips, and the report page."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ from solver.dataset.manifest import (
     current_manifest,
     finished_manifest,
     input_files,
+    lost_trials,
     manifest_key,
     subject_status,
 )
@@ -190,6 +192,25 @@ def test_a_stored_manifest_counts_only_with_an_equal_key_and_a_final_status(tmp_
     for status in FINAL_STATUSES:  # what addb info compares with, whatever the key
         (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": status}))
         assert finished_manifest(tmp_path)["status"] == status
+
+
+def test_a_manifest_whose_trial_output_is_gone_is_not_current(tmp_path: Path) -> None:
+    """Output deleted or emptied after the run is not counted as finished: a new run processes
+    the subject again (docs/audits/2026-12-02-dataset.md, finding 7)."""
+    key = {"schema": 1, "inputs": {"a": "0"}}
+    rows = [{"trial": "walk"}, {"trial": "static"}]
+    (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": "ok", "trials": rows}))
+    for trial in ("walk", "static"):
+        (tmp_path / trial).mkdir()
+        for f in ("trial.npz", "results.json"):
+            (tmp_path / trial / f).write_bytes(b"x")
+    assert current_manifest(tmp_path, key)["status"] == "ok" and lost_trials(tmp_path, finished_manifest(tmp_path)) == []
+    (tmp_path / "walk" / "trial.npz").write_bytes(b"")  # emptied
+    assert current_manifest(tmp_path, key) is None and lost_trials(tmp_path, finished_manifest(tmp_path)) == ["walk"]
+    shutil.rmtree(tmp_path / "static")  # deleted
+    assert lost_trials(tmp_path, finished_manifest(tmp_path)) == ["walk", "static"]
+    (tmp_path / "manifest.json").write_text(json.dumps({"key": key, "status": "failed", "trials": []}))
+    assert current_manifest(tmp_path, key)["status"] == "failed"  # a failure record lists no output
 
 
 def test_a_subjects_status_follows_its_trials_in_one_place() -> None:
