@@ -154,10 +154,11 @@ def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOpt
         if not np.isfinite(f).all():
             bad = int(np.argmax(~np.isfinite(f).all(axis=1)))
             raise DynamicsError(f"plate {p.name}: force is NaN at {forces.time[bad]:.3f} s", path=forces.source or None, where=f"trial {trial}")
-        peak = float(np.abs(f).max()) if f.size else 0.0
+        k = int(np.abs(f).max(axis=1).argmax()) if f.size else 0
+        peak = float(np.abs(f[k]).max()) if f.size else 0.0
         if peak > ABSURD_FORCE_BW * bw:
             raise DynamicsError(
-                f"plate {p.name}: force of {peak:.0f} N is {peak / bw:.0f} body weights (more than {ABSURD_FORCE_BW:.0f}); "
+                f"plate {p.name}: force of {peak:.4g} N at {forces.time[k]:.3f} s (sample {k + 1}) is {peak / bw:.4g} body weights (more than {ABSURD_FORCE_BW:.0f}); "
                 "check the units and the subject's mass",
                 path=forces.source or None,
                 where=f"trial {trial}",
@@ -206,8 +207,13 @@ def trial_frames(markers: MarkerTrajectories, forces: ForceRecording, rate: floa
     Raises
     ------
     DynamicsError
-        Markers and forces overlap by less than ten frames (naming the trial).
+        Markers and forces overlap by less than ten frames, or either has a single frame
+        (naming the trial, and the file of the one with a single frame).
     """
+    for what, times, source in (("markers", markers.time, markers.source), ("forces", forces.time, forces.source)):
+        if times.size < 2:  # a span of one instant: "do not overlap" would be wrong
+            raise DynamicsError(f"the {what} have {times.size} frame{'' if times.size == 1 else 's'}; the dynamics needs at "
+                                "least 10", path=source or None, where=f"trial {trial}")  # fmt: skip
     start = max(float(markers.time[0]), float(forces.time[0]))
     stop = min(float(markers.time[-1]), float(forces.time[-1]))
     if stop - start < 10.0 / rate:

@@ -51,7 +51,7 @@ from solver.io.plate_moments import (
     warn_conversion,
 )
 from solver.io.types import ForcePlate, ForceRecording, Table
-from solver.sampling import nominal_rate
+from solver.sampling import frame_interval, nominal_rate
 
 #: Header keys written as "key value" (older Motion Analysis / SIMM style) instead of key=value.
 _SPACE_KEYS = {"name", "datacolumns", "datarows", "range"}
@@ -388,8 +388,8 @@ def read_forces(path: str | Path, *, moment_reference: Reference = "auto") -> Fo
         ``(T, 3)`` N·m about the CoP, all in the file's lab frame (Y up for OpenSim
         files). Unloaded frames keep the file's CoP, which is often meaningless there.
         A plate without moment columns gets zeros. ``rate_hz`` is the header's
-        ``DataRate`` when present, else estimated from the time column (see
-        :func:`estimate_rate`). ``corners`` is None (MOT files carry no plate geometry).
+        ``DataRate`` when present and within 1 % of the time column's rate, else the
+        time column's (:func:`estimate_rate`; a disagreeing ``DataRate`` is warned about). ``corners`` is None (MOT files carry no plate geometry).
 
     Raises
     ------
@@ -464,7 +464,22 @@ def estimate_rate(time: np.ndarray) -> float:
     return nominal_rate((time.shape[0] - 1) / (float(time[-1]) - float(time[0])))
 
 
+#: Relative disagreement between a force file's ``DataRate`` and its time column above which
+#: the time column's rate is used, with a warning (input audit 2026-12-02, finding 13).
+RATE_TOLERANCE = 0.01
+
+
 def _rate(table: Table, path: str | Path) -> float:
+    """Sampling rate (Hz) of a force table: its ``DataRate`` header; the time column's
+    (:func:`estimate_rate`) when there is none; the time column's median step's
+    (:func:`solver.sampling.frame_interval`) when the header differs from it by more than
+    :data:`RATE_TOLERANCE` (with a UserWarning naming the file).
+
+    Raises
+    ------
+    MotFormatError
+        ``DataRate`` is not a positive number.
+    """
     text = table.header.get("DataRate")
     if text is None:
         return estimate_rate(table.time)
@@ -476,6 +491,18 @@ def _rate(table: Table, path: str | Path) -> float:
         raise MotFormatError(
             f"DataRate={text!r} is not a positive number (Hz)", path=path, where="header"
         )
+    if table.time.shape[0] > 1:
+        measured = nominal_rate(1.0 / frame_interval(table.time))  # the median step: a dropped sample moves it not
+        if abs(measured / rate - 1.0) > RATE_TOLERANCE:
+            import warnings
+
+            warnings.warn(
+                f"{path}: DataRate says {rate:g} Hz but the time column steps {1.0 / measured:g} s ({measured:g} Hz); "
+                "the time column's rate is used (it places the samples, and sets the force filter)",
+                UserWarning,
+                stacklevel=3,
+            )
+            return measured
     return rate
 
 

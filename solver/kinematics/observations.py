@@ -9,7 +9,7 @@ body automatically, see :mod:`solver.kinematics.autoplace`).
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +43,51 @@ class MarkerSettings:
     source: str = ""
 
 
+class _DuplicateKey(ValueError):
+    """A key given twice in one mapping of a marker mapping file (the message names it)."""
+
+
+def _unique_pairs(pairs: list[tuple[str, object]]) -> dict[str, object]:
+    """``json.loads``' object hook: the pairs as a dict, refusing a key given twice."""
+    out: dict[str, object] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(f"{key!r} is mapped twice ({out[key]!r} and {value!r}); give each lab marker once")
+        out[key] = value
+    return out
+
+
+def _load_yaml_unique(text: str) -> object:
+    """``yaml.safe_load`` of ``text``, refusing a key given twice in one mapping (PyYAML
+    keeps the last silently: input audit 2026-12-02, finding 15).
+
+    Raises
+    ------
+    _DuplicateKey
+        Naming the key, both values and the line of the second.
+    yaml.YAMLError
+        Text that is not YAML.
+    """
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(self, node, deep=False):  # noqa: ANN001, ANN202 (PyYAML's signature)
+            seen: dict[object, object] = {}
+            for key_node, value_node in node.value:
+                key = self.construct_object(key_node, deep=deep)
+                if not isinstance(key, Hashable):  # PyYAML's own mapping refuses it, naming the line
+                    break
+                if key in seen:
+                    raise _DuplicateKey(
+                        f"line {key_node.start_mark.line + 1}: {key!r} is mapped twice ({seen[key]!r} on an earlier line, "
+                        f"then {self.construct_object(value_node, deep=deep)!r}); give each lab marker once"
+                    )
+                seen[key] = self.construct_object(value_node, deep=deep)
+            return super().construct_mapping(node, deep=deep)
+
+    return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
 def read_marker_settings(path: str | Path) -> MarkerSettings:
     """Read a marker mapping file (YAML or JSON).
 
@@ -52,7 +97,8 @@ def read_marker_settings(path: str | Path) -> MarkerSettings:
     Raises
     ------
     KinematicsError
-        Unparsable file or other content, naming the file.
+        Unparsable file or other content, or a lab marker mapped twice, naming the file
+        (and the line, for YAML).
     """
     path = Path(path)
     try:
@@ -62,11 +108,11 @@ def read_marker_settings(path: str | Path) -> MarkerSettings:
                               path=path) from None
     try:
         if path.suffix in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text)
+            data = _load_yaml_unique(text)
         else:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_pairs)
+    except _DuplicateKey as exc:
+        raise KinematicsError(str(exc), path=path) from None
     except Exception as exc:  # noqa: BLE001 (yaml/json errors carry their own position)
         raise KinematicsError(f"cannot parse marker mapping: {exc}", path=path) from None
     attach = False

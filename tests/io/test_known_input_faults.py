@@ -86,6 +86,7 @@ def test_a_row_missing_a_value_in_a_file_whose_rows_end_with_a_tab_is_refused(tm
 
 
 WALK_MOT = SHARED_DATA / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "grf.mot"
+WALK_TRC = SHARED_DATA / "subjects" / "rajagopal2016_walk" / "trials" / "walk" / "markers.trc"
 WALK_MODEL = SHARED_DATA / "subjects" / "rajagopal2016_walk" / "unscaled_generic.osim"
 
 
@@ -220,3 +221,101 @@ def test_an_unknown_missing_grf_reason_is_read_and_written_back(tmp_path: Path) 
     again = tmp_path / "again.b3d"
     write_b3d(again, f.header, [f.read_trial(0)])
     assert open_b3d(again).header.trials[0].missing_grf == ("notMissingGRF", "unknownReason11")
+
+
+def test_a_lost_marker_filled_with_a_sentinel_is_read_as_missing(tmp_path: Path) -> None:
+    """Audit finding 11: R.Shoulder written as 9999999 mm on six rows (a lost-marker fill)
+    is read as missing there, with a warning naming the file, the marker and the lines (the
+    scale fit blamed the Units line and heightM); every other sample is as before."""
+    import numpy as np
+
+    lines = WALK_TRC.read_text().split("\n")
+    for r in range(50, 56):  # lines 51-56
+        cells = lines[r].split("\t")
+        cells[2:5] = ["9999999"] * 3
+        lines[r] = "\t".join(cells)
+    bad = tmp_path / "markers.trc"
+    bad.write_text("\n".join(lines))
+    with pytest.warns(UserWarning, match=rf"{bad}: marker R.Shoulder is 17.3 km from the frame's other markers on 6 rows \(lines 51-56\)"):
+        read = read_trc(bad)
+    good = read_trc(WALK_TRC)
+    shoulder = good.names.index("R.Shoulder")
+    lost = np.zeros(good.positions.shape[:2], dtype=bool)
+    lost[44:50, shoulder] = True  # data rows 45-50 are lines 51-56
+    assert np.isnan(read.positions[lost]).all()
+    np.testing.assert_array_equal(read.positions[~lost], good.positions[~lost])
+
+
+def test_a_data_rate_that_disagrees_with_the_time_column_is_not_used(tmp_path: Path) -> None:
+    """Audit finding 13: ``DataRate=1000`` in a force file whose time column steps 0.5 ms:
+    the rate is the time column's 2000 Hz (it sets the force filter), with a warning naming
+    the file; the file's own DataRate is kept when it agrees."""
+    from solver.io.mot import read_forces
+
+    lines = WALK_MOT.read_text().split("\n")
+    lines.insert(lines.index("endheader"), "DataRate=1000")
+    bad = tmp_path / "grf.mot"
+    bad.write_text("\n".join(lines))
+    with pytest.warns(UserWarning, match=rf"{bad}: DataRate says 1000 Hz but the time column steps 0.0005 s \(2000 Hz\)"):
+        assert read_forces(bad).rate_hz == 2000.0
+    lines[lines.index("DataRate=1000")] = "DataRate=2000"
+    bad.write_text("\n".join(lines))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_forces(bad).rate_hz == 2000.0
+
+
+def test_a_lab_marker_mapped_twice_is_refused(tmp_path: Path) -> None:
+    """Audit finding 15: a markers.yaml giving R.Shoulder twice is refused, naming the file,
+    the line and both names (the last entry won silently); the same in JSON."""
+    from solver.errors import KinematicsError
+    from solver.kinematics.observations import read_marker_settings
+
+    bad = tmp_path / "markers.yaml"
+    bad.write_text("R.Shoulder: RACR\nR.Shoulder: LACR\n")
+    with pytest.raises(KinematicsError, match=r"line 2: 'R.Shoulder' is mapped twice \('RACR' on an earlier line, then 'LACR'\)") as err:
+        read_marker_settings(bad)
+    assert err.value.path == str(bad)
+    nested = tmp_path / "nested.yaml"
+    nested.write_text("markers:\n  R.Shoulder: RACR\n  L.Shoulder: LACR\nattach_unmatched: true\n")
+    assert read_marker_settings(nested).mapping == {"R.Shoulder": "RACR", "L.Shoulder": "LACR"}
+    doubled = tmp_path / "markers.json"
+    doubled.write_text('{"R.Shoulder": "RACR", "R.Shoulder": "LACR"}')
+    with pytest.raises(KinematicsError, match=r"'R.Shoulder' is mapped twice \('RACR' and 'LACR'\)"):
+        read_marker_settings(doubled)
+
+
+def test_a_one_frame_marker_file_is_named_as_such(tmp_path: Path) -> None:
+    """Audit finding 16: a TRC of one frame stops the dynamics with "the markers have 1
+    frame", naming the file (it said the markers and forces "do not overlap in time")."""
+    from solver.dynamics.stage import trial_frames
+    from solver.errors import DynamicsError
+    from solver.io.mot import read_forces
+
+    lines = WALK_TRC.read_text().split("\n")
+    lines[2] = lines[2].replace("238", "1", 1)  # NumFrames
+    one = tmp_path / "markers.trc"
+    one.write_text("\n".join(lines[:7]) + "\n")
+    markers = read_trc(one)
+    assert markers.time.size == 1
+    with pytest.raises(DynamicsError, match="the markers have 1 frame; the dynamics needs at least 10") as err:
+        trial_frames(markers, read_forces(WALK_MOT), 100.0, "walk")
+    assert err.value.path == str(one)
+
+
+def test_an_absurd_force_is_printed_briefly_with_its_time(tmp_path: Path) -> None:
+    """Audit finding 17: a force of 1e308 N is printed as 1e+308 N with its time and sample
+    (it was printed with its 309 digits and no time)."""
+    import dataclasses
+
+    from solver.dynamics.stage import DynamicsOptions, _filtered_plates
+    from solver.errors import DynamicsError
+    from solver.io.mot import read_forces
+
+    forces = read_forces(WALK_MOT)
+    force = forces.plates[0].force.copy()
+    force[3000, 1] = 1e308
+    broken = dataclasses.replace(forces, plates=(dataclasses.replace(forces.plates[0], force=force), *forces.plates[1:]))
+    with pytest.raises(DynamicsError, match=rf"force of 1e\+308 N at {forces.time[3000]:.3f} s \(sample 3001\) is 1\.\d+e\+305 body weights") as err:
+        _filtered_plates(broken, forces.time[::10], DynamicsOptions(), 700.0, "walk")
+    assert err.value.path == str(WALK_MOT) and len(str(err.value)) < 400
