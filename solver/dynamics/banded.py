@@ -220,21 +220,9 @@ def banded_back_solve(factor: FloatArray, rhs: FloatArray) -> FloatArray:
     Loan, *Matrix Computations*, 4th ed., §3.1.4). Its one right-hand side reads the factor
     once, so it is not chunked as :func:`banded_forward_solve` is.
 
-    Parameters
-    ----------
-    factor
-        ``(u + 1, N)`` lower band storage of L, ``factor[d, c] = L[c + d, c]``.
-    rhs
-        ``(N,)`` or ``(N, k)`` right-hand side(s).
-
-    Returns
-    -------
-    The solution, shaped as ``rhs``.
-
-    Raises
-    ------
-    LinAlgError
-        A zero on the factor's diagonal (or a LAPACK argument error).
+    ``factor`` is ``(u + 1, N)``, as :func:`banded_forward_solve` takes it; ``rhs`` is
+    ``(N,)`` or ``(N, k)``, and the solution is returned in its shape. Raises LinAlgError
+    for a zero on the factor's diagonal (or a LAPACK argument error).
     """
     x, info = dtbtrs(factor, rhs.reshape(rhs.shape[0], -1), uplo="L", trans="T")
     if info != 0:
