@@ -173,6 +173,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileNotFoundError as exc:
         print(f"addb {args.command}: no such file or folder: {exc.filename}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader of stdout left (addb info ... | head): no traceback, as other tools
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush has nowhere to fail
+        return 141  # 128 + SIGPIPE, what a shell reports for a command its pipe's reader left
     except OSError as exc:  # a folder named where a file is expected, no permission, disk full
         if exc.filename is None:
             raise

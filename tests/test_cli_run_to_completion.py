@@ -63,3 +63,14 @@ def test_main_called_from_python_leaves_the_interpreter_alone() -> None:
     assert cli.main(["info", str(MODEL)]) == 0
     assert gc.get_threshold() == before
     assert gc.get_freeze_count() == 0
+
+
+def test_a_reader_that_leaves_the_pipe_gets_no_traceback() -> None:
+    """``addb info MODEL | head -1``: when the reader of stdout has gone before the summary is
+    printed, the command exits 141 (128 + SIGPIPE, as a shell reports it) with nothing on
+    stderr, not a BrokenPipeError traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "addb_viewer.cli", "info", str(MODEL)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc.stdout.close()  # before the child has imported anything: its print meets a closed pipe
+    err = proc.stderr.read()
+    assert proc.wait(timeout=60) == 141 and err == "", err

@@ -248,8 +248,68 @@ def model_counts(p: Path) -> dict[str, Any]:
     }
 
 
+def model_details(p: Path) -> dict[str, Any]:
+    """What a user checks in a model before processing with it, as addb reads it
+    (:func:`solver.model.osim.read_osim`): total mass and each body's, coordinates with
+    their motion type, range and default (degrees for rotational ones, m for translational
+    ones, the model's units for coupled ones), the
+    locked, clamped and coupled ones, and the markers of each body.
+
+    Returns
+    -------
+    ``{"mass_kg", "body_masses_kg": {body: kg}, "coordinate_list": [{"name", "joint",
+    "motion_type", "range", "default", "unit", "locked", "clamped", "coupled_to"}],
+    "markers_by_body": {body: [names]}}``.
+
+    Raises
+    ------
+    OsimModelError, XmlFormatError
+        The model cannot be read, naming the file and element.
+    """
+    from solver.model.osim import ROTATIONAL, TRANSLATIONAL, read_osim
+
+    model = read_osim(p)
+    coupled = {c.dependent: c.independent for c in model.couplers}
+    coordinates = []
+    for c in model.coordinates:
+        k = math.degrees(1.0) if c.motion_type == ROTATIONAL else 1.0
+        coordinates.append({
+            "name": c.name, "joint": c.joint, "motion_type": c.motion_type,
+            "range": [_fmt(c.range[0] * k), _fmt(c.range[1] * k)], "default": _fmt(c.default_value * k),
+            "unit": {ROTATIONAL: "deg", TRANSLATIONAL: "m"}.get(c.motion_type, "(model units)"), "locked": c.locked,
+            "clamped": c.clamped,
+            "coupled_to": coupled.get(c.name),
+        })  # fmt: skip
+    markers: dict[str, list[str]] = {}
+    for m in model.markers:
+        markers.setdefault(m.body, []).append(m.name)
+    return {
+        "mass_kg": float(sum(b.mass for b in model.bodies)),
+        "body_masses_kg": {b.name: float(b.mass) for b in model.bodies},
+        "coordinate_list": coordinates,
+        "markers_by_body": markers,
+    }
+
+
 def _osim(p: Path) -> dict[str, Any]:
-    return {"kind": "osim", "path": str(p), **model_counts(p)}
+    return {"kind": "osim", "path": str(p), **model_counts(p), **model_details(p)}
+
+
+def _osim_lines(d: dict[str, Any]) -> list[str]:
+    """The body masses, coordinates and markers of :func:`model_details`, one line each
+    (markers: one line per body)."""
+    masses = ", ".join(f"{b} {_fmt(m)}" for b, m in d["body_masses_kg"].items())
+    lines = [f"  mass {_fmt(d['mass_kg'])} kg: {masses}"]
+    coords = d["coordinate_list"]
+    flags = {k: sum(1 for c in coords if c[k]) for k in ("locked", "clamped", "coupled_to")}
+    lines.append(f"  coordinates ({flags['locked']} locked, {flags['clamped']} clamped, {flags['coupled_to']} coupled):")
+    for c in coords:
+        state = [w for w in ("locked", "clamped") if c[w]] + ([f"coupled to {c['coupled_to']}"] if c["coupled_to"] else [])
+        lines.append(f"    {c['name']} ({c['joint']}, {c['motion_type']}): {c['range'][0]} to {c['range'][1]} {c['unit']}, "
+                     f"default {c['default']}" + (f"; {', '.join(state)}" if state else ""))  # fmt: skip
+    lines.append("  markers:")
+    lines += [f"    {body}: {', '.join(names)}" for body, names in d["markers_by_body"].items()]
+    return lines
 
 
 def _xml(p: Path) -> dict[str, Any]:
@@ -582,6 +642,8 @@ def format_summary(d: dict[str, Any]) -> str:
             f"  model {d['model']!r} (version {d['version']}): {d['bodies']} bodies, "
             f"{d['coordinates']} coordinates, {d['markers']} markers"
         )
+        if "coordinate_list" in d:
+            lines += _osim_lines(d)
     if kind == "external_loads":
         lines.append(f"  datafile: {d['datafile']}")
         lines += [f"  {f['name']}: {f['force']} -> {f['body']}" for f in d["forces"]]

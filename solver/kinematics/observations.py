@@ -71,7 +71,7 @@ def _load_yaml_unique(text: str) -> object:
     import yaml
 
     class UniqueKeyLoader(yaml.SafeLoader):
-        def construct_mapping(self, node, deep=False):  # noqa: ANN001, ANN202 (PyYAML's signature)
+        def construct_mapping(self, node, deep=False):  # PyYAML's signature
             seen: dict[object, object] = {}
             for key_node, value_node in node.value:
                 key = self.construct_object(key_node, deep=deep)
@@ -85,7 +85,7 @@ def _load_yaml_unique(text: str) -> object:
                 seen[key] = self.construct_object(value_node, deep=deep)
             return super().construct_mapping(node, deep=deep)
 
-    return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 (a SafeLoader subclass)
+    return yaml.load(text, Loader=UniqueKeyLoader)  # a SafeLoader subclass: safe_load's constructors
 
 
 def read_marker_settings(path: str | Path) -> MarkerSettings:

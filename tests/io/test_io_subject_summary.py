@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 import shutil
 import subprocess
@@ -246,6 +247,30 @@ def test_osim_counts_agree_with_opensim(path: Path) -> None:
     assert d["bodies"] == model.getBodySet().getSize()
     assert d["coordinates"] == model.getCoordinateSet().getSize()
     assert d["markers"] == model.getMarkerSet().getSize()
+    # the details (addb info MODEL): total mass, each coordinate's range, default and flags
+    # in OpenSim's units (rotational in degrees here), the couplers and the markers' bodies
+    state = model.initSystem()
+    assert d["mass_kg"] == pytest.approx(model.getTotalMass(state), rel=1e-12)
+    coordinates = model.getCoordinateSet()
+    assert [c["name"] for c in d["coordinate_list"]] == [coordinates.get(i).getName() for i in range(coordinates.getSize())]
+    for c in d["coordinate_list"]:
+        osim = coordinates.get(c["name"])
+        k = 180.0 / math.pi if c["unit"] == "deg" else 1.0
+        assert (c["unit"] == "deg") == (osim.getMotionType() == opensim.Coordinate.Rotational), c
+        expected = [osim.getRangeMin() * k, osim.getRangeMax() * k, osim.getDefaultValue() * k]
+        assert [float(v) for v in (*c["range"], c["default"])] == pytest.approx(expected, rel=1e-3, abs=1e-9), c
+        assert (c["locked"], c["clamped"]) == (osim.getDefaultLocked(), osim.getDefaultClamped()), c
+    couplers = {}
+    for i in range(model.getConstraintSet().getSize()):
+        coupler = opensim.CoordinateCouplerConstraint.safeDownCast(model.getConstraintSet().get(i))
+        if coupler is not None and coupler.get_isEnforced():
+            couplers[coupler.getDependentCoordinateName()] = coupler.getIndependentCoordinateNames().get(0)
+    assert {c["name"]: c["coupled_to"] for c in d["coordinate_list"] if c["coupled_to"]} == couplers
+    markers = model.getMarkerSet()
+    by_body: dict[str, list[str]] = {}
+    for i in range(markers.getSize()):
+        by_body.setdefault(markers.get(i).getParentFrame().findBaseFrame().getName(), []).append(markers.get(i).getName())
+    assert d["markers_by_body"] == by_body
 
 
 def test_subject_summary_in_body_weights(shared_data: Path) -> None:
