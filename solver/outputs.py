@@ -40,6 +40,13 @@ CACHE_DIR = ".addb_cache"
 #: the settings of each stage), written by :func:`solver.pipeline.write_subject_summary`.
 SUBJECT_RECORD = "subject.json"
 
+#: Keys of :data:`SUBJECT_RECORD` naming the run's inputs: the subject folder it read
+#: (absolute), and the review record whose flags it took (absolute; null when it took no
+#: flags; absent when the caller gave flags without naming their record). ``addb export``
+#: reads them to find the subject's tags and the reviewer's flags.
+SUBJECT_DIR_KEY = "subject_dir"
+REVIEW_RECORD_KEY = "review_record"
+
 #: A dataset run's record of one subject's inputs and outcome (:mod:`solver.dataset.manifest`).
 MANIFEST_NAME = "manifest.json"
 

@@ -45,6 +45,8 @@ from solver.model.rotations import rotations_to_wxyz
 from solver.model.skeleton import Skeleton
 from solver.outputs import (
     CACHE_DIR,
+    REVIEW_RECORD_KEY,
+    SUBJECT_DIR_KEY,
     SUBJECT_RECORD,
     TRIAL_RESULTS,
     check_output_folder,
@@ -338,6 +340,7 @@ def process_subject(
     options: ProcessOptions | None = None,
     unmeasured_force: dict[str, np.ndarray] | None = None,
     progress: Progress | None = None,
+    review_record: str | Path | None = None,
 ) -> ProcessResult:
     """Run every stage on a subject and write ``out_dir`` (see :mod:`solver.outputs`).
 
@@ -356,6 +359,10 @@ def process_subject(
         automatic proposals of the dynamics stage for that trial. See :mod:`solver.masks`.
     progress
         Called with (message, fraction done).
+    review_record
+        The review record ``unmeasured_force`` was read from, recorded in subject.json
+        (:data:`solver.outputs.REVIEW_RECORD_KEY`, with the subject folder,
+        :data:`solver.outputs.SUBJECT_DIR_KEY`) for ``addb export``.
 
     Returns
     -------
@@ -380,7 +387,7 @@ def process_subject(
         what is not an output of addb (:func:`solver.outputs.check_output_folder`).
     """
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress, keep_kinematics=True)
+        return _process_subject(subject_dir, out_dir, options, unmeasured_force, progress, keep_kinematics=True, review_record=review_record)
 
 
 def reprocess_dynamics(
@@ -392,6 +399,7 @@ def reprocess_dynamics(
     *,
     options: ProcessOptions | None = None,
     warm_start: bool | None = None,
+    review_record: str | Path | None = None,
 ) -> ProcessResult:
     """Rerun the dynamics stage only (after a flag edit) and write ``trials`` into ``out_dir``.
 
@@ -444,6 +452,8 @@ def reprocess_dynamics(
     warm_start
         Start the dynamics fit from the previous solutions (see above); None: when the fit
         runs to convergence.
+    review_record
+        As for :func:`process_subject`.
 
     Returns
     -------
@@ -462,7 +472,9 @@ def reprocess_dynamics(
     if warm_start is None:
         warm_start = opts.dynamics is not None and opts.dynamics.fit.converges
     with single_threaded_blas():
-        return _process_subject(subject_dir, out_dir, opts, unmeasured_force, progress, dynamics_only=True, warm_start=warm_start)
+        return _process_subject(
+            subject_dir, out_dir, opts, unmeasured_force, progress, dynamics_only=True, warm_start=warm_start, review_record=review_record
+        )
 
 
 # ---------------------------------------------------------------------- kinematics cache
@@ -630,6 +642,7 @@ def _process_subject(
     dynamics_only: bool = False,
     warm_start: bool = False,
     keep_kinematics: bool = False,
+    review_record: str | Path | None = None,
 ) -> ProcessResult:
     """:func:`process_subject` (``keep_kinematics``: a trial the dynamics stage cannot take
     is written without dynamics, then its DynamicsError raised) and
@@ -728,6 +741,7 @@ def _process_subject(
                 "total_seconds": time.perf_counter() - t0,
                 "stage_seconds": {"kinematics": t_kin - t0, "dynamics": t_dyn - t_kin},
                 **({"kinematics_from_cache": True} if dynamics_only else {}),
+                **_recorded_inputs(subject_dir, unmeasured_force, review_record),
             },
         )
         if not dynamics_only:
@@ -738,6 +752,18 @@ def _process_subject(
         error.kept_trials = tuple(failed.items())
         raise error
     return ProcessResult(sk, dyn, out_path)
+
+
+def _recorded_inputs(subject_dir: str | Path, unmeasured_force: object, review_record: str | Path | None) -> dict[str, Any]:
+    """The inputs subject.json records (:data:`solver.outputs.SUBJECT_DIR_KEY`,
+    :data:`solver.outputs.REVIEW_RECORD_KEY`): the subject folder; the review record, None
+    when no flags were given, left out when flags were given without their record."""
+    out: dict[str, Any] = {SUBJECT_DIR_KEY: str(Path(subject_dir).resolve())}
+    if unmeasured_force is None:
+        out[REVIEW_RECORD_KEY] = None
+    elif review_record is not None:
+        out[REVIEW_RECORD_KEY] = str(Path(review_record).resolve())
+    return out
 
 
 def _check_feet(foot_bodies: Sequence[str], model: OsimModel, loaded: Sequence[Trial]) -> None:

@@ -47,14 +47,92 @@ def _subject_info(subject_dir: Path | None) -> dict[str, Any]:
     return info
 
 
-def _record_beside(out_dir: Path) -> tuple[Path | None, Path | None]:
-    """(subject folder, review record) of an output folder given on its own, when they can be found."""
-    from addb_viewer.locations import ANNOTATIONS_NAME, OUTPUT_NAME
 
-    if out_dir.name == OUTPUT_NAME and (out_dir.parent / "_subject.json").is_file():
-        return out_dir.parent, out_dir.parent / ANNOTATIONS_NAME
-    beside = out_dir.parent / f"{out_dir.name}.annotations.json"
-    return None, beside if beside.is_file() else None
+def _recorded_path(out_dir: Path, summary: dict[str, Any], key: str) -> Path | None:
+    """``summary[key]`` as a path (relative ones from ``out_dir``); None when null.
+
+    Raises
+    ------
+    FileFormatError
+        The value is neither a non-empty string nor null (names ``subject.json`` and the key).
+    """
+    value = summary[key]
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value:
+        from solver.errors import FileFormatError
+        from solver.outputs import SUBJECT_RECORD
+
+        raise FileFormatError(f"{key}={value!r}: expected a path, or null", path=out_dir / SUBJECT_RECORD, where=key)
+    return out_dir / value  # an absolute value stays as it is
+
+
+def recorded_inputs(out_dir: str | Path) -> tuple[Path | None, Path | None]:
+    """The subject folder and review record of a processed output folder given on its own.
+
+    The subject folder ``out_dir/subject.json`` records (:data:`solver.outputs.SUBJECT_DIR_KEY`,
+    written by every run since 2026-12-02), else ``<subject>`` for a folder named
+    ``<subject>/addb_out``. The review record: ``<out_dir>.annotations.json`` beside the
+    folder (a review of this very output, :command:`addb view OUT`), else the one
+    subject.json records (:data:`solver.outputs.REVIEW_RECORD_KEY`: the flags the run took;
+    null: it took none), else, when it records none, the subject's where ``addb view`` and
+    ``addb convert`` keep it (:func:`addb_viewer.locations.annotations_path`, then
+    ``<subject>/annotations.json``). A subject folder is taken only when it holds
+    ``_subject.json``, and a review record only when it is a file; a recorded one that is
+    gone is named on stderr and left out.
+
+    Returns
+    -------
+    (subject folder or None, review record or None)
+
+    Raises
+    ------
+    FileFormatError
+        ``subject.json`` is not a JSON object, or records a path that is not a string
+        (names the file).
+    """
+    import json
+
+    from addb_viewer.locations import ANNOTATIONS_NAME, OUTPUT_NAME, annotations_path
+    from solver.outputs import REVIEW_RECORD_KEY, SUBJECT_DIR_KEY, SUBJECT_RECORD
+
+    out = Path(out_dir)
+    summary: dict[str, Any] = {}
+    record_file = out / SUBJECT_RECORD
+    if record_file.is_file():
+        try:
+            summary = json.loads(record_file.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            from solver.errors import FileFormatError
+
+            raise FileFormatError(f"is not readable JSON ({exc})", path=record_file) from None
+        if not isinstance(summary, dict):
+            from solver.errors import FileFormatError
+
+            raise FileFormatError(f"holds a JSON {type(summary).__name__}, expected an object", path=record_file)
+
+    def kept(path: Path | None, what: str, ok: bool) -> Path | None:
+        if path is not None and not ok:
+            print(f"addb export: {record_file}: the {what} it records, {path}, is gone; exported without it", file=sys.stderr)
+            return None
+        return path
+
+    subject_dir = None
+    if SUBJECT_DIR_KEY in summary:
+        subject_dir = _recorded_path(out, summary, SUBJECT_DIR_KEY)
+        subject_dir = kept(subject_dir, "subject folder", subject_dir is not None and (subject_dir / "_subject.json").is_file())
+    elif out.name == OUTPUT_NAME and (out.parent / "_subject.json").is_file():
+        subject_dir = out.parent
+    beside = out.parent / f"{out.name}.annotations.json"  # the record kept for this very folder
+    if beside.is_file():
+        return subject_dir, beside
+    if REVIEW_RECORD_KEY in summary:
+        record = _recorded_path(out, summary, REVIEW_RECORD_KEY)
+        return subject_dir, kept(record, "review record", record is not None and record.is_file())
+    guesses = []
+    if subject_dir is not None:
+        guesses += [annotations_path(subject_dir, out), subject_dir / ANNOTATIONS_NAME]
+    return subject_dir, next((g for g in guesses if g.is_file()), None)
 
 
 def export_b3d(args: argparse.Namespace) -> int:
@@ -81,7 +159,7 @@ def export_b3d(args: argparse.Namespace) -> int:
             out_dir = found.tree / rel
             target = output / Path(found.below_folder(rel)).parent / f"{out_dir.name}.b3d"  # the given folder's layout
             target.parent.mkdir(parents=True, exist_ok=True)
-            subject_dir, record = _record_beside(out_dir)
+            subject_dir, record = recorded_inputs(out_dir)
             processed_to_b3d(out_dir, target, manual=_manual_masks(record, out_dir), subject_info=_subject_info(subject_dir))
             print(f"wrote {target} ({target.stat().st_size / 1e6:.1f} MB)")
         print(f"{counted(len(processed), 'subject')} written under {output}")
@@ -92,7 +170,7 @@ def export_b3d(args: argparse.Namespace) -> int:
         raise OutputFolderError(f"is a folder; expected the name of the .b3d file to write (e.g. {output / (src.name + '.b3d')})", path=output)
     if (src / SUBJECT_RECORD).is_file() and processed_trials(src):
         out_dir = src
-        subject_dir, record = _record_beside(out_dir)
+        subject_dir, record = recorded_inputs(out_dir)
     else:
         from addb_viewer.locations import annotations_path
         from addb_viewer.progress import ProgressBar

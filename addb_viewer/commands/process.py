@@ -218,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
     from solver.pipeline import options_for_fit, process_subject
 
     opts = options_for_fit(args.fit, args.trial)
-    unmeasured_force = None
+    unmeasured_force, record = None, None
     if args.annotations:
         from addb_viewer.review_masks import masks_from_file
 
@@ -226,7 +226,8 @@ def run(args: argparse.Namespace) -> int:
         unmeasured_force = masks_from_file(record, args.subject, reviewer="addb process", trials=tuple(args.trial or ()) or None) or None
     try:
         result = _process_one(args, lambda: process_subject(
-            args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar()))  # fmt: skip
+            args.subject, args.out, options=opts, unmeasured_force=unmeasured_force, progress=ProgressBar(),
+            review_record=record))  # fmt: skip
     except DynamicsError as exc:
         raise with_kept_kinematics(exc, Path(args.out)) from None
     rows = []

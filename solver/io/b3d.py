@@ -74,6 +74,9 @@ class B3dTrialPass:
         The Butterworth filter of a low-pass pass (0 when none).
     force_plate_cutoffs
         (P,) noise cutoff per plate, N (float32), possibly empty.
+    extra_fields
+        Fields of the stored pass header this reader's schema does not name, as their
+        protobuf wire bytes (:func:`extra_field_values`); written back unchanged.
 
     Arrays of a pass that does not store them are empty (shape (0,)).
     """
@@ -90,6 +93,7 @@ class B3dTrialPass:
     lowpass_cutoff_hz: float = 0.0
     lowpass_filter_order: int = 0
     force_plate_cutoffs: FloatArray = field(default_factory=lambda: _frozen_array([]))
+    extra_fields: bytes = b""
 
 
 @dataclass(frozen=True)
@@ -120,6 +124,12 @@ class B3dTrial:
         Whether the marker names were guessed by the platform.
     passes
         One :class:`B3dTrialPass` per processing pass of this trial.
+    extra_fields
+        Fields of the stored trial header this reader's schema does not name (in the current
+        nimblephysics format among them ``trial_type``, ``has_manual_GRF_annotation``, the
+        original trial's start and end, detected features, per-trial force plates), as
+        their protobuf wire bytes in stored order (:func:`extra_field_values`); written
+        back unchanged.
     """
 
     name: str
@@ -133,6 +143,7 @@ class B3dTrial:
     force_plate_corners: FloatArray
     marker_names_guessed: bool
     passes: tuple[B3dTrialPass, ...]
+    extra_fields: bytes = b""
 
     @property
     def rate_hz(self) -> float:
@@ -142,10 +153,13 @@ class B3dTrial:
 
 @dataclass(frozen=True)
 class B3dPass:
-    """A processing pass of the subject: its type and the OpenSim model it used (.osim text)."""
+    """A processing pass of the subject: its type and the OpenSim model it used (.osim text);
+    ``extra_fields``: the stored fields this reader's schema does not name, as their
+    protobuf wire bytes (:func:`extra_field_values`), written back unchanged."""
 
     type: str
     model_osim_text: str
+    extra_fields: bytes = b""
 
 
 @dataclass(frozen=True)
@@ -176,6 +190,11 @@ class B3dHeader:
         One :class:`B3dPass` per processing pass (type and model text).
     trials
         One :class:`B3dTrial` per trial.
+    extra_fields
+        Fields of the stored header this reader's schema does not name (in the current
+        nimblephysics format ``data_quality`` among them), as their protobuf wire bytes in
+        stored order (:func:`extra_field_values`); written back unchanged, so that reading
+        and rewriting a file keeps them.
     """
 
     version: int
@@ -199,6 +218,7 @@ class B3dHeader:
     exo_dof_indices: tuple[int, ...] = ()
     custom_value_names: tuple[str, ...] = ()
     custom_value_lengths: tuple[int, ...] = ()
+    extra_fields: bytes = b""
 
     def trial_index(self, trial: int | str) -> int:
         """Index of a trial given by index or name.
@@ -350,6 +370,60 @@ def _enum_name(values: tuple[str, ...], number: int, what: str, path: Path, offs
     )
 
 
+def unknown_fields(extra: bytes) -> list[tuple[int, int, int | bytes]]:
+    """``(field number, wire type, value)`` of each field of the protobuf wire bytes
+    ``extra``, in stored order, read by protobuf itself (``UnknownFieldSet`` of an empty
+    message): a varint as an int, a fixed 64- or 32-bit value (a double, a float) as its 8
+    or 4 little-endian bytes, a length-delimited value (a string, message or packed array)
+    as its bytes.
+
+    Raises
+    ------
+    ValueError
+        ``extra`` is not well-formed protobuf wire bytes.
+    """
+    from google.protobuf import empty_pb2
+    from google.protobuf.message import DecodeError
+    from google.protobuf.unknown_fields import UnknownFieldSet
+
+    try:
+        message = empty_pb2.Empty.FromString(bytes(extra))
+    except DecodeError as exc:
+        raise ValueError(f"not protobuf wire bytes ({exc})") from None
+    width = {1: 8, 5: 4}  # the fixed wire types' sizes: protobuf gives their bits as an int
+    return [
+        (f.field_number, f.wire_type, f.data.to_bytes(width[f.wire_type], "little") if f.wire_type in width else f.data)
+        for f in UnknownFieldSet(message)
+    ]
+
+
+def extra_field_values(extra: bytes) -> dict[int, tuple[int | bytes, ...]]:
+    """The values of the ``extra_fields`` of a header, trial, trial pass or pass, by field
+    number of the nimblephysics ``SubjectOnDisk.proto`` (such as ``data_quality`` or
+    ``trial_type``, enums: ints), in stored order (:func:`unknown_fields`).
+
+    Raises
+    ------
+    ValueError
+        ``extra`` is not well-formed protobuf wire bytes.
+    """
+    values: dict[int, list[int | bytes]] = {}
+    for number, _, value in unknown_fields(extra):
+        values.setdefault(number, []).append(value)
+    return {k: tuple(v) for k, v in values.items()}
+
+
+def _extra_fields(msg: Any) -> bytes:
+    """The wire bytes of the fields of ``msg`` that the schema does not name (protobuf keeps
+    them as unknown fields when it parses), in stored order: ``msg`` serialized with every
+    named field cleared (those of its nested messages with them)."""
+    own = type(msg)()
+    own.CopyFrom(msg)
+    for described, _ in own.ListFields():
+        own.ClearField(described.name)
+    return own.SerializeToString()
+
+
 def _per_frame(values: Any, n: int, what: str, path: Path, where: str) -> np.ndarray:
     arr = np.array(values, dtype=np.float64)
     if arr.size not in (0, n):
@@ -379,6 +453,7 @@ def _trial_pass(msg: Any, n: int, n_dofs: int, path: Path, where: str) -> B3dTri
         lowpass_cutoff_hz=float(msg.lowpass_cutoff_frequency),
         lowpass_filter_order=int(msg.lowpass_filter_order),
         force_plate_cutoffs=_frozen_array(list(msg.force_plate_cutoff)),
+        extra_fields=_extra_fields(msg),
     )
 
 
@@ -421,6 +496,7 @@ def _trial(msg: Any, index: int, n_passes: int, n_dofs: int, path: Path) -> B3dT
         passes=tuple(
             _trial_pass(p, n, n_dofs, path, f"{where}, pass {k}") for k, p in enumerate(msg.processing_pass_header)
         ),
+        extra_fields=_extra_fields(msg),
     )
 
 
@@ -442,7 +518,11 @@ def _header(msg: Any, path: Path) -> B3dHeader:
             path=path, offset=PREFIX_BYTES,
         )
     passes = tuple(
-        B3dPass(_enum_name(PASS_TYPES, p.pass_type, "processing pass type", path, PREFIX_BYTES), p.model_osim_text)
+        B3dPass(
+            _enum_name(PASS_TYPES, p.pass_type, "processing pass type", path, PREFIX_BYTES),
+            p.model_osim_text,
+            _extra_fields(p),
+        )
         for p in msg.passes
     )
     trials = tuple(_trial(t, i, len(passes), n_dofs, path) for i, t in enumerate(msg.trial_header))
@@ -468,6 +548,7 @@ def _header(msg: Any, path: Path) -> B3dHeader:
         exo_dof_indices=tuple(int(v) for v in msg.exo_dof_index),
         custom_value_names=tuple(msg.custom_value_name),
         custom_value_lengths=tuple(int(v) for v in msg.custom_value_length),
+        extra_fields=_extra_fields(msg),
     )
 
 

@@ -20,10 +20,38 @@ from typing import Any
 import numpy as np
 
 from solver.io import b3d_schema as schema
-from solver.io.b3d import PASS_TYPES, B3dFrames, B3dHeader, B3dTrial, missing_grf_number
+from solver.io.b3d import (
+    PASS_TYPES,
+    B3dFrames,
+    B3dHeader,
+    B3dTrial,
+    missing_grf_number,
+    unknown_fields,
+)
 
 #: The file format version written.
 WRITE_VERSION = 4
+
+
+def _merge_extra(msg: Any, extra: bytes, where: str) -> None:
+    """Add ``extra`` (the wire bytes of fields the schema does not name, as read) to ``msg``.
+
+    Raises
+    ------
+    ValueError
+        ``extra`` is not well-formed, or holds a field the schema names (it would change that
+        field instead of being kept beside it).
+    """
+    if not extra:
+        return
+    try:
+        numbers = {number for number, *_ in unknown_fields(extra)}
+    except ValueError as exc:
+        raise ValueError(f"{where}: extra_fields are {exc}") from None
+    named = sorted(numbers & {f.number for f in msg.DESCRIPTOR.fields})
+    if named:
+        raise ValueError(f"{where}: extra_fields hold field(s) {named}, which the schema names; give them as attributes")
+    msg.MergeFromString(bytes(extra))
 
 
 def _header_message(header: B3dHeader, sensor_bytes: int, pass_bytes: int) -> Any:
@@ -51,10 +79,11 @@ def _header_message(header: B3dHeader, sensor_bytes: int, pass_bytes: int) -> An
     msg.emg_name.extend(header.emg_names)
     msg.exo_dof_index.extend(header.exo_dof_indices)
     msg.subject_tag.extend(header.tags)
-    for p in header.passes:
-        msg.passes.add(pass_type=PASS_TYPES.index(p.type), model_osim_text=p.model_osim_text)
+    for k, p in enumerate(header.passes):
+        _merge_extra(msg.passes.add(pass_type=PASS_TYPES.index(p.type), model_osim_text=p.model_osim_text), p.extra_fields, f"pass {k}")
     for t in header.trials:
         _trial_message(msg.trial_header.add(), t)
+    _merge_extra(msg, header.extra_fields, "header")  # fields the schema does not name, as read: kept unchanged
     return msg
 
 
@@ -69,7 +98,7 @@ def _trial_message(out: Any, t: B3dTrial) -> None:
     out.trial_tag.extend(t.tags)
     out.missing_grf_reason.extend(missing_grf_number(r) for r in t.missing_grf)
     out.force_plate_corners.extend(np.asarray(t.force_plate_corners, dtype=np.float64).ravel().tolist())
-    for p in t.passes:
+    for k, p in enumerate(t.passes):
         ph = out.processing_pass_header.add(
             type=PASS_TYPES.index(p.type),
             lowpass_cutoff_frequency=p.lowpass_cutoff_hz,
@@ -84,6 +113,8 @@ def _trial_message(out: Any, t: B3dTrial) -> None:
         ph.angular_residual.extend(np.asarray(p.angular_residual, dtype=np.float64).tolist())
         ph.joints_max_velocity.extend(np.asarray(p.joints_max_velocity, dtype=np.float64).tolist())
         ph.force_plate_cutoff.extend(np.asarray(p.force_plate_cutoffs, dtype=np.float64).tolist())
+        _merge_extra(ph, p.extra_fields, f"trial {t.name!r}, pass {k}")
+    _merge_extra(out, t.extra_fields, f"trial {t.name!r}")
 
 
 def _flat(a: np.ndarray, i: int) -> list[float]:
@@ -141,7 +172,9 @@ def write_b3d(path: str | Path, header: B3dHeader, frames: Sequence[B3dFrames]) 
     header
         The subject, passes (with model text) and trials (with per-frame pass summaries
         and missing-GRF reasons). ``version``, ``raw_sensor_frame_size`` and
-        ``processing_pass_frame_size`` are set by the writer.
+        ``processing_pass_frame_size`` are set by the writer. The ``extra_fields`` of the
+        header, its passes, trials and trial passes (fields the schema does not name, as
+        :func:`solver.io.b3d.open_b3d` read them) are written unchanged, after the named ones.
     frames
         One :class:`B3dFrames` per trial of ``header.trials`` (same order), holding every
         frame of that trial (``start`` 0, F = ``n_frames``) and one pass per trial pass.
@@ -150,7 +183,8 @@ def write_b3d(path: str | Path, header: B3dHeader, frames: Sequence[B3dFrames]) 
     ------
     ValueError
         ``frames`` does not match the header (trial count, frame count, pass count, array
-        shapes), or the frames would not all serialize to one size.
+        shapes), the frames would not all serialize to one size, or ``extra_fields`` are
+        not protobuf wire bytes or hold a field the schema names.
     """
     p = Path(path)
     if len(frames) != len(header.trials):

@@ -229,3 +229,78 @@ def test_a_trial_without_force_data_exports_no_measured_frame(tmp_path: Path) ->
     ours, theirs = load_dataset([out]), load_dataset([exported])
     assert [t.trial for t in theirs.trials] == [t.trial for t in ours.trials] == ["walk"]
     assert theirs.n_frames == ours.n_frames > 100
+
+
+@pytest.fixture(scope="module")
+def reviewed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """results.b3d converted, frames 60-63 of walking2_segment_0 flagged by a reviewer, and
+    processed with ``--annotations SUBJ/annotations.json`` into a folder not named addb_out
+    (the workflow ``addb convert`` prints): audit 2026-12-02-b3d findings 3 and 4."""
+    from annotations import AnnotationStore
+
+    root = tmp_path_factory.mktemp("b3d_reviewed")
+    subject = root / "subj"
+    assert main(["convert", str(B3D), "--out", str(subject)]) == 0
+    with AnnotationStore.open(subject / "annotations.json", reviewer="tester") as store:
+        store.set_unmeasured("walking2_segment_0", range(60, 64), source="manual")
+    assert main(["process", str(subject), "--out", str(root / "out"), "--annotations", str(subject / "annotations.json")]) == 0
+    return root / "out"
+
+
+def test_an_output_folder_finds_its_subject_and_review_record(reviewed: Path, tmp_path: Path) -> None:
+    """``addb export OUT`` of a folder processed with ``--annotations``: the reviewer's flags are
+    ``manualReview`` (they were ``unmeasuredExternalForceDetected``) and the subject's tags,
+    sex and age are kept (they were ``()``, ``unknown``, -1), found from the subject folder the
+    output folder records, not from its name."""
+    target = tmp_path / "x.b3d"
+    assert main(["export", str(reviewed), "--format", "b3d", "-o", str(target)]) == 0
+    h = open_b3d(target).header
+    reasons = h.trials[h.trial_index("walking2_segment_0")].missing_grf
+    assert reasons[60:64] == ("manualReview",) * 4
+    assert "manualReview" not in reasons[:60] + reasons[64:]
+    assert "manualReview" not in h.trials[h.trial_index("walking1_segment_0")].missing_grf
+    source = open_b3d(B3D).header
+    assert (h.tags, h.sex, h.age_years) == (source.tags, source.sex, source.age_years) == (("healthy",), "male", 18)
+
+
+def test_the_inputs_subject_json_records_are_taken(reviewed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``subject_dir`` and ``review_record`` in the output folder's subject.json (relative to
+    the folder, or absolute) name the inputs; a recorded null review record means none; a
+    recorded path that is gone is named and left out; a value that is no path is refused
+    naming subject.json."""
+    from addb_viewer.commands.export import recorded_inputs
+    from solver.outputs import REVIEW_RECORD_KEY, SUBJECT_DIR_KEY
+
+    subject = reviewed.parent / "subj"
+    out = tmp_path / "moved" / "out"
+    shutil.copytree(reviewed, out, ignore=shutil.ignore_patterns(".addb_cache"))  # no cache: nothing else names the subject
+    shutil.copy(subject / "annotations.json", tmp_path / "record.json")
+    summary = json.loads((out / "subject.json").read_text())
+    # the run recorded its inputs (addb process --annotations)
+    assert (summary[SUBJECT_DIR_KEY], summary[REVIEW_RECORD_KEY]) == (str(subject.resolve()), str((subject / "annotations.json").resolve()))
+    assert recorded_inputs(out) == (subject.resolve(), (subject / "annotations.json").resolve())
+    del summary[SUBJECT_DIR_KEY], summary[REVIEW_RECORD_KEY]  # an output folder of an older addb, without its cache
+    (out / "subject.json").write_text(json.dumps(summary))
+    assert recorded_inputs(out) == (None, None)
+
+    def record(**keys: object) -> None:
+        (out / "subject.json").write_text(json.dumps({**summary, **keys}))
+
+    record(**{SUBJECT_DIR_KEY: str(subject), REVIEW_RECORD_KEY: "../../record.json"})
+    assert recorded_inputs(out) == (subject, out / "../../record.json")
+    target = tmp_path / "x.b3d"
+    assert main(["export", str(out), "--format", "b3d", "-o", str(target)]) == 0
+    h = open_b3d(target).header
+    assert h.trials[h.trial_index("walking2_segment_0")].missing_grf[60:64] == ("manualReview",) * 4 and h.tags == ("healthy",)
+    record(**{SUBJECT_DIR_KEY: str(subject), REVIEW_RECORD_KEY: None})  # processed without flags: none, not the subject's
+    assert recorded_inputs(out) == (subject, None)
+    record(**{SUBJECT_DIR_KEY: str(tmp_path / "gone"), REVIEW_RECORD_KEY: None})
+    capsys.readouterr()
+    assert recorded_inputs(out) == (None, None)
+    assert str(tmp_path / "gone") in capsys.readouterr().err
+    from solver.errors import FileFormatError
+
+    record(**{SUBJECT_DIR_KEY: 3})
+    with pytest.raises(FileFormatError, match="subject_dir") as err:
+        recorded_inputs(out)
+    assert str(out / "subject.json") in str(err.value)

@@ -207,3 +207,59 @@ def test_writer_rejects_mismatched_frames(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="markers of shape"):
         write_b3d(tmp_path / "bad.b3d", header, [bad, blocks[1]])
     assert not (tmp_path / "bad.b3d").exists() and not (tmp_path / "bad.b3d.partial").exists()
+
+
+def test_fields_the_schema_does_not_name_are_read_and_written_back(tmp_path: Path) -> None:
+    """Audit 2026-12-02-b3d finding 7: header fields of the current nimblephysics format
+    (``data_quality`` of the header; ``trial_type``, ``has_manual_GRF_annotation`` and the
+    original trial's start of a trial; here at field numbers the schema does not name) were
+    dropped when a file was rewritten. results.b3d with such fields added to its header, a
+    trial, a trial pass and a pass: they are read as ``extra_fields`` and come back exactly
+    (read -> write -> read equal, write -> read -> write byte-identical)."""
+    import struct
+
+    from solver.io import b3d_schema as schema
+
+    data = B3D.read_bytes()
+    (n,) = struct.unpack("<q", data[:8])
+    msg = schema.Header.FromString(data[8:8 + n])
+    header_extra = bytes([0xC8, 0x01, 2])  # field 25, varint 2
+    trial_extra = bytes([0x80, 0x01, 1]) + bytes([0x61]) + struct.pack("<d", 1.25) + bytes([0x92, 0x01, 3, 1, 0, 1])  # 16 = 1, 12 = 1.25, 18 = packed bools
+    pass_extra = bytes([0x68, 7])  # field 13, varint 7
+    msg.MergeFromString(header_extra)
+    msg.trial_header[1].MergeFromString(trial_extra)
+    msg.trial_header[1].processing_pass_header[0].MergeFromString(pass_extra)
+    msg.passes[0].MergeFromString(pass_extra)
+    raw = msg.SerializeToString()
+    source = tmp_path / "newer.b3d"
+    source.write_bytes(struct.pack("<q", len(raw)) + raw + data[8 + n:])
+
+    src = open_b3d(source)
+    h = src.header
+    frames = [src.read_trial(k) for k in range(len(h.trials))]
+    first = tmp_path / "first.b3d"
+    write_b3d(first, h, frames)
+    written = first.read_bytes()
+    (m,) = struct.unpack("<q", written[:8])
+    rewritten = schema.Header.FromString(written[8:8 + m])  # each message keeps its own extra fields
+    assert rewritten.SerializeToString()[-len(header_extra):] == header_extra
+    assert rewritten.trial_header[1].SerializeToString()[-len(trial_extra):] == trial_extra
+    assert rewritten.trial_header[1].processing_pass_header[0].SerializeToString()[-len(pass_extra):] == pass_extra
+    assert rewritten.passes[0].SerializeToString()[-len(pass_extra):] == pass_extra
+    from solver.io.b3d import extra_field_values
+
+    assert h.extra_fields == header_extra and extra_field_values(h.extra_fields) == {25: (2,)}
+    assert h.trials[0].extra_fields == b"" and h.trials[1].extra_fields == trial_extra
+    assert extra_field_values(trial_extra) == {16: (1,), 12: (struct.pack("<d", 1.25),), 18: (bytes([1, 0, 1]),)}
+    assert h.trials[1].passes[0].extra_fields == pass_extra == h.passes[0].extra_fields
+    back = open_b3d(first)
+    assert_same(h, back.header, "header")
+    for k, fr in enumerate(frames):
+        assert_same(fr, back.read_trial(k), f"trial {k}")
+    second = tmp_path / "second.b3d"
+    write_b3d(second, back.header, [back.read_trial(k) for k in range(len(h.trials))])
+    assert second.read_bytes() == first.read_bytes()
+    assert first.read_bytes()[back.data_start:] == data[8 + n:]
+    # a field the schema names cannot pass as an extra one
+    with pytest.raises(ValueError, match=r"header: extra_fields hold field\(s\) \[15\]"):
+        write_b3d(tmp_path / "bad.b3d", dataclasses.replace(h, extra_fields=bytes([0x79]) + struct.pack("<d", 70.0)), frames)
