@@ -11,7 +11,8 @@ A dataset is opened from either
   user's cache (:func:`dataset_output_dir`).
 
 Per trial the row says: the processing state (not processed / processing with its
-progress / failed with the error / processed / kinematics only), the review state
+progress / failed with the error / processed / kinematics only / output lost, when a
+trial's ``trial.npz`` or ``results.json`` is missing, empty or damaged), the review state
 (unreviewed / in review / reviewed, and by whom) from the subject's review record
 (:func:`addb_viewer.locations.annotations_path`), the frames the solver proposes as
 unmeasured that the reviewer has neither flagged nor rejected (pending proposals), the
@@ -46,6 +47,9 @@ DATASET_OUTPUT_NAME = "addb_out"
 #: Processing states, as shown.
 NOT_PROCESSED, PROCESSING, FAILED, PROCESSED, KINEMATICS_ONLY = (
     "not processed", "processing", "failed", "processed", "kinematics only")  # fmt: skip
+#: Processing state of a trial the manifest lists whose ``trial.npz`` or ``results.json`` is
+#: missing, empty or damaged since the run: it cannot be opened (the row's detail says why).
+OUTPUT_LOST = "output lost"
 #: Review states, as shown (the last: the subject's review record cannot be read, so its
 #: flags and review marks are unknown until it is mended; the app names the problem).
 UNREVIEWED, IN_REVIEW, REVIEWED, RECORD_UNREADABLE = "unreviewed", "in review", "reviewed", "record unreadable"
@@ -71,12 +75,13 @@ class QueueRow:
     trial
         Trial name; None for a subject row (not processed, processing or failed).
     processing
-        :data:`NOT_PROCESSED`, :data:`PROCESSING`, :data:`FAILED`, :data:`PROCESSED` or
-        :data:`KINEMATICS_ONLY`.
+        :data:`NOT_PROCESSED`, :data:`PROCESSING`, :data:`FAILED`, :data:`PROCESSED`,
+        :data:`KINEMATICS_ONLY` or :data:`OUTPUT_LOST`.
     detail
-        The error of a failed subject, the progress message of a running one, or, for a
+        The error of a failed subject, the progress message of a running one, for a
         trial kept with its kinematics because its dynamics failed, "dynamics failed: "
-        and the error ("" else).
+        and the error, for a trial whose output is lost, the file and what is wrong with
+        it ("" else).
     review
         :data:`UNREVIEWED`, :data:`IN_REVIEW`, :data:`REVIEWED` or :data:`RECORD_UNREADABLE`.
     reviewer
@@ -107,8 +112,8 @@ class QueueRow:
 
     @property
     def needs_review(self) -> bool:
-        """Processed (dynamics or kinematics only) and not marked reviewed."""
-        return self.trial is not None and self.review != REVIEWED
+        """Processed (dynamics or kinematics only), its output there, and not marked reviewed."""
+        return self.trial is not None and self.processing != OUTPUT_LOST and self.review != REVIEWED
 
     @property
     def attention(self) -> tuple[Any, ...]:
@@ -116,11 +121,13 @@ class QueueRow:
 
         Order: trials whose review record cannot be read, processed trials with pending
         proposals or a failed Hicks threshold, trials in review, other unreviewed trials,
-        failed subjects, running ones, unprocessed ones, reviewed trials; within a group
-        more pending frames first, then by name.
+        failed subjects and trials whose output is lost, running ones, unprocessed ones,
+        reviewed trials; within a group more pending frames first, then by name.
         """
         hicks_bad = self.hicks_linear_ok is False or self.hicks_angular_ok is False
-        if self.trial is not None and self.review == RECORD_UNREADABLE:
+        if self.processing == OUTPUT_LOST:
+            group = 3
+        elif self.trial is not None and self.review == RECORD_UNREADABLE:
             group = -1
         elif self.trial is not None and self.review != REVIEWED and ((self.pending or 0) > 0 or hicks_bad):
             group = 0
@@ -302,6 +309,8 @@ def _results_row(res: Path) -> dict[str, Any] | None:
         m = json.loads(res.read_text())
     except (OSError, ValueError):
         return None
+    if not isinstance(m, dict):
+        return None
     dyn = "n_observed_frames" in m
     return {
         "trial": res.parent.name, "status": "ok" if dyn else "kinematics_only", "frames": m.get("n_frames", 0),
@@ -309,6 +318,37 @@ def _results_row(res: Path) -> dict[str, Any] | None:
         "hicks_linear_ok": m.get("hicks_linear_ok"), "hicks_angular_ok": m.get("hicks_angular_ok"),
         "dynamics_error": dynamics_error_message(m),
     }  # fmt: skip
+
+
+def output_problem(trial_dir: Path, check_json: bool = True) -> str | None:
+    """What is wrong with a processed trial's output folder ``trial_dir`` (``OUT/<trial>``),
+    None when it can be opened: its ``trial.npz`` or ``results.json`` missing or empty (the
+    rule of :func:`solver.dataset.manifest.lost_trials`), or (``check_json``) its
+    ``results.json`` not a JSON object. The text names the file (its name first, for the
+    queue's narrow state column; its full path last), what is wrong and the fix."""
+    for name in ("trial.npz", "results.json"):
+        f = trial_dir / name
+        if not f.is_file():
+            return f"{name} is missing: process the subject again ({f})"
+        if f.stat().st_size == 0:
+            return f"{name} is empty: process the subject again ({f})"
+    if not check_json:
+        return None
+    res = trial_dir / "results.json"
+    try:
+        ok = isinstance(json.loads(res.read_text()), dict)
+        why = "not a JSON object"
+    except ValueError as exc:
+        ok, why = False, f"not valid JSON ({getattr(exc, 'msg', exc)}, line {getattr(exc, 'lineno', '?')})"
+    except OSError as exc:
+        ok, why = False, f"cannot be read ({exc.strerror or exc})"
+    return None if ok else f"results.json is damaged, {why}: process the subject again ({res})"
+
+
+def _lost_row(trial: str, problem: str) -> dict[str, Any]:
+    """A manifest row for a trial whose output is lost: no figures (they would be stale)."""
+    return {"trial": trial, "status": OUTPUT_LOST, "frames": 0, "measured_frames": 0, "marker_rms_m": None,
+            "hicks_linear_ok": None, "hicks_angular_ok": None, "output_problem": problem}  # fmt: skip
 
 
 def _proposed(npz: Path) -> NDArray[np.bool_] | None:
@@ -329,8 +369,10 @@ _REPROCESSED = ("status", "measured_frames", "marker_rms_m", "hicks_linear_ok", 
 def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any]]]:
     """(processing state, detail, trial rows) from a subject's output folder: the dataset
     run's manifest, with the figures of each trial whose results.json is newer (the review
-    app's Reprocess) taken from there, and its proposals from the trial.npz beside it;
-    without a manifest, the results.json files."""
+    app's Reprocess) taken from there, and its proposals from the trial.npz beside it; a
+    trial whose output is missing, empty or damaged since (:func:`output_problem`) gets a
+    row with status :data:`OUTPUT_LOST`, no figures and the problem. Without a manifest,
+    the results.json files."""
     manifest = read_manifest(subject.out_dir)
     if manifest is not None:
         if manifest.get("status") == "failed":
@@ -339,14 +381,25 @@ def _rows_of_output(subject: QueueSubject) -> tuple[str, str, list[dict[str, Any
             return FAILED, f"{err.get('type')}: {err.get('message')}" + (f" ({where})" if where else ""), []
         rows = [dict(r) for r in manifest.get("trials") or []]
         written = (subject.out_dir / MANIFEST_NAME).stat().st_mtime_ns
-        for r in rows:
+        for i, r in enumerate(rows):
             res = subject.out_dir / str(r.get("trial")) / "results.json"
-            if res.is_file() and res.stat().st_mtime_ns > written and (new := _results_row(res)) is not None:
+            newer = res.is_file() and res.stat().st_mtime_ns > written  # Reprocessed, or damaged, since the run
+            # the rule of lost_trials (stat only), and a results.json changed since the run that is no JSON object
+            if (problem := output_problem(res.parent, check_json=newer)) is not None:
+                rows[i] = _lost_row(str(r.get("trial")), problem)
+            elif newer and (new := _results_row(res)) is not None:
                 r.update({k: new[k] for k in _REPROCESSED})
                 if (proposed := _proposed(res.parent / "trial.npz")) is not None:  # its fit's proposals
                     r["frames"], r["proposed_ranges"] = len(proposed), proposed_ranges(proposed)
         return PROCESSED, "", rows
-    rows = [row for res in sorted(subject.out_dir.glob("*/results.json")) if (row := _results_row(res)) is not None]
+    folders = sorted({f.parent for pattern in ("*/results.json", "*/trial.npz") for f in subject.out_dir.glob(pattern)})
+    rows = []
+    for d in folders:  # a results.json read only once: its reason looked for when it cannot be
+        problem = output_problem(d, check_json=False)
+        row = _results_row(d / "results.json") if problem is None else None
+        if row is None:
+            row = _lost_row(d.name, problem or output_problem(d) or f"results.json is damaged: process the subject again ({d / 'results.json'})")
+        rows.append(row)
     return (PROCESSED if rows else NOT_PROCESSED), "", rows
 
 
@@ -379,6 +432,8 @@ def build_queue(subjects: tuple[QueueSubject, ...], running: Mapping[str, str] |
             processing = PROCESSING if subject.rel in running else PROCESSED if r["status"] == "ok" else KINEMATICS_ONLY
             failed = r.get("dynamics_error")
             detail = running.get(subject.rel) or (f"dynamics failed: {failed}" if failed else "")
+            if r["status"] == OUTPUT_LOST and subject.rel not in running:  # being processed again: "processing"
+                processing, detail = OUTPUT_LOST, r["output_problem"]
             out.append(QueueRow(
                 subject, r["trial"], processing, detail, review, reviewer,
                 _pending(r, snap) if snaps is not None else None, int(r.get("frames") or 0), int(r.get("measured_frames") or 0),

@@ -70,7 +70,12 @@ REFRESH_S = 1.0
 
 
 class TrialLoadError(AddbError):
-    """A processed trial cannot be shown (not processed, or its file is damaged)."""
+    """A processed trial cannot be shown (not processed, or its file is damaged). Shown in
+    the page as ``FILE[:LINE]: message``: the file once, no class name."""
+
+    def _format(self) -> str:
+        loc = [x for x in ((self.path or "") + (f":{self.line}" if self.line is not None else ""), self.where or "") if x]
+        return f"{', '.join(loc)}: {self.message}" if loc else self.message
 
 
 class ReviewApp:
@@ -193,8 +198,7 @@ class ReviewApp:
             self._open_store()
             self.trials = processed_trials(self.paths.out_dir) if self.paths.out_dir.is_dir() else []
             if self.trials:
-                self.set_trial_options(_preferred(self.trials))
-                self.load_trial(_preferred(self.trials))
+                self.show_trial()
             elif self.process_missing:
                 self.set_status(f"**{self._subject_label(self.paths)}** has not been processed yet: processing…")
                 self.jobs.process_subject()
@@ -239,11 +243,60 @@ class ReviewApp:
                 self.set_status(f"**{self._subject_label(paths)}** has not been processed yet (see the dataset queue).")
                 self._clear_trial_controls()
                 return
-            name = trial if trial in self.trials else _preferred(self.trials)
-            self.set_trial_options(name)
-            self.load_trial(name)
+            self.show_trial(trial)
         except Exception as exc:  # noqa: BLE001 - shown in the page
             self.show_error("Could not open the subject", exc)
+
+    def show_trial(self, wanted: str | None = None) -> None:
+        """Show trial ``wanted`` of the subject opened (None: the preferred one) from
+        :attr:`trials` (those with a trial.npz), with the error area naming any trial that
+        could not be shown.
+
+        * ``wanted`` given but not processed (its ``trial.npz`` missing) or unreadable: no
+          trial is shown (not another one in its place); the page names the trial and the
+          file that is missing or damaged.
+        * ``wanted`` None: the preferred trial, else, when its output cannot be read (a
+          damaged ``results.json`` or ``trial.npz``), the first other trial that can be;
+          the page names the damaged trial, its file and what is wrong.
+
+        Raises
+        ------
+        TrialLoadError
+            ``wanted`` None and no trial of the subject can be read (the first one's error).
+        """
+        label = self._subject_label(self.paths)
+        if wanted is not None:
+            try:
+                if wanted not in self.trials:
+                    raise TrialLoadError(
+                        f"trial {wanted!r} is not processed: its trial.npz is missing; process the subject again",
+                        path=self.paths.trial_dir(wanted) / "trial.npz",
+                    )
+                self.set_trial_options(wanted)
+                self.load_trial(wanted)
+            except AddbError as exc:  # TrialLoadError among them
+                with self._lock:  # none shown: not the one shown before either
+                    self._drop_trial()
+                    self.trial = self.playback = self.editor = self.view = self.tracks = None
+                self._clear_trial_controls()
+                self.set_status(f"**{label} / {_escape(wanted)}** cannot be opened (see the error below).")
+                self.show_error(f"Could not open trial {wanted!r} of {label}", exc)
+            return
+        first = _preferred(self.trials)
+        failed: list[tuple[str, TrialLoadError]] = []
+        for name in [first, *(t for t in self.trials if t != first)]:
+            try:
+                self.set_trial_options(name)
+                self.load_trial(name)
+            except TrialLoadError as exc:
+                failed.append((name, exc))
+                continue
+            if failed:
+                names = ", ".join(repr(n) for n, _ in failed)
+                self.show_error(f"Could not open trial {names} of {label}; showing {name!r} instead",
+                                "; ".join(str(e) for _, e in failed))  # fmt: skip
+            return
+        raise failed[0][1]
 
     def _clear_trial_controls(self) -> None:
         """Empty the trial's controls when no trial is shown (a subject not processed, or
@@ -312,8 +365,7 @@ class ReviewApp:
             self.trials = processed_trials(self.paths.out_dir)
             if not self.trials:
                 raise FileNotFoundError(f"the solver wrote no trial into {self.paths.out_dir}")
-            self.set_trial_options(_preferred(self.trials))
-            self.load_trial(_preferred(self.trials))
+            self.show_trial()
         except Exception as exc:  # noqa: BLE001
             self.show_error("Could not load the processed subject", exc)
         finally:
@@ -369,9 +421,12 @@ class ReviewApp:
         """
         name = safe_name(name, what="trial name")
         if name not in self.trials:
-            raise TrialLoadError(f"trial {name!r} is not processed", path=self.paths.out_dir)
+            raise TrialLoadError(f"trial {name!r} is not processed: its trial.npz is missing; process the subject again",
+                                 path=self.paths.trial_dir(name) / "trial.npz")  # fmt: skip
         try:
             trial = load_processed(self.paths.out_dir, name)
+        except AddbError as exc:  # names its file (trial.npz or results.json) and the remedy
+            raise TrialLoadError(f"trial {name!r}: {exc.message}", path=exc.path, line=exc.line, where=exc.where) from exc
         except Exception as exc:
             raise TrialLoadError(
                 f"cannot read the processed trial ({type(exc).__name__}: {exc}); press Reprocess to recompute it",

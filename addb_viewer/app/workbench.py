@@ -261,9 +261,9 @@ class Workbench:
         self.current = (rel, trial)
         if trial is not None and self._shown(paths) and trial in self.app.trials:
             # another trial of the subject on screen: its review record (and the undo
-            # history in it) stays open, a running Reprocess goes on
-            self.app.set_trial_options(trial)
-            self.app.load_trial(trial)
+            # history in it) stays open, a running Reprocess goes on; a trial that cannot be
+            # read shows no trial (not the one before) and the error naming its file
+            self.app.show_trial(trial)
         else:
             self.app.open_subject(paths, trial)
             if self.app.trial is None and subject.rel in self._failed:

@@ -50,9 +50,13 @@ def test_unprocessed_broken_subject_shows_the_error_in_the_page(tmp_path, make_a
 def test_unreadable_trial_file_is_reported_and_others_still_load(demo_paths, make_app) -> None:
     (demo_paths.out_dir / "walk" / "trial.npz").write_bytes(b"garbage")
     app = make_app(demo_paths)
-    assert app.trial is None and app.panel.error.visible
+    # the other trial is shown at once, the damaged one named (docs/audits/2026-12-02-viewer.md, finding 3)
+    assert app.trial is not None and app.trial.trial == "static" and app.panel.error.visible
+    assert str(demo_paths.out_dir / "walk" / "trial.npz") in app.panel.error.content
     assert _page_ok(app)
-    app.panel.trial.value = "static"  # the trial picker
+    app.panel.trial.value = "walk"  # the trial picker: the damaged trial says so again
+    assert app.trial.trial == "static" and app.panel.error.visible
+    app.panel.trial.value = "static"
     assert app.trial is not None and app.trial.trial == "static"
     assert not app.panel.error.visible
 
