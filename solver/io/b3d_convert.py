@@ -136,7 +136,9 @@ def b3d_to_subject(
         The file is damaged.
     SubjectFolderError
         ``out_dir`` already holds a subject and ``overwrite`` is False, or the file has no
-        trial with frames, no model or no subject mass (checked before anything is written).
+        trial with frames, no model or no subject mass, a mass or height out of range, a
+        marker name twice, a trial's time step out of :data:`RATE_RANGE_HZ` or model text
+        that is not XML (checked before anything is written).
     """
     b3d = path if isinstance(path, B3dFile) else open_b3d(path)
     h = b3d.header
@@ -150,6 +152,7 @@ def b3d_to_subject(
     if not (np.isfinite(h.mass_kg) and h.mass_kg > 0):  # proto3: an absent mass reads as 0
         raise SubjectFolderError(f"the file's header gives no subject mass (mass_kg {h.mass_kg!r}), which addb process "
                                  "needs; nothing was written", path=b3d.path)
+    _check_before_writing(b3d, pass_index)
     earlier = _converted_trials(out) if overwrite else ()
     out.mkdir(parents=True, exist_ok=True)
     (out / MODEL_FILE).write_text(b3d.model_text(pass_index), encoding="utf-8")
@@ -184,7 +187,7 @@ def b3d_to_subject(
         trials.append(ConvertedTrial(folder.name, t.name, t.n_frames, t.rate_hz, t.missing_grf))
     subject: dict[str, Any] = {
         "massKg": h.mass_kg,
-        "heightM": h.height_m,
+        **({"heightM": h.height_m} if np.isfinite(h.height_m) and h.height_m > 0 else {}),  # optional: 0 means not given
         "sex": h.sex or "unknown",
         "subjectTags": list(h.tags),
         "footBodyNames": list(h.ground_contact_bodies) or ["calcn_r", "calcn_l"],
@@ -207,6 +210,53 @@ def b3d_to_subject(
     gone = [name for name in earlier if name not in source["trials"] and (out / "trials" / name).is_dir()]
     removed = tuple(name for name in gone if _remove_converted_trial(out / "trials" / name))
     return ConvertedSubject(out, Path(b3d.path), tuple(trials), removed, tuple(n for n in gone if n not in removed))
+
+
+#: Frame rates (Hz) of a trial that :func:`b3d_to_subject` converts: a motion capture's
+#: (a time step outside them is a damaged or mistaken header: input audit 2026-12-02, finding 14).
+RATE_RANGE_HZ = (1.0, 20000.0)
+
+
+def _check_before_writing(b3d: B3dFile, pass_index: int) -> None:
+    """What :func:`b3d_to_subject` would otherwise find only in the folder it writes
+    (input audit 2026-12-02, finding 10): the subject's mass and height within what
+    ``_subject.json`` accepts (:data:`solver.io.subject.MOST_KG`, ``MOST_M``), marker names
+    unique, each trial's frame rate within :data:`RATE_RANGE_HZ`, and the model text of
+    pass ``pass_index`` well-formed XML.
+
+    Raises
+    ------
+    SubjectFolderError
+        Naming the .b3d and the header field, trial or pass; nothing is written.
+    """
+    import xml.etree.ElementTree as ET
+
+    from solver.io.subject import MOST_KG, MOST_M
+
+    h = b3d.header
+    nothing = "; nothing was written"
+    if h.mass_kg > MOST_KG:
+        raise SubjectFolderError(f"mass_kg {h.mass_kg:g} is more than {MOST_KG:g} kg (a unit error?){nothing}", path=b3d.path,
+                                 where="header")  # fmt: skip
+    if np.isfinite(h.height_m) and h.height_m > MOST_M:
+        raise SubjectFolderError(f"height_m {h.height_m:g} is more than {MOST_M:g} m (a unit error?){nothing}", path=b3d.path,
+                                 where="header")  # fmt: skip
+    names = [n for n in h.marker_names if n]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise SubjectFolderError(f"marker names {', '.join(repeated)} appear more than once in marker_name{nothing}",
+                                 path=b3d.path, where="header")  # fmt: skip
+    lo, hi = RATE_RANGE_HZ
+    for t in h.trials:
+        if t.n_frames and not (lo <= t.rate_hz <= hi):
+            raise SubjectFolderError(f"trial_timestep {t.timestep_s:g} s ({t.rate_hz:g} Hz); expected the frame interval of a "
+                                     f"motion capture, {1 / hi:g} to {1 / lo:g} s{nothing}", path=b3d.path,
+                                     where=f"trial {t.name!r}")  # fmt: skip
+    try:
+        ET.fromstring(b3d.model_text(pass_index))
+    except ET.ParseError as exc:
+        raise SubjectFolderError(f"the model text of pass {pass_index} is not well-formed XML ({exc}){nothing}", path=b3d.path,
+                                 where=f"pass {pass_index}") from None  # fmt: skip
 
 
 def converted_trial_folders(subject_dir: str | Path) -> dict[str, str]:

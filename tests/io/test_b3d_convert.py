@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -177,6 +178,65 @@ def test_a_file_without_a_subject_mass_is_refused_before_anything_is_written(tmp
     err = capsys.readouterr().err
     assert f"SubjectFolderError ({no_mass}): the file's header gives no subject mass (mass_kg 0.0)" in err, err
     assert not (tmp_path / "s").exists()
+
+
+
+def _header_with(tmp_path: Path, name: str, **changes: object) -> Path:
+    """results.b3d rewritten with its header's fields ``changes`` (dataclasses.replace)."""
+    f = open_b3d(B3D)
+    out = tmp_path / f"{name}.b3d"
+    write_b3d(out, dataclasses.replace(f.header, **changes), [f.read_trial(k) for k in range(len(f.header.trials))])
+    return out
+
+
+@pytest.mark.parametrize(
+    ("case", "changes", "message"),
+    [
+        ("mass in grams", {"mass_kg": 68000.0}, r", header\): mass_kg 68000 is more than 500 kg"),
+        ("height in cm", {"height_m": 172.0}, r", header\): height_m 172 is more than 3 m"),
+        ("a marker twice", "marker", r", header\): marker names (\S+) appear more than once in marker_name"),
+        ("a 1 ns time step", "timestep", r", trial 'walking2_segment_0'\): trial_timestep 1e-09 s \(1e\+09 Hz\); expected"),
+        ("truncated model text", "model", r", pass 0\): the model text of pass 0 is not well-formed XML"),
+    ],
+)
+def test_a_header_convert_would_write_wrong_is_refused_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str, changes: object, message: str
+) -> None:
+    """Input audit 2026-12-02, findings 10 and 14: header values that ``_subject.json``, the
+    TRC reader or the dynamics would refuse in the written folder (naming its own files, the
+    folder left half written) are refused first, naming the .b3d and the field, trial or
+    pass, and no folder is written."""
+    f = open_b3d(B3D)
+    if changes == "marker":
+        names = list(f.header.marker_names)
+        names[1] = names[0]
+        changes = {"marker_names": tuple(names)}
+    elif changes == "timestep":
+        trials = list(f.header.trials)
+        k = f.header.trial_index("walking2_segment_0")
+        trials[k] = dataclasses.replace(trials[k], timestep_s=1e-9)
+        changes = {"trials": tuple(trials)}
+    elif changes == "model":
+        passes = list(f.header.passes)
+        passes[0] = dataclasses.replace(passes[0], model_osim_text=passes[0].model_osim_text[: len(passes[0].model_osim_text) // 2])
+        changes = {"passes": tuple(passes)}
+    bad = _header_with(tmp_path, case.replace(" ", "_"), **changes)
+    assert main(["convert", str(bad), "--out", str(tmp_path / "s")]) == 1
+    err = capsys.readouterr().err
+    assert f"SubjectFolderError ({bad}, " in err and "nothing was written" in err, err
+    assert re.search(message, err), err
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_file_without_a_height_converts_without_one(tmp_path: Path) -> None:
+    """Input audit 2026-12-02, finding 10: a header height of 0 (proto3's absent value, what
+    addb export writes for a subject without one) is left out of ``_subject.json`` (it was
+    written as 0, which ``addb process`` refused); the subject loads with no height."""
+    no_height = _header_with(tmp_path, "no_height", height_m=0.0)
+    assert main(["convert", str(no_height), "--out", str(tmp_path / "s")]) == 0
+    assert "heightM" not in json.loads((tmp_path / "s" / "_subject.json").read_text())
+    subject = load_subject(tmp_path / "s")
+    assert subject.height_m is None and subject.mass_kg == open_b3d(B3D).header.mass_kg
 
 
 @pytest.mark.slow
