@@ -28,6 +28,7 @@ from solver.dataset.manifest import (
     lost_trials,
     run_settings,
     subject_key_now,
+    transient_failure,
 )
 from solver.errors import AddbError, counted, listed
 from solver.io.summary import summarize
@@ -226,6 +227,8 @@ def _changes(
     lost = lost_trials(target, stored)
     if lost:
         return [f"its output of {listed(lost, 3)} is gone (trial.npz or results.json missing or empty)"]
+    if transient_failure(stored):
+        return [f"its last run failed on a storage error, not on its data: {stored['error'].get('message')}"]
     kept = stored["key"].get("annotations")
     try:
         now = subject_key_now(entry.path, target, settings, review_digest or (lambda subject, out: kept))

@@ -255,11 +255,21 @@ def lost_trials(out_dir: str | Path, stored: dict[str, Any]) -> list[str]:
     return lost
 
 
+def transient_failure(stored: dict[str, Any]) -> bool:
+    """Whether the manifest ``stored`` records a transient failure: the output storage failed
+    (disk full, I/O error; ``error["transient"]``, :func:`solver.dataset.task.storage_error`),
+    not the subject's data. Such a record is never up to date (:func:`current_manifest`): a
+    new run processes the subject again (docs/audits/2026-12-02-dataset.md, finding 3)."""
+    error = stored.get("error")
+    return stored.get("status") == "failed" and isinstance(error, dict) and bool(error.get("transient"))
+
+
 def current_manifest(out_dir: str | Path, key: dict[str, Any]) -> dict[str, Any] | None:
     """The stored manifest when its run finished, its key equals ``key`` (the output, or the
-    failure it records, is up to date with the inputs) and none of its trials' output is
-    lost (:func:`lost_trials`), else None."""
+    failure it records, is up to date with the inputs), none of its trials' output is
+    lost (:func:`lost_trials`) and it records no transient failure (:func:`transient_failure`),
+    else None."""
     stored = finished_manifest(out_dir)
-    if stored is None or stored["key"] != key or lost_trials(out_dir, stored):
+    if stored is None or stored["key"] != key or lost_trials(out_dir, stored) or transient_failure(stored):
         return None
     return stored

@@ -18,10 +18,15 @@ machine with addb installed that can read the dataset and write the output folde
 
 Failures: a subject whose data or solve fails is recorded by its task
 (:func:`solver.dataset.task.run_subject`) and the batch goes on. A subject whose worker
-dies (killed, out of memory) is submitted again, up to ``retries`` more times; on the
+dies (killed, out of memory) while it runs is submitted again, up to ``retries`` more times
+(a subject only queued on that worker, which had not started, is submitted again without
+counting an attempt: :func:`solver.dataset.task.attempt_started`); on the
 local cluster the scheduler gives up on a task at its first worker death
 (``distributed.scheduler.allowed-failures = 0``) so that ``retries`` counts every death.
 A remote scheduler applies its own ``allowed-failures`` (Dask's default 3) before ours.
+
+A failure of the output storage (disk full, I/O error) is recorded as transient, not as the
+subject's failure (:func:`solver.dataset.task.storage_error`): the next run processes it again.
 
 Resume: a subject whose output carries a manifest with the same key as now (same input
 files, addb version and solver source digest, settings and review record) is skipped without starting a cluster,
@@ -58,8 +63,11 @@ from solver.dataset.task import (
     PROGRESS_TOPIC,
     MaskLoader,
     SubjectJob,
+    attempt_started,
     remove_stale_work,
     run_subject,
+    storage_error,
+    storage_failure,
 )
 from solver.errors import DatasetError, OutputFolderError, listed
 from solver.outputs import check_output_folder, output_marker, write_json
@@ -164,6 +172,11 @@ def _progress_line(counts: dict[str, int], frames: int | None, to_process: int =
     line += f", {counts['cancelled']} cancelled" if counts["cancelled"] else ""
     return f"{line} ({frames} frames processed)"
 
+
+#: How many times a subject is submitted again, free of charge, after the worker it was only
+#: queued on died (it had not started there: :func:`solver.dataset.task.attempt_started`);
+#: past that, such a death counts as an attempt.
+MAX_UNSTARTED_REQUEUES = 10
 
 #: The variable Dask's nanny sets in its workers that slows the pipeline (module docstring).
 TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
@@ -514,14 +527,18 @@ def _run_jobs(
         if opts.scheduler:
             _check_worker_environment(client, tell)
         run_id = uuid.uuid4().hex[:8]
-        attempts: dict[str, int] = {}
+        attempts: dict[str, int] = {}  # per subject: the attempts charged (those that started), this one included
+        unstarted: dict[str, int] = {}  # per subject: submissions lost with a worker before they started
         by_key: dict[str, SubjectJob] = {}
 
         futures: list[Any] = []
 
-        def submit(job: SubjectJob) -> Any:
-            attempts[job.rel] = attempts.get(job.rel, 0) + 1
+        def submit(job: SubjectJob, *, charged: bool = True) -> Any:
+            if charged:
+                attempts[job.rel] = attempts.get(job.rel, 0) + 1
             key = f"addb-subject-{job.rel}-{run_id}-{attempts[job.rel]}"
+            key += f"-requeued{unstarted[job.rel]}" if not charged else ""
+            job = replace(job, attempt=key)  # the task writes it as it starts (attempt_started)
             by_key[key] = job
             futures.append(client.submit(run_subject, job, key=key, pure=False, retries=0))
             return futures[-1]
@@ -554,6 +571,17 @@ def _run_jobs(
                     outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), "CancelledError",
                                        "the cluster cancelled this subject's task")  # fmt: skip
             except KilledWorker:
+                # a worker holds queued tasks besides the running one, and its death fails them
+                # all: one that never started there is submitted again, not charged an attempt
+                # (docs/audits/2026-12-02-dataset.md, finding 1); the cap keeps a subject from
+                # waiting for ever on a cluster whose workers keep dying
+                if job.attempt is not None and not attempt_started(job.out_dir, job.attempt) \
+                        and unstarted.get(job.rel, 0) < MAX_UNSTARTED_REQUEUES:
+                    unstarted[job.rel] = unstarted.get(job.rel, 0) + 1
+                    tell(f"{job.rel}: the worker it was queued on died before the subject started there; "
+                         "submitted again (no attempt counted)")
+                    pending.add(submit(job, charged=False))
+                    continue
                 if attempts[job.rel] <= opts.retries:
                     tell(f"{job.rel}: its worker died; retrying (attempt {attempts[job.rel] + 1})")
                     pending.add(submit(job))
@@ -566,6 +594,9 @@ def _run_jobs(
                 )
             except Exception as exc:  # noqa: BLE001 - a failure outside the pipeline (e.g. sending the task)
                 outcome = _failure(DatasetSubject(job.rel, Path(job.subject_dir)), type(exc).__name__, str(exc))
+                if storage_error(exc) is not None:  # e.g. its work folder could not be made: transient
+                    error = storage_failure(exc)
+                    outcome["error"] = {**error, "path": error["path"] or job.subject_dir}
             outcome["attempts"] = attempts[job.rel]
             results[job.rel] = outcome
             notify("done", outcome)

@@ -13,10 +13,21 @@ as the subject's outcome, never raised, and recorded in the subject's output fol
 (``process.log`` and a manifest with the error; an earlier run's output files stay): a
 deterministic failure is not worth a retry, and the batch goes on. Only the death of the worker itself (killed, out of memory)
 reaches the runner, which then retries the subject on another worker.
+
+A failure of the output storage (disk full, quota, I/O error: :func:`storage_error`) is no
+fault of the subject's data: it is recorded as transient (``error["transient"]``), so that
+the next run processes the subject again instead of reporting the failure unchanged
+(docs/audits/2026-12-02-dataset.md, finding 3).
+
+Each attempt first writes its task key into :data:`STARTED_NAME` in its work folder: the
+runner tells with :func:`attempt_started` a subject that was running when its worker died
+from one that was only queued on that worker (finding 1), and charges only the first.
 """
 
 from __future__ import annotations
 
+import errno
+import glob
 import json
 import os
 import shutil
@@ -39,6 +50,15 @@ PROGRESS_TOPIC = "addb-subject-progress"
 PROGRESS_INTERVAL_S = 0.5
 #: Prefix of a subject's private work folder (beside its final output folder).
 WORK_PREFIX = ".addb-work-"
+#: File of a subject's work folder that holds the key of the attempt that made it, written
+#: before anything else: the attempt started (:func:`attempt_started`).
+STARTED_NAME = "started"
+#: ``errno`` values of a failure of the output storage rather than of the subject
+#: (:func:`storage_error`): full disk or quota, I/O error, read-only or stale file system,
+#: file too large.
+STORAGE_ERRNOS = frozenset(
+    getattr(errno, name) for name in ("ENOSPC", "EDQUOT", "EIO", "EROFS", "ESTALE", "EFBIG") if hasattr(errno, name)
+)
 
 #: ``(subject_dir, out_dir) -> {trial: (T,) bool}`` or None: the reviewer's
 #: unmeasured-force flags of a subject whose output goes to ``out_dir``, at each trial's
@@ -65,6 +85,9 @@ class SubjectJob:
         Name of the run's ``distributed.Event`` that asks it to stop, or None: once set,
         the subject is given up (before it starts, at its next progress message, or
         before its output is put in place) and its outcome is ``"cancelled"``.
+    attempt
+        The Dask key of this attempt, or None (not on Dask): written into the work folder's
+        :data:`STARTED_NAME` as the attempt starts (:func:`attempt_started`).
     """
 
     rel: str
@@ -73,6 +96,7 @@ class SubjectJob:
     key: dict[str, Any]
     masks: MaskLoader | None = None
     stop_event: str | None = None
+    attempt: str | None = None
 
 
 class Stopped(Exception):
@@ -136,11 +160,69 @@ class _Log:
         self._f.close()
 
 
+def storage_error(exc: BaseException) -> OSError | None:
+    """The failure of the output storage behind ``exc`` (``exc`` itself or an exception it was
+    raised from or while handling: an OSError whose errno is one of :data:`STORAGE_ERRNOS`),
+    or None: the failure is the subject's own (its data or the solver)."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, OSError) and cur.errno in STORAGE_ERRNOS:
+            return cur
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
+def storage_failure(exc: BaseException) -> dict[str, Any]:
+    """The error record (:meth:`AddbError.to_dict` form) of a failure of the output storage
+    behind ``exc``: type ``StorageError``, ``"transient": true``, the file as ``path`` and a
+    message that says so and that the next run processes the subject again.
+
+    Raises
+    ------
+    ValueError
+        No failure of the output storage is behind ``exc`` (:func:`storage_error` is None).
+    """
+    storage = storage_error(exc)
+    if storage is None:
+        raise ValueError(f"not a failure of the output storage: {type(exc).__name__}: {exc}")
+    code = errno.errorcode.get(storage.errno or 0, str(storage.errno))
+    return {
+        "type": "StorageError",
+        "message": f"storage error ({code}: {storage.strerror or storage}), not a fault of the subject's data; "
+                   "the next run processes this subject again",
+        "path": None if storage.filename is None else os.fsdecode(storage.filename),
+        "line": None,
+        "where": None,
+        "transient": True,
+    }
+
+
 def _error_record(exc: BaseException) -> dict[str, Any]:
-    """JSON form of an exception: our errors carry file / line / where."""
+    """JSON form of an exception: our errors carry file / line / where; a failure of the
+    output storage is a transient ``StorageError`` (:func:`storage_failure`)."""
+    if storage_error(exc) is not None:
+        return storage_failure(exc)
     if isinstance(exc, AddbError):
         return exc.to_dict()
     return {"type": type(exc).__name__, "message": str(exc), "path": None, "line": None, "where": None}
+
+
+def attempt_started(out_dir: str | Path, attempt: str) -> bool:
+    """Whether the attempt ``attempt`` (a :attr:`SubjectJob.attempt` key) of the subject whose
+    final output folder is ``out_dir`` started on its worker: one of the subject's work
+    folders holds that key in :data:`STARTED_NAME`. A killed worker leaves its work folder
+    (removed by the next :func:`remove_stale_work`); a task that was only queued on a worker
+    made none. Raises nothing: an unreadable folder counts as not started."""
+    final = Path(out_dir)
+    for folder in final.parent.glob(f"{glob.escape(WORK_PREFIX + final.name)}-*"):
+        try:
+            if (folder / STARTED_NAME).read_text(encoding="utf-8") == attempt:
+                return True
+        except OSError:
+            continue
+    return False
 
 
 def _replace_dir(src: Path, dst: Path) -> None:
@@ -184,6 +266,8 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
     final = Path(job.out_dir)
     final.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{final.name}-", dir=final.parent))
+    if job.attempt is not None:  # first of all: this attempt started (attempt_started)
+        (work / STARTED_NAME).write_text(job.attempt, encoding="utf-8")
     log = _Log(work / LOG_NAME, job.rel, job.stop_event)
     log(f"subject {job.rel}: {job.subject_dir} -> {job.out_dir} (pid {os.getpid()})")
     outcome: dict[str, Any] = {"rel": job.rel, "worker_pid": os.getpid()}
@@ -217,7 +301,13 @@ def run_subject(job: SubjectJob) -> dict[str, Any]:
         log(traceback.format_exc().rstrip())
         log.close()
         outcome.update(status="failed", error=_error_record(exc), trials=[], seconds=time.perf_counter() - t0)
-        _record_failure(final, work / LOG_NAME, {"key": job.key, **outcome})
+        try:
+            _record_failure(final, work / LOG_NAME, {"key": job.key, **outcome})
+        except OSError:
+            if not outcome["error"].get("transient"):
+                raise
+            # the storage that failed the subject cannot hold its record either: the outcome
+            # still reaches the summary, and without a record the next run processes it again
     finally:
         shutil.rmtree(work, ignore_errors=True)
     outcome["worker_peak_rss_mb"] = _peak_rss_mb()

@@ -105,16 +105,18 @@ def test_scheduler_run_equals_a_serial_run(scheduler, tree, serial_walk, tmp_pat
     assert assert_same_results(out / WALK, serial_walk) == 9 + 3
 
 
-def _run_killing_the_walks_first_worker(address: str, tree: Path, out: Path, marker: Path, *options: str) -> int:
-    """``addb process TREE --out OUT --scheduler ADDRESS OPTIONS`` with the worker that starts
-    the walk's first attempt killed (SIGKILL, its pid in ``marker``); returns the exit code
-    once the nanny has started that worker again."""
+def _run_killing_the_walks_first_worker(address: str, tree: Path, out: Path, marker: Path, *options: str,
+                                        rel: str = WALK) -> int:
+    """``addb process TREE --out OUT --scheduler ADDRESS OPTIONS`` with the worker that runs
+    the first attempt of subject ``rel`` (default the walk; "": the first subject to start)
+    killed once that subject has started (SIGKILL, its pid in ``marker``); returns the exit
+    code once the nanny has started that worker again."""
     from distributed import Client
 
     from tests.dataset.kill_plugin import KillOnFirstAttempt
 
     with Client(address, timeout="30s") as client:
-        client.register_plugin(KillOnFirstAttempt(WALK, str(marker)))
+        client.register_plugin(KillOnFirstAttempt(rel, str(marker), str(out)))
         try:
             code = cli(["process", str(tree), "--out", str(out), "--scheduler", address, *options])
         finally:
@@ -159,3 +161,31 @@ def test_with_no_retries_a_killed_worker_fails_its_subject_alone(scheduler, tree
     assert not (out / WALK / "manifest.json").exists()
     assert not no_work_folders(out), no_work_folders(out)
     assert not [p for p in out.rglob("*.tmp*")]
+
+
+def test_a_worker_death_charges_only_the_subject_that_was_running_on_it(scheduler, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """docs/audits/2026-12-02-dataset.md, finding 1: four walks on the two one-thread workers
+    (each worker is given two at once: every subject is its own task group, which the
+    scheduler does not hold back), and the worker of the first subject to start is killed
+    while it runs, with ``--retries 0``. Only that subject fails, as a worker death of one
+    attempt; the subject that was only queued on the dead worker is submitted again without
+    counting an attempt and is processed (it used to fail as ``WorkerDied`` too)."""
+    address, _ = scheduler
+    walks = {f"labA/walk{k}": "rajagopal2016_walk" for k in range(4)}
+    tree = build_tree(tmp_path / "in", walks)
+    marker, out = tmp_path / "killed.pid", tmp_path / "out"
+    capsys.readouterr()
+    code = _run_killing_the_walks_first_worker(address, tree, out, marker, "--retries", "0", rel="")
+    err = capsys.readouterr().err
+    rows = {s["rel"]: s for s in json.loads((out / "dataset_summary.json").read_text())["subjects"]}
+    failed = sorted(rel for rel, s in rows.items() if s["status"] != "ok")
+    assert len(failed) == 1, {rel: (s["status"], s.get("error")) for rel, s in rows.items()}
+    assert code == 1
+    died = rows[failed[0]]
+    assert died["error"]["type"] == "WorkerDied" and died["attempts"] == 1, died
+    assert "died 1 time(s)" in died["error"]["message"]
+    assert all(s["attempts"] == 1 for rel, s in rows.items() if rel != failed[0]), rows
+    requeued = [line for line in err.splitlines() if "submitted again (no attempt counted)" in line]
+    assert requeued and all("before the subject started there" in line for line in requeued), err
+    assert not no_work_folders(out), no_work_folders(out)
