@@ -2,7 +2,7 @@
 
 Every subject output of a dataset run carries ``manifest.json``::
 
-    {"key": {"schema": 1, "addb_version": "0.1.0", "code": "<sha256 of the solver's source>",
+    {"key": {"schema": 1, "addb_version": "0.1.0", "code": "<sha256 of the processing modules' source>",
              "inputs": {"_subject.json": "<sha256>", "trials/walk/markers.trc": "<sha256>", ...},
              "settings": {...}, "annotations": "<sha256 of the reviewer's flags>" | null},
      "status": "ok" | "kinematics_only" | "failed", "error": {...} (failed only),
@@ -16,9 +16,11 @@ such record and runs again. The inputs are every file of the subject folder
 except hidden files, addb's output folder, bone meshes (``Geometry/``, they do not change
 the solution) and the review record, whose unmeasured-force flags enter as ``annotations``
 instead (a digest given by the caller: the solver package does not read review records).
-The ``code`` is a digest of the solver package's Python source (:func:`solver.provenance.code_digest`): the
-version number does not change with every commit, so a rerun after an update of the code
-(a ``git pull`` of an editable install) processes the subjects again.
+The ``code`` is a digest of the source of the solver modules processing runs
+(:func:`solver.provenance.code_digest`, :func:`solver.provenance.processing_modules`): the
+version number does not change with every commit, so a rerun after an update of that code
+(a ``git pull`` of an editable install) processes the subjects again; an update of other
+modules (the .b3d export, the diagnosis, this package) does not.
 """
 
 from __future__ import annotations

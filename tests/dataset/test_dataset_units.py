@@ -160,8 +160,9 @@ def test_a_subject_whose_key_cannot_be_made_is_named_with_what_cannot_be_read(tr
 
 
 def test_manifest_key_follows_the_solver_code(tmp_path: Path) -> None:
-    # the version number stays 0.1.0 across commits: the key carries a digest of the solver
-    # package's source, so a rerun after a code update processes the subjects again
+    # the version number stays 0.1.0 across commits: the key carries a digest of the source of
+    # the solver modules processing runs, so a rerun after an update of them processes the
+    # subjects again (tests/test_provenance.py: and only after an update of them)
     import shutil
 
     import solver
