@@ -205,8 +205,13 @@ def _local_cluster(options: DatasetOptions) -> Any:
     # workers: with --workers 1 on 8 cores the one worker had an eighth (paused, then
     # restarted, on a large subject); with more workers than cores their limits exceeded the RAM
     memory_limit = MEMORY_LIMIT // n if options.memory_limit == "auto" else options.memory_limit
-    # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold)
-    settings = {"distributed.scheduler.allowed-failures": 0, f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}": None}
+    # None unsets a pre-spawn variable (module docstring: glibc's adaptive mmap threshold).
+    # No pause at 80 % of the memory limit: a worker paused there runs nothing more, and one
+    # that stayed between the pause and the kill (95 %) thresholds hung the run without a
+    # word (docs/audits/2026-12-02-dataset.md, finding 2); a worker over its limit is killed
+    # and the subject retried or failed as WorkerDied, which names the limit
+    settings = {"distributed.scheduler.allowed-failures": 0, f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}": None,
+                "distributed.worker.memory.pause": False}  # fmt: skip
     main = threading.current_thread() is threading.main_thread()  # signal handlers: the main thread only
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:

@@ -292,3 +292,19 @@ def test_the_default_memory_limit_divides_the_ram_among_the_workers_asked_for() 
     workers = _workers(DatasetOptions(workers=n))
     assert len(workers) == n
     assert all(w["memory_limit"] == pytest.approx(MEMORY_LIMIT / n, rel=1e-9) for w in workers), (MEMORY_LIMIT, workers)
+
+
+def test_the_local_cluster_never_pauses_a_worker_at_its_memory_threshold() -> None:
+    """Dataset audit 2026-12-02, finding 2: a worker paused at 80 % of its memory limit runs
+    nothing more, and one that stayed below the kill threshold (95 %) hung the run without a
+    word. The local cluster's workers do not pause (Dask's ``distributed.worker.memory.pause``
+    off in each worker process); they still are killed at their limit (terminate 0.95)."""
+    from distributed import Client
+
+    from solver.dataset.runner import DatasetOptions, _local_cluster
+
+    with _local_cluster(DatasetOptions(workers=1, memory_limit="1GB")) as cluster, Client(cluster) as client:
+        fractions = client.run(lambda dask_worker: (dask_worker.memory_manager.memory_pause_fraction,
+                                                    dask_worker.memory_manager.memory_limit))  # fmt: skip
+    ((pause, limit),) = fractions.values()
+    assert pause is False and limit == 10**9, fractions
