@@ -53,6 +53,11 @@ MANIFEST_NAME = "manifest.json"
 #: The summary a dataset run writes at the top of its output tree (:mod:`solver.dataset.runner`).
 SUMMARY_NAME = "dataset_summary.json"
 
+#: The lock file a dataset run holds at the top of its output tree from its start
+#: (:func:`solver.dataset.lock.output_tree_lock`; hidden: the dataset search and the exports
+#: skip it). With :data:`SUMMARY_NAME`, which a run writes at its end, it marks an output tree.
+RUN_LOCK_NAME = ".addb_run.lock"
+
 #: A trial's metrics in its output folder (``OUT/<trial>/results.json``, written by
 #: :func:`solver.pipeline.process_subject` beside the trial's ``trial.npz``).
 TRIAL_RESULTS = "results.json"
@@ -74,11 +79,19 @@ def output_marker(folder: str | Path) -> str | None:
     return next((m for m in OUTPUT_MARKERS if (folder / m).exists()), None)
 
 
+def is_output_tree(folder: str | Path) -> bool:
+    """Whether ``folder`` is a dataset run's output tree: it holds :data:`SUMMARY_NAME` (a
+    run ended there) or :data:`RUN_LOCK_NAME` (a run started there, maybe still running:
+    dataset audit 2026-12-02, finding 4)."""
+    folder = Path(folder)
+    return (folder / SUMMARY_NAME).is_file() or (folder / RUN_LOCK_NAME).is_file()
+
+
 def output_tree_above(folder: str | Path) -> Path | None:
     """The dataset run's output tree that ``folder`` lies inside: the nearest folder above it
-    holding :data:`SUMMARY_NAME` (not ``folder`` itself), or None."""
+    that :func:`is_output_tree` (not ``folder`` itself), or None."""
     for parent in Path(folder).resolve().parents:
-        if (parent / SUMMARY_NAME).is_file():
+        if is_output_tree(parent):
             return parent
     return None
 

@@ -33,10 +33,10 @@ from pathlib import Path
 from typing import Any
 
 from solver.errors import DatasetError
-from solver.outputs import output_tree_above
+from solver.outputs import RUN_LOCK_NAME, output_tree_above
 
 #: The lock file in the output tree (hidden: the dataset search and the exports skip it).
-LOCK_NAME = ".addb_run.lock"
+LOCK_NAME = RUN_LOCK_NAME
 
 
 #: The trees this process holds: resolved tree -> [the lock file, number of holders].

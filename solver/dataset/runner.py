@@ -70,7 +70,7 @@ from solver.dataset.task import (
     storage_failure,
 )
 from solver.errors import DatasetError, OutputFolderError, listed
-from solver.outputs import check_output_folder, output_marker, write_json
+from solver.outputs import check_output_folder, output_marker, output_tree_above, write_json
 from solver.provenance import addb_version
 
 Progress = Callable[[str, float], None]
@@ -389,7 +389,12 @@ def process_dataset(
     if (note := loop_note(scan)) is not None:
         tell(note)
     out.mkdir(parents=True, exist_ok=True)
-    with output_tree_lock(out):  # one run per output tree: each removes the work folders it finds
+    with contextlib.ExitStack() as held:
+        # a tree inside another run's output tree holds that tree too (refused while another
+        # run writes it), as a one-subject run into it does (dataset audit 2026-12-02, finding 5)
+        if (outer := output_tree_above(out)) is not None:
+            held.enter_context(output_tree_lock(outer))
+        held.enter_context(output_tree_lock(out))  # one run per output tree: each removes the work folders it finds
         remove_stale_work(out)
         context = _Run(subjects, out, source, opts, t0)
         results, jobs = _plan(context, masks, review_digest)

@@ -370,8 +370,18 @@ def _peak_rss_mb() -> float | None:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _in_nested_tree(path: Path, root: Path) -> bool:
+    """Whether ``path`` lies in another run's output tree below ``root`` (a folder between
+    them that :func:`solver.outputs.is_output_tree`): its work folders are that run's."""
+    from solver.outputs import is_output_tree
+
+    return any(is_output_tree(folder) for folder in path.parents if folder != root and root in folder.parents)
+
+
 def remove_stale_work(out_root: str | Path) -> int:
-    """Remove work folders left below ``out_root`` by killed workers; returns how many.
+    """Remove work folders left below ``out_root`` by killed workers; returns how many. The
+    output trees of other runs below ``out_root`` are left alone (their work folders may be
+    in use: dataset audit 2026-12-02, finding 5).
 
     A worker killed between the two renames of :func:`_replace_dir` leaves the previous
     output in ``.addb-work-old-<name>-*/previous`` and no ``<name>``: that output is put
@@ -382,7 +392,7 @@ def remove_stale_work(out_root: str | Path) -> int:
     if not root.is_dir():
         return 0
     for path in sorted(root.rglob(f"{WORK_PREFIX}*")):
-        if not path.is_dir():
+        if not path.is_dir() or _in_nested_tree(path, root):
             continue
         old_prefix = f"{WORK_PREFIX}old-"
         if path.name.startswith(old_prefix) and (path / "previous").is_dir():

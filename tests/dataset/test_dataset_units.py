@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -429,3 +431,68 @@ def test_a_one_subject_run_into_a_dataset_output_tree_holds_the_tree(command: st
             pass
     with subject_output_lock(tmp_path / "elsewhere" / "s01") as held:
         assert held is None
+
+
+def _holding(tree_dir: Path) -> subprocess.Popen[str]:
+    """Another process holding the output tree ``tree_dir`` (as a running dataset run does)."""
+
+    script = (
+        "import sys, time; from solver.dataset.lock import output_tree_lock\n"
+        "with output_tree_lock(sys.argv[1]):\n    print('held', flush=True); time.sleep(120)"
+    )
+    holder = subprocess.Popen([sys.executable, "-c", script, str(tree_dir)], stdout=subprocess.PIPE, text=True,
+                              cwd=Path(__file__).resolve().parents[2])  # fmt: skip
+    assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+    return holder
+
+
+def test_a_one_subject_run_into_a_tree_a_first_run_is_writing_is_refused(tree: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Dataset audit 2026-12-02, finding 4: while the first run into a new OUT runs (no
+    dataset_summary.json yet, only its lock file), ``addb process SUBJECT --out OUT/s01`` is
+    refused naming the tree (it replaced the run's finished output and manifest)."""
+    from addb_viewer.cli import main as cli
+
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = _holding(out)
+    try:
+        assert cli(["process", str(tree / "labA" / "s01"), "--out", str(out / "labA" / "s01")]) == 1
+        err = capsys.readouterr().err
+        assert f"DatasetError ({out}): another addb run is writing this output tree (process {holder.pid} on " in err, err
+        assert not (out / "labA").exists()
+    finally:
+        holder.kill()
+        holder.wait(timeout=30)
+
+
+def test_a_run_inside_another_runs_tree_is_refused_and_a_run_around_one_leaves_its_work(tree: Path, tmp_path: Path) -> None:
+    """Dataset audit 2026-12-02, finding 5: a dataset run whose OUT lies inside a tree another
+    run is writing is refused before anything is written; and a run whose OUT holds another
+    run's tree below it leaves that tree's work folders alone (its start removed them, failing
+    the other run's subjects), while its own stale work folders go."""
+    from solver.dataset.runner import process_dataset
+    from solver.dataset.task import WORK_PREFIX, remove_stale_work
+
+    outer = tmp_path / "T"
+    outer.mkdir()
+    holder = _holding(outer)
+    try:
+        with pytest.raises(DatasetError, match="another addb run is writing this output tree") as err:
+            process_dataset(tree, outer / "sub")
+        assert err.value.path == str(outer) and not any((outer / "sub").iterdir())
+    finally:
+        holder.kill()
+        holder.wait(timeout=30)
+    inner = outer / "sub"
+    holder = _holding(inner)
+    try:
+        theirs = inner / "labA" / f"{WORK_PREFIX}s01-abc"
+        mine = outer / "labB" / f"{WORK_PREFIX}s02-def"
+        theirs.mkdir(parents=True)
+        mine.mkdir(parents=True)
+        assert remove_stale_work(outer) == 1
+        assert theirs.is_dir() and not mine.exists()
+    finally:
+        holder.kill()
+        holder.wait(timeout=30)
