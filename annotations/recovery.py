@@ -97,6 +97,23 @@ def recover(
         os.close(lock_fd)
 
 
+def journal_holds_every_edit(path: str | os.PathLike[str]) -> bool:
+    """Whether :func:`recover` can rebuild the subject file from the journal alone: the
+    journal beside the record exists, its header is readable and it starts at the first
+    edit (it was never restarted after the subject file). Reads only; nothing is changed.
+
+    Parameters
+    ----------
+    path
+        Subject folder or ``.json`` record path, as for ``AnnotationStore.open``.
+    """
+    try:
+        journal = _read_journal(StorePaths.for_path(path))
+    except (AnnotationFileError, OSError):
+        return False
+    return journal is not None and journal.base_seq == 0
+
+
 def _recover_locked(paths: StorePaths, stamp: str, skip: bool) -> RecoveryReport:
     main, main_err = _read_main(paths)
     journal = _read_journal(paths)

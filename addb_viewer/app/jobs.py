@@ -76,6 +76,10 @@ class JobSpec:
         or stale). The reviewer's flags do not change the kinematics. Either way the
         dynamics fit is the one ``out_dir`` was made with
         (:func:`solver.pipeline.recorded_dynamics_options`; the default for a first run).
+    review_record
+        The review record (``annotations.json``) the ``unmeasured_force`` flags were read
+        from; the solver records it in the output's ``subject.json`` (``review_record``).
+        None: no record (flags given without one are recorded as such).
     """
 
     subject_dir: Path
@@ -84,6 +88,7 @@ class JobSpec:
     unmeasured_force: dict[str, np.ndarray] = field(default_factory=dict)
     kind: str = "process"
     dynamics_only: bool = False
+    review_record: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -167,6 +172,7 @@ class SolverJob:
                     "unmeasured_force": str(masks),
                     "kind": self.spec.kind,
                     "dynamics_only": self.spec.dynamics_only,
+                    "review_record": str(self.spec.review_record) if self.spec.review_record is not None else None,
                 }
             )
         )
@@ -422,6 +428,7 @@ def _child(spec_path: str) -> int:
                 trials,
                 unmeasured_force or None,
                 lambda m, f: _emit({"progress": m, "fraction": f}),
+                review_record=spec.get("review_record"),
             )
             _emit({"done": True})
             return 0
@@ -432,6 +439,7 @@ def _child(spec_path: str) -> int:
             options=ProcessOptions(trials=trials, dynamics=recorded_dynamics_options(spec["out_dir"])),
             unmeasured_force=unmeasured_force or None,
             progress=lambda m, f: _emit({"progress": m, "fraction": f}),
+            review_record=spec.get("review_record"),
         )
     except Exception as exc:  # noqa: BLE001 - every failure is reported to the page
         info = exc.to_dict() if hasattr(exc, "to_dict") else {"type": type(exc).__name__, "message": str(exc)}

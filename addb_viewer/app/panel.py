@@ -95,6 +95,7 @@ class ReviewPanel:
 
     status: viser.GuiMarkdownHandle
     error: viser.GuiMarkdownHandle
+    recover_record: viser.GuiButtonHandle
     trial: viser.GuiDropdownHandle
     frame: viser.GuiSliderHandle
     transport: viser.GuiButtonGroupHandle
@@ -160,6 +161,11 @@ def build_panel(server: viser.ViserServer, *, title: str) -> ReviewPanel:
     h: dict = {}
     h["status"] = gui.add_markdown("Starting…")
     h["error"] = gui.add_markdown("", visible=False)
+    # shown only while the review record cannot be opened and its journal can rebuild it
+    h["recover_record"] = gui.add_button(
+        "Rebuild the review record from its journal", visible=False, color="orange",
+        hint="replays annotations.journal (every edit) into a new annotations.json; the damaged file is kept beside it",
+    )
     with gui.add_folder("Playback"):
         h["trial"] = gui.add_dropdown("Trial", ("(none)",), initial_value="(none)", disabled=True)
         h["frame"] = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0, disabled=True)

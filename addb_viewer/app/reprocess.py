@@ -262,7 +262,7 @@ class Reprocessor:
     def process_subject(self) -> None:
         """Process the whole subject into the output folder (first start)."""
         paths = self.app.paths
-        spec = JobSpec(paths.subject_dir, paths.out_dir, None, self._masks())
+        spec = JobSpec(paths.subject_dir, paths.out_dir, None, self._masks(), review_record=self._record())
         self._start(spec, new_work_dir(paths.jobs_dir, "process"), label="Processing the subject", trial=None)
 
     def reprocess(self, trial: str | None = None) -> None:
@@ -292,7 +292,8 @@ class Reprocessor:
         work = new_work_dir(app.paths.jobs_dir, f"reprocess-{name}")
         # flags change the dynamics only: the child reuses the kinematics cached by the last
         # full run (a full run when that cache is missing or stale, e.g. after an extension)
-        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, trials, self._masks(), dynamics_only=True)
+        spec = JobSpec(app.paths.subject_dir, app.paths.out_dir, trials, self._masks(), dynamics_only=True,
+                       review_record=self._record())
         self._review = self._review_digest()  # the flags this run takes, for a dataset run's manifest
         self._kept = kept_reports(app.paths.out_dir, trials)  # the solver rewrites those folders without them
         self._start(spec, work, label=f"Reprocessing {name}", trial=name)
@@ -399,6 +400,11 @@ class Reprocessor:
             self.app.show_error("The reviewer's flags were not used", exc)
             return {}
 
+    def _record(self) -> Path | None:
+        """The review record the flags of :meth:`_masks` come from (recorded by the solver in
+        the output's ``subject.json``); None when the record could not be opened."""
+        return Path(self.app.paths.annotations) if self.app.store is not None else None
+
     def _review_digest(self) -> str | None | bool:
         """The digest of the review record's flags a dataset run keys on
         (:func:`addb_viewer.review_masks.review_digest`), False when the record cannot be
@@ -427,7 +433,7 @@ class Reprocessor:
             self._say(f"{label}: cancelled before it started.")
             return
         if waited is not None:  # it waited for the plan: the flags as they are now, not as when it was pressed
-            spec = replace(spec, unmeasured_force=self._masks())
+            spec = replace(spec, unmeasured_force=self._masks(), review_record=self._record())
             if kind == "process" and spec.dynamics_only:
                 self._review = self._review_digest()
         if waited is None and self.running:

@@ -53,6 +53,8 @@ from addb_viewer.app.summary import hicks_exceeded
 from addb_viewer.app.timeline import TrackData, frames_text, timeline_html, track_data
 from addb_viewer.geometry import trial_search_path
 from annotations import AnnotationError, AnnotationStore, Edit
+from annotations.journal import StorePaths
+from annotations.recovery import journal_holds_every_edit
 from solver.dataset.summary import dynamics_error_message
 from solver.errors import AddbError
 from solver.results import ProcessedTrial, load_processed, processed_trials
@@ -67,6 +69,11 @@ STATUS_LINE_EM = 1.55
 """Height of one line of the panel's text, em (viser's markdown: 22.9 px at 14.8 px)."""
 REFRESH_S = 1.0
 """How often the store is polled for other writers' edits."""
+RELOAD_S = 10.0
+"""A loopback page opened within this many seconds of another page closing is taken for
+that page reloaded: it keeps the closed page's "Your name", s."""
+NO_RECORD = "Flagging is disabled until the review record can be opened (see above)."
+"""The edits' line while the review record cannot be opened (in place of :data:`NO_EDITS`)."""
 
 
 class TrialLoadError(AddbError):
@@ -141,13 +148,17 @@ class ReviewApp:
         self._quiet = threading.local()
         self._actor = threading.local()  # the page (viser client id) whose handler runs
         self.client_names: dict[int, str] = {}
+        # loopback pages' names across a reload (a reload is a new client): the names of pages
+        # that just closed, and the pages that just opened still holding the prefill
+        self._left_names: list[tuple[float, str]] = []
+        self._fresh_pages: dict[int, float] = {}
+        self._names_lock = threading.Lock()
         self.cameras = PageCameras(self.server)
         self.name_fields: dict[int, Any] = {}  # client id -> its "Your name" text field
         self._stop = threading.Event()
         self.store: AnnotationStore | None = None
         #: Why the review record could not be opened (shown again with every trial loaded).
-        self.store_problem: tuple[str, BaseException] | None = None
-        self._typed_name = ""  # the name last typed in a page's "Your name" (loopback: prefills new pages)
+        self.store_problem: tuple[str, BaseException | str] | None = None
         self.actions = ActionHistory()  # who made each edit the store can undo or redo
         self.review_warning = SecondThought()  # "Trial reviewed" with pending proposals: (trial, pending frames)
         self.trials: list[str] = []
@@ -385,8 +396,38 @@ class ReviewApp:
             self.actions.clear()  # a new store: a new history
         except AnnotationError as exc:
             self.store = None
-            self.store_problem = ("The review record cannot be opened; flagging is disabled", exc)
+            rebuildable = journal_holds_every_edit(self.paths.annotations)
+            self.store_problem = ("The review record cannot be opened; flagging is disabled", _record_problem(self.paths.annotations, exc, rebuildable))
+            self.panel.recover_record.visible = rebuildable
+            self.panel.saved.content = NO_RECORD
             self.show_error(*self.store_problem)
+            return
+        self.panel.recover_record.visible = False
+
+    def recover_record(self) -> None:
+        """Rebuild the review record that could not be opened from its journal
+        (:meth:`annotations.AnnotationStore.recover`: the journal holds every edit; nothing is
+        deleted, the damaged record is renamed ``<name>.damaged-<UTC time>`` beside it), then
+        open it and show the shown trial again with its flags. Says what was done in the
+        Edits line; a recovery that cannot be done is shown as an error (the files unchanged)."""
+        if self.store is not None:
+            self._answer("The review record is open; there is nothing to rebuild.")
+            return
+        report = AnnotationStore.recover(self.paths.annotations)
+        print(f"addb view: {self.paths.annotations}: {report.message}", file=sys.stderr, flush=True)
+        self._open_store()
+        if self.store is None:
+            return  # still unreadable: its error is shown again
+        with self._lock:
+            name = self.trial.trial if self.trial is not None else None
+            frame = self.playback.frame if self.playback is not None else 0
+        if name is not None:
+            self.load_trial(name, frame=frame)
+        else:
+            self.clear_error()
+        if self.workbench is not None:
+            self.workbench.refresh()  # its row no longer says "record unreadable"
+        self.panel.saved.content = f"✓ {_escape(report.message)} ({report.main})"
 
     def stop(self) -> None:
         """Stop playback, cancel a running solver (and a dataset's background run), close
@@ -706,11 +747,20 @@ class ReviewApp:
     def _client_connected(self, client: Any) -> None:
         """Give a new page its own "Your name" field (each edit keeps its reviewer's name).
 
-        Prefilled on a loopback address (one person at this machine) with the name last typed
-        on any page, else ``--reviewer``, so a reloaded page keeps it; empty on a server
-        reached by a team, where a page must name its reviewer before editing."""
+        Prefilled on a loopback address (one person at this machine) with the name of the
+        page that closed just before (:data:`RELOAD_S`: the same page reloaded, so it keeps
+        its own name; when its old connection closes just after, the name follows then),
+        else ``--reviewer``. Never the name typed on a page still open: the reloaded page's
+        edits would be recorded, and its undo judged, as that other reviewer's. Empty on a
+        server reached by a team, where a page must name its reviewer before editing."""
         client.camera.on_update(self._camera_moved)
-        default = (self._typed_name or self.reviewer) if self.token is None else ""
+        default = ""
+        if self.token is None:
+            now = time.monotonic()
+            with self._names_lock:
+                self._left_names = [(t, n) for t, n in self._left_names if now - t <= RELOAD_S]
+                default = self._left_names.pop()[1] if self._left_names else self.reviewer
+                self._fresh_pages[client.client_id] = now
         self.client_names[client.client_id] = default
         field = client.gui.add_text(
             "Your name", initial_value=default, order=-1000.0,
@@ -721,12 +771,25 @@ class ReviewApp:
         self._camera_moved(client.camera)  # its first report: framed for its canvas, the queue fitted
 
     def _name_typed(self, client_id: int, name: str) -> None:
-        self.client_names[client_id] = name
-        if name:
-            self._typed_name = name
+        with self._names_lock:
+            self._fresh_pages.pop(client_id, None)  # named on this page: a closing page's name no longer follows
+        self.client_names[client_id] = name  # this page's own: no other page takes it
 
     def _client_disconnected(self, client: Any) -> None:
-        self.client_names.pop(client.client_id, None)
+        name = self.client_names.pop(client.client_id, None)
+        if self.token is None and name:  # its name goes to its reload (a page opened just before, or next)
+            now = time.monotonic()
+            with self._names_lock:
+                self._fresh_pages.pop(client.client_id, None)
+                fresh = [(t, c) for c, t in self._fresh_pages.items() if now - t <= RELOAD_S and c in self.name_fields]
+                heir = max(fresh)[1] if fresh else None
+                if heir is None:
+                    self._left_names.append((now, name))
+                else:
+                    del self._fresh_pages[heir]
+            if heir is not None and self.client_names.get(heir) != name:
+                self.client_names[heir] = name
+                self.name_fields[heir].value = name
         self.name_fields.pop(client.client_id, None)
         self.cameras.forget(client.client_id)
         self._fit_queue()  # to the narrowest page left (viser has removed this one)
@@ -979,8 +1042,9 @@ class ReviewApp:
         the reviewer's last press, and would read as an answer to the next ("Select frames
         first" beside a selection, "open trial X" once X is open)."""
         text = self.panel.saved.content
-        if text != NO_EDITS and not text.startswith("✓"):
-            self.panel.saved.content = NO_EDITS
+        idle = NO_RECORD if self.store is None and self.store_problem is not None else NO_EDITS
+        if text != idle and not text.startswith("✓"):
+            self.panel.saved.content = idle
 
     def selection_edit(self, what: str) -> None:
         """"Flag", "Unflag", "Accept" or "Reject" the timeline's selected frames."""
@@ -1120,6 +1184,7 @@ class ReviewApp:
         p.diagnose.on_click(on("Diagnose", lambda e: self.jobs.diagnose()))
         p.apply_diagnosis.on_click(on("Apply the diagnosis", lambda e: self.jobs.apply_diagnosis()))
         p.cancel.on_click(on("Cancel", lambda e: self.jobs.cancel()))
+        p.recover_record.on_click(on("Rebuild the review record", lambda e: self.recover_record()))
         for h in (p.show_labels, p.show_markers, p.show_bones, p.show_forces, p.marker_threshold_cm, p.m_per_bw):
             h.on_update(on("Display", lambda e: self._apply_display()))
         p.record.on_click(on("Record to Rerun", lambda e: self.jobs.record(p.record_name.value)))
@@ -1246,3 +1311,21 @@ def _preferred(trials: list[str]) -> str:
 
 def _escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _record_problem(record: Path, exc: BaseException, rebuildable: bool) -> str:
+    """Why the review record ``record`` cannot be opened, and what the reviewer can do: its
+    journal (beside it) rebuilds it when it holds every edit (:func:`annotations.recovery.
+    journal_holds_every_edit`), else the record must be restored from a copy."""
+    paths = StorePaths.for_path(record)
+    if rebuildable:
+        return (
+            f"{exc}. Its journal {paths.journal} still holds every edit: press "
+            f"“Rebuild the review record from its journal” (below) to rebuild {paths.main.name} from it "
+            f"(the damaged file is kept beside it as {paths.main.name}.damaged-<time>), then flag as before."
+        )
+    return (
+        f"{exc}. Its journal {paths.journal} does not hold every edit (it is missing, damaged, or was "
+        f"restarted after an earlier save), so it cannot rebuild the record: restore {paths.main} from a "
+        "backup, then open the subject again."
+    )

@@ -270,6 +270,8 @@ def test_a_reprocess_keeps_the_dataset_manifest_current(dataset: Path, make_app)
     assert current_manifest(out, manifest_key(subject, settings, digest)) is None  # flags changed: a run would redo it
     app.jobs.reprocess()
     assert app.jobs.finished.wait(300) and app.jobs.last_result.status == "done", app.panel.job_status.content
+    # the output records the review record whose flags the run took
+    assert json.loads((out / "subject.json").read_text())["review_record"] == str(app.paths.annotations.resolve())
     stored = current_manifest(out, manifest_key(subject, settings, digest))
     assert stored is not None, read_manifest(out)["key"]["annotations"]
     row = next(r for r in stored["trials"] if r["trial"] == "walk")
