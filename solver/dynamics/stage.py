@@ -147,7 +147,14 @@ STANCE_BW = 0.2
 
 
 def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOptions, bw: float, trial: str) -> tuple[PlateData, ...]:
-    """Plates filtered at their own rate and resampled onto ``time``."""
+    """Plates filtered at their own rate and resampled onto ``time``: the recording's
+    ``rate_hz``, or its time column's when that differs by more than
+    :data:`solver.io.mot.RATE_TOLERANCE` (the samples are where the time column puts them)."""
+    from solver.io.mot import RATE_TOLERANCE, time_column_rate
+
+    rate = forces.rate_hz
+    if forces.time.size > 1 and abs(time_column_rate(forces.time) / rate - 1.0) > RATE_TOLERANCE:
+        rate = time_column_rate(forces.time)
     out = []
     for p in forces.plates:
         f = np.asarray(p.force, dtype=float)
@@ -191,8 +198,8 @@ def _filtered_plates(forces: ForceRecording, time: FloatArray, opts: DynamicsOpt
         m_o = moment_about_origin(f, np.asarray(p.cop), np.asarray(p.free_moment))
         loaded = f[:, 1] > 0.02 * bw
         plane = float(np.nanmedian(np.asarray(p.cop)[loaded, 1])) if loaded.any() else 0.0
-        f_f = lowpass(f, forces.rate_hz, opts.cutoff_hz, opts.filter_order)
-        m_f = lowpass(m_o, forces.rate_hz, opts.cutoff_hz, opts.filter_order)
+        f_f = lowpass(f, rate, opts.cutoff_hz, opts.filter_order)
+        m_f = lowpass(m_o, rate, opts.cutoff_hz, opts.filter_order)
         f_r, m_r = resample(forces.time, f_f, time), resample(forces.time, m_f, time)
         cop, free = cop_from_wrench(f_r, m_r, plane, 0.02 * bw)
         out.append(PlateData(p.name, f_r, cop, free, p.corners, np.full(time.size, -1)))

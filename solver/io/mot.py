@@ -388,8 +388,8 @@ def read_forces(path: str | Path, *, moment_reference: Reference = "auto") -> Fo
         ``(T, 3)`` N·m about the CoP, all in the file's lab frame (Y up for OpenSim
         files). Unloaded frames keep the file's CoP, which is often meaningless there.
         A plate without moment columns gets zeros. ``rate_hz`` is the header's
-        ``DataRate`` when present and within 1 % of the time column's rate, else the
-        time column's (:func:`estimate_rate`; a disagreeing ``DataRate`` is warned about). ``corners`` is None (MOT files carry no plate geometry).
+        ``DataRate`` when present (warned about when more than 1 % from the time column's
+        rate), else estimated from the time column (see :func:`estimate_rate`). ``corners`` is None (MOT files carry no plate geometry).
 
     Raises
     ------
@@ -464,16 +464,16 @@ def estimate_rate(time: np.ndarray) -> float:
     return nominal_rate((time.shape[0] - 1) / (float(time[-1]) - float(time[0])))
 
 
-#: Relative disagreement between a force file's ``DataRate`` and its time column above which
-#: the time column's rate is used, with a warning (input audit 2026-12-02, finding 13).
+#: Relative disagreement between a force recording's rate and its time column's above which
+#: the reader warns and the dynamics filters at the time column's rate (input audit
+#: 2026-12-02, finding 13: a DataRate of 1000 over samples 0.5 ms apart doubled the cutoff).
 RATE_TOLERANCE = 0.01
 
 
 def _rate(table: Table, path: str | Path) -> float:
-    """Sampling rate (Hz) of a force table: its ``DataRate`` header; the time column's
-    (:func:`estimate_rate`) when there is none; the time column's median step's
-    (:func:`solver.sampling.frame_interval`) when the header differs from it by more than
-    :data:`RATE_TOLERANCE` (with a UserWarning naming the file).
+    """Sampling rate (Hz) of a force table: its ``DataRate`` header (a UserWarning naming the
+    file when it differs from :func:`time_column_rate` by more than :data:`RATE_TOLERANCE`),
+    or the time column's (:func:`estimate_rate`) when there is none.
 
     Raises
     ------
@@ -491,19 +491,24 @@ def _rate(table: Table, path: str | Path) -> float:
         raise MotFormatError(
             f"DataRate={text!r} is not a positive number (Hz)", path=path, where="header"
         )
-    if table.time.shape[0] > 1:
-        measured = nominal_rate(1.0 / frame_interval(table.time))  # the median step: a dropped sample moves it not
-        if abs(measured / rate - 1.0) > RATE_TOLERANCE:
-            import warnings
+    measured = time_column_rate(table.time)
+    if abs(measured / rate - 1.0) > RATE_TOLERANCE:
+        import warnings
 
-            warnings.warn(
-                f"{path}: DataRate says {rate:g} Hz but the time column steps {1.0 / measured:g} s ({measured:g} Hz); "
-                "the time column's rate is used (it places the samples, and sets the force filter)",
-                UserWarning,
-                stacklevel=3,
-            )
-            return measured
+        warnings.warn(
+            f"{path}: DataRate says {rate:g} Hz but the time column steps {1.0 / measured:g} s ({measured:g} Hz); "
+            "rate_hz keeps the header's value, and the dynamics filters the forces at the time column's rate",
+            UserWarning,
+            stacklevel=3,
+        )
     return rate
+
+
+def time_column_rate(time: np.ndarray) -> float:
+    """The rate (Hz) of a time column ``(T,)``, s, at least two samples: its median step's
+    (:func:`solver.sampling.frame_interval`: a dropped sample moves it not), nominal
+    (:func:`solver.sampling.nominal_rate`)."""
+    return nominal_rate(1.0 / frame_interval(time))
 
 
 # --------------------------------------------------------------------------- writing

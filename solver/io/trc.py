@@ -62,9 +62,7 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     MarkerTrajectories
         ``positions`` ``(T, M, 3)`` in metres in the file's lab frame (OpenSim files
         are Y up; no rotation is applied), NaN where a marker is missing (empty cell,
-        ``nan``, all three coordinates exactly 0, a gap filled with zeros, or a position
-        more than :data:`FAR_MARKER_M` from the frame's other markers, a sentinel value,
-        with a UserWarning); ``time`` ``(T,)`` s from the Time column; ``rate_hz`` from
+        ``nan``, or all three coordinates exactly 0, a gap filled with zeros); ``time`` ``(T,)`` s from the Time column; ``rate_hz`` from
         ``DataRate`` (a :class:`UserWarning` says so when the Time column steps at a
         rate more than 1 % away); marker names from line 4.
 
@@ -83,8 +81,7 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     Warns
     -----
     UserWarning
-        Rows missing from the time column (:func:`solver.io._text.warn_frame_gaps`); a
-        marker read as missing for being far from the others.
+        Rows missing from the time column (:func:`solver.io._text.warn_frame_gaps`).
     """
     lines = read_lines(path, TrcFormatError)
     header = _read_header(lines, path)
@@ -112,7 +109,6 @@ def read_trc(path: str | Path) -> MarkerTrajectories:
     positions = coords.reshape(len(rows), len(names), 3)
     _check_finite(positions, names, line_numbers, path)
     positions[np.all(positions == 0.0, axis=2)] = np.nan  # gaps exported as (0, 0, 0)
-    _drop_far_markers(positions, names, line_numbers, path)
     return MarkerTrajectories(names, positions, time, rate, source=str(path))
 
 
@@ -309,38 +305,6 @@ def _check_finite(positions: np.ndarray, names: tuple[str, ...], numbers: list[i
             path=path,
             line=numbers[row],
         )
-
-
-#: Distance (m) from the median of a frame's markers beyond which a marker is read as missing:
-#: no marker on a person or in a lab is 100 m from the others, while a lost marker filled
-#: with a sentinel such as 9999999 mm is 10 km away (input audit 2026-12-02, finding 11).
-FAR_MARKER_M = 100.0
-
-
-def _drop_far_markers(positions: np.ndarray, names: tuple[str, ...], numbers: list[int], path: str | Path) -> None:
-    """Set to NaN, in place, each marker more than :data:`FAR_MARKER_M` from the median of
-    its frame's markers (``positions`` ``(T, M, 3)``, m), with one UserWarning per such
-    marker naming the file, the marker, its distance and its first and last lines."""
-    with np.errstate(invalid="ignore"):
-        if not (np.abs(positions) > FAR_MARKER_M / 4.0).any():  # then no two markers are 100 m apart (2 sqrt(3) / 4 < 1)
-            return
-    seen = np.isfinite(positions).all(axis=2)
-    rows = np.flatnonzero(seen.any(axis=1))
-    centre = np.full((positions.shape[0], 3), np.nan)
-    centre[rows] = np.nanmedian(positions[rows], axis=1)
-    with np.errstate(invalid="ignore"):
-        far = np.linalg.norm(positions - centre[:, None, :], axis=2) > FAR_MARKER_M  # NaN compares False
-    for m in np.flatnonzero(far.any(axis=0)).tolist():
-        frames = np.flatnonzero(far[:, m])
-        distance = float(np.linalg.norm(positions[frames[0], m] - centre[frames[0]]))
-        warnings.warn(
-            f"{path}: marker {names[m]} is {distance / 1000.0:.3g} km from the frame's other markers on {frames.size} "
-            f"row{'s' * (frames.size != 1)} (lines {numbers[frames[0]]}-{numbers[frames[-1]]}); a lost marker filled with "
-            "a sentinel value? Those samples are read as missing",
-            UserWarning,
-            stacklevel=3,
-        )
-        positions[frames, m] = np.nan
 
 
 def write_trc(path: str | Path, markers: MarkerTrajectories, *, units: str = "mm") -> None:

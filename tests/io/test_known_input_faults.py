@@ -224,32 +224,41 @@ def test_an_unknown_missing_grf_reason_is_read_and_written_back(tmp_path: Path) 
 
 
 def test_a_lost_marker_filled_with_a_sentinel_is_read_as_missing(tmp_path: Path) -> None:
-    """Audit finding 11: R.Shoulder written as 9999999 mm on six rows (a lost-marker fill)
-    is read as missing there, with a warning naming the file, the marker and the lines (the
-    scale fit blamed the Units line and heightM); every other sample is as before."""
+    """Audit finding 11: R.Shoulder written as 9999999 mm on six rows (a lost-marker fill, no
+    single-frame spike) is read by the TRC reader as the file holds it, and as missing where
+    the trial is loaded, with a warning naming the file, the marker and the frames (the scale
+    fit blamed the Units line and heightM); every other sample is as before."""
     import numpy as np
 
+    from solver.io.spikes import without_spikes
+
     lines = WALK_TRC.read_text().split("\n")
-    for r in range(50, 56):  # lines 51-56
+    for r in range(50, 56):  # lines 51-56: data rows 45-50, frames 44-49
         cells = lines[r].split("\t")
         cells[2:5] = ["9999999"] * 3
         lines[r] = "\t".join(cells)
     bad = tmp_path / "markers.trc"
     bad.write_text("\n".join(lines))
-    with pytest.warns(UserWarning, match=rf"{bad}: marker R.Shoulder is 17.3 km from the frame's other markers on 6 rows \(lines 51-56\)"):
-        read = read_trc(bad)
+    raw = read_trc(bad)
+    shoulder = raw.names.index("R.Shoulder")
+    assert (raw.positions[44:50, shoulder] == 9999.999).all()  # the reader keeps what the file holds
+    with pytest.warns(UserWarning, match=rf"{bad}, frames 44-49 \(0.440-0.490 s\): marker R.Shoulder is 17.3 km from the frame's other markers on 6 frames"):
+        read = without_spikes(raw)
     good = read_trc(WALK_TRC)
-    shoulder = good.names.index("R.Shoulder")
     lost = np.zeros(good.positions.shape[:2], dtype=bool)
-    lost[44:50, shoulder] = True  # data rows 45-50 are lines 51-56
+    lost[44:50, shoulder] = True
     assert np.isnan(read.positions[lost]).all()
     np.testing.assert_array_equal(read.positions[~lost], good.positions[~lost])
 
 
-def test_a_data_rate_that_disagrees_with_the_time_column_is_not_used(tmp_path: Path) -> None:
-    """Audit finding 13: ``DataRate=1000`` in a force file whose time column steps 0.5 ms:
-    the rate is the time column's 2000 Hz (it sets the force filter), with a warning naming
-    the file; the file's own DataRate is kept when it agrees."""
+def test_a_data_rate_that_disagrees_with_the_time_column_does_not_set_the_filter(tmp_path: Path) -> None:
+    """Audit finding 13: ``DataRate=1000`` in a force file whose time column steps 0.5 ms: the
+    reader warns, naming the file (and keeps the header's value: a force file written and read
+    again is the same), and the dynamics filters the forces at the time column's 2000 Hz: the
+    same forces as from the file without the wrong DataRate (the cutoff had doubled)."""
+    import numpy as np
+
+    from solver.dynamics.stage import DynamicsOptions, _filtered_plates
     from solver.io.mot import read_forces
 
     lines = WALK_MOT.read_text().split("\n")
@@ -257,7 +266,13 @@ def test_a_data_rate_that_disagrees_with_the_time_column_is_not_used(tmp_path: P
     bad = tmp_path / "grf.mot"
     bad.write_text("\n".join(lines))
     with pytest.warns(UserWarning, match=rf"{bad}: DataRate says 1000 Hz but the time column steps 0.0005 s \(2000 Hz\)"):
-        assert read_forces(bad).rate_hz == 2000.0
+        wrong = read_forces(bad)
+    right = read_forces(WALK_MOT)
+    assert wrong.rate_hz == 1000.0 and right.rate_hz == 2000.0
+    frames = right.time[::20]
+    for a, b in zip(_filtered_plates(wrong, frames, DynamicsOptions(), 700.0, "walk"),
+                    _filtered_plates(right, frames, DynamicsOptions(), 700.0, "walk"), strict=True):  # fmt: skip
+        np.testing.assert_array_equal(a.force, b.force)
     lines[lines.index("DataRate=1000")] = "DataRate=2000"
     bad.write_text("\n".join(lines))
     with warnings.catch_warnings():
