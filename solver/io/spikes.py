@@ -82,16 +82,9 @@ def far_markers(positions: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArr
     coordinates all lie within 25 m of the origin has none (no two of its markers are 100 m
     apart), which is every frame of a lab file, so the usual cost is one comparison.
 
-    Parameters
-    ----------
-    positions
-        ``(T, M, 3)`` marker positions, m, NaN where missing.
-
-    Returns
-    -------
-    frames, markers, distance
-        ``(F,)`` each, in frame order: the frame index, the marker index, and its distance
-        from the frame's median, m.
+    Takes and returns what :func:`marker_spikes` does (``positions`` ``(T, M, 3)``, m, NaN
+    where missing; ``(frames, markers, distance)``, ``(F,)`` each in frame order), the
+    distance being the marker's from the frame's median, m.
     """
     p = np.asarray(positions, dtype=float)
     empty = np.zeros(0, dtype=np.intp)
